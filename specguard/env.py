@@ -1,0 +1,213 @@
+"""The constructed environment: a Gymnasium wrapper built from a goal tree (SPEC.md section 2).
+
+:class:`GoalEnv` takes the base env as its first argument and records its
+other constructor arguments, so ``env.spec`` re-creates it the Gymnasium way
+(``gym.make(env.spec)``, ``check_env``, ``make_vec_env``, ``SubprocVecEnv``).
+
+Example:
+    >>> import numpy as np
+    >>> import specguard as sg
+    >>> pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
+    >>> tree = sg.All(
+    ...     sg.Goal("position", x=(0.966, 1.0), y=(-0.259, 0.259)),
+    ...     sg.Goal("stabilization", omega=(-0.25, 0.25)),
+    ...     name="pendulum",
+    ... )
+    >>> env = sg.make_env(pendulum, tree)
+    >>> obs, info = env.reset(seed=0)
+    >>> obs, reward, terminated, truncated, info = env.step(np.zeros(1, dtype=np.float32))
+    >>> sorted(info["goals"])
+    ['pendulum', 'pendulum/position', 'pendulum/stabilization']
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from typing import Any, Literal, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.utils import RecordConstructorArgs
+
+from specguard.compiled import compile_tree
+from specguard.error import InitialEnvError, InvalidSpec, SpecError, StateMappingError
+from specguard.initial_env import InitialEnv
+from specguard.nodes import Node
+from specguard.reference import ReferenceEvaluator
+
+__all__ = ["GoalEnv", "make_env"]
+
+EvaluatorName = Literal["flat", "reference"]
+
+
+class GoalEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
+    """Wraps an initial env into the environment Algorithm 1 constructs from ``tree``.
+
+    * observation: ``state(obs*)`` followed by one counter per constraint
+      (Algorithm 1's order), a float32 ``Box`` with finite bounds where known;
+    * reward: the root requirements' ``R_G``, a Python float;
+    * ``terminated``: the base env's, or the root goal reached, or a counter at 0;
+      ``truncated``: the base env's;
+    * ``info["goals"]``: ``{path: bool}`` membership of ``s'`` in every node's
+      goal (also after ``reset``); ``info["reward_terms"]``: every weighted
+      component by key, summing to the reward; ``info["base_reward"]``: the
+      initial env's own reward.
+
+    Args:
+        env: the base (initial) env.
+        tree: the goal tree.
+        features: the feature names.
+        state: ``state(obs*)``; ``None`` for the identity.
+        execute: ``execute(a)``; ``None`` for the identity.
+        feature_low, feature_high: bounds of the features, ``None`` for
+            unbounded (see :meth:`InitialEnv.feature_bounds`).
+        action_space: ``A_G``; ``None`` for the base env's.
+        evaluator: ``"flat"`` (compiled, fast) or ``"reference"`` (Algorithm 1 as written).
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        tree: Node,
+        features: Sequence[str],
+        state: Callable[[Any], Any] | None = None,
+        execute: Callable[[Any], Any] | None = None,
+        feature_low: Sequence[float] | None = None,
+        feature_high: Sequence[float] | None = None,
+        action_space: gym.Space[Any] | None = None,
+        evaluator: EvaluatorName = "flat",
+    ) -> None:
+        RecordConstructorArgs.__init__(
+            self,
+            tree=tree,
+            features=tuple(features),
+            state=state,
+            execute=execute,
+            feature_low=feature_low,
+            feature_high=feature_high,
+            action_space=action_space,
+            evaluator=evaluator,
+        )
+        gym.Wrapper.__init__(self, env)
+        if not isinstance(tree, Node):
+            raise InvalidSpec("tree", f"expected a Goal or All node, got {tree!r}")
+        self.tree = tree
+        self.features = tuple(features)
+        self.compiled = compile_tree(tree, self.features)  # validates feature names, even for "reference"
+        if evaluator == "flat":
+            self.evaluator: Any = self.compiled.evaluator()
+        elif evaluator == "reference":
+            self.evaluator = ReferenceEvaluator(tree, self.features)
+        else:
+            raise InvalidSpec("evaluator", f"expected 'flat' or 'reference', got {evaluator!r}")
+        self._state = state
+        self._execute = execute
+        self._n = len(self.features)
+        base_space = env.observation_space
+        if state is None and (not isinstance(base_space, gym.spaces.Box) or base_space.shape != (self._n,)):
+            raise StateMappingError(
+                f"{tree.name}: the identity state() needs a flat Box observation of {self._n} features "
+                f"{self.features}, but the base observation space is {base_space}; "
+                "pass state=... to InitialEnv to map observations to features"
+            )
+        n_counters = len(self.evaluator.counter_keys)
+        low = np.full(self._n, -np.inf) if feature_low is None else np.asarray(feature_low, dtype=np.float64)
+        high = np.full(self._n, np.inf) if feature_high is None else np.asarray(feature_high, dtype=np.float64)
+        budgets = np.asarray(self.evaluator.budgets, dtype=np.float64)
+        self.observation_space = gym.spaces.Box(
+            np.concatenate([low, np.zeros(n_counters)]).astype(np.float32),
+            np.concatenate([high, budgets]).astype(np.float32),
+            dtype=np.float32,
+        )
+        if action_space is not None:
+            self.action_space = action_space
+        # The base observation can be handed on untouched when nothing is added or converted.
+        self._passthrough = state is None and n_counters == 0 and base_space.dtype == np.float32
+
+    # -- mapping ---------------------------------------------------------------
+
+    def _features(self, obs: Any) -> list[float]:
+        if self._state is None:
+            f = obs.tolist()
+        else:
+            try:
+                raw = self._state(obs)
+                f = raw.tolist() if isinstance(raw, np.ndarray) else [float(v) for v in raw]
+            except Exception as e:
+                raise StateMappingError(
+                    f"{self.tree.name}: state() raised {type(e).__name__}: {e} on observation {obs!r}"
+                ) from e
+        if len(f) != self._n or not math.isfinite(sum(f)):
+            raise StateMappingError(
+                f"{self.tree.name}: state() must return {self._n} finite numbers for features "
+                f"{self.features}, got {f!r} (from observation {obs!r})"
+            )
+        return f
+
+    def _observation(self, obs: Any, f: list[float]) -> np.ndarray:
+        if self._passthrough:
+            return obs  # type: ignore[no-any-return]
+        out = np.empty(self.observation_space.shape, dtype=np.float32)
+        out[: self._n] = f
+        out[self._n :] = self.evaluator.counters
+        return out
+
+    # -- gymnasium API -------------------------------------------------------
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        obs, info = self.env.reset(seed=seed, options=options)
+        f = self._features(obs)
+        members = self.evaluator.reset(f)
+        info["goals"] = dict(zip(self.evaluator.paths, members))
+        return self._observation(obs, f), info
+
+    def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+        base_action = action if self._execute is None else self._execute(action)
+        obs, base_reward, terminated, truncated, info = self.env.step(base_action)
+        f = self._features(obs)
+        reward, ended, members, terms = self.evaluator.step(action, f)
+        info["goals"] = dict(zip(self.evaluator.paths, members))
+        info["reward_terms"] = terms
+        info["base_reward"] = float(base_reward)
+        return self._observation(obs, f), reward, bool(terminated or ended), bool(truncated), info
+
+
+def make_env(initial_env: InitialEnv, tree: Node, *, evaluator: EvaluatorName = "flat", **make_kwargs: Any) -> GoalEnv:
+    """Construct the trainable env of ``tree`` over ``initial_env`` (Algorithm 1).
+
+    Args:
+        initial_env: the initial environment and its mappings.
+        tree: the goal tree; its root goal ends the episode.
+        evaluator: ``"flat"`` (default, compiled) or ``"reference"``.
+        **make_kwargs: overrides for the base env's ``gymnasium.make`` kwargs
+            (e.g. ``render_mode="human"``).
+
+    Returns:
+        A :class:`GoalEnv`, a ``gymnasium.Env``.
+
+    Raises:
+        SpecError: the tree or the initial env is invalid; the message names the node path.
+    """
+    if not isinstance(initial_env, InitialEnv):
+        raise InitialEnvError(f"make_env: expected an InitialEnv as first argument, got {initial_env!r}")
+    if not isinstance(tree, Node):
+        raise InvalidSpec("make_env", f"expected a Goal or All node as tree, got {tree!r}")
+    compile_tree(tree, initial_env.features)  # fail before building the base env
+    base = initial_env.make(**make_kwargs)
+    low, high = initial_env.feature_bounds(base.observation_space)
+    try:
+        return GoalEnv(
+            base,
+            tree=tree,
+            features=initial_env.features,
+            state=initial_env.state,
+            execute=initial_env.execute,
+            feature_low=None if np.all(np.isinf(low)) else tuple(low.tolist()),
+            feature_high=None if np.all(np.isinf(high)) else tuple(high.tolist()),
+            action_space=initial_env.action_space,
+            evaluator=evaluator,
+        )
+    except SpecError:
+        base.close()
+        raise

@@ -1,0 +1,197 @@
+"""The initial environment ``(S*, A*, P*)`` and its mappings (SPEC.md section 1).
+
+An :class:`InitialEnv` names a Gymnasium env (by id or factory), the features
+of the goal state space ``S_G`` and the two mappings ``state: S* -> S_G`` and
+``execute: A_G -> A*``. It builds nothing until :meth:`InitialEnv.make` is
+called, so declaring one is cheap (pytest fixtures, module constants).
+
+Example:
+    >>> import specguard as sg
+    >>> pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
+    >>> pendulum
+    InitialEnv('Pendulum-v1', features=('x', 'y', 'omega'))
+"""
+
+from __future__ import annotations
+
+import keyword
+import math
+from collections import namedtuple
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from functools import lru_cache
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from specguard.error import InitialEnvError
+
+__all__ = ["InitialEnv", "state_type"]
+
+
+@lru_cache(maxsize=None)
+def state_type(features: tuple[str, ...]) -> type:
+    """The namedtuple class that user functions receive as ``s`` (``s.x`` by feature name).
+
+    One class per feature tuple, so building a state each step costs one
+    ``_make`` call. In batch evaluation each attribute holds a column array.
+    """
+    return namedtuple("State", features)  # type: ignore[misc]
+
+
+def _check_features(features: object) -> tuple[str, ...]:
+    if isinstance(features, str) or not isinstance(features, Sequence) or not features:
+        raise InitialEnvError(
+            f"InitialEnv features: expected a non-empty sequence of feature names, got {features!r}"
+        )
+    for f in features:
+        if not isinstance(f, str) or not f.isidentifier() or keyword.iskeyword(f) or f.startswith("_"):
+            raise InitialEnvError(
+                f"InitialEnv features: {f!r} is not a usable feature name; expected a Python "
+                "identifier that is not a keyword and does not start with '_' (goals name it as s.<name>)"
+            )
+    dup = sorted({f for f in features if list(features).count(f) > 1})
+    if dup:
+        raise InitialEnvError(f"InitialEnv features: names must be unique, {dup} appear more than once")
+    return tuple(features)
+
+
+@dataclass(frozen=True, init=False)
+class InitialEnv:
+    """An initial environment with named features.
+
+    Args:
+        env: a registered Gymnasium env id (``"Pendulum-v1"``) or a factory
+            returning a ``gymnasium.Env``.
+        features: the names of the feature vector's components, in order.
+        state: ``state(obs) -> feature vector``; ``None`` for the identity,
+            in which case the names label the observation's components.
+        execute: ``execute(action) -> base action``; ``None`` for the identity.
+        bounds: ``{feature: (lo, hi)}`` for features whose range is known but
+            not given by the base observation space (e.g. a feature computed
+            by ``state``); others default to the base space (identity ``state``)
+            or to an unbounded interval.
+        action_space: the agent's action space ``A_G`` when ``execute`` changes
+            it; defaults to the base env's action space.
+        **make_kwargs: keyword arguments for ``gymnasium.make`` (or the factory).
+
+    Raises:
+        InitialEnvError: an unknown env id, bad feature names, or a mapping
+            that is not callable.
+    """
+
+    env: str | Callable[..., gym.Env]
+    features: tuple[str, ...]
+    state: Callable[[Any], Any] | None
+    execute: Callable[[Any], Any] | None
+    bounds: tuple[tuple[str, float, float], ...]
+    action_space: gym.Space[Any] | None
+    make_kwargs: Mapping[str, Any] = field(default_factory=dict)
+
+    def __init__(
+        self,
+        env: str | Callable[..., gym.Env],
+        features: Sequence[str],
+        state: Callable[[Any], Any] | None = None,
+        execute: Callable[[Any], Any] | None = None,
+        *,
+        bounds: Mapping[str, tuple[float, float]] | None = None,
+        action_space: gym.Space[Any] | None = None,
+        **make_kwargs: Any,
+    ) -> None:
+        if isinstance(env, str):
+            try:
+                gym.spec(env)
+            except gym.error.Error as e:
+                raise InitialEnvError(f"InitialEnv {env!r}: no such Gymnasium environment id ({e})") from None
+        elif not callable(env):
+            raise InitialEnvError(
+                f"InitialEnv: expected an env id or a factory returning a gymnasium.Env, got {env!r}"
+            )
+        names = _check_features(features)
+        for label, fn in (("state", state), ("execute", execute)):
+            if fn is not None and not callable(fn):
+                raise InitialEnvError(f"InitialEnv {self._label(env)}: expected {label} to be callable, got {fn!r}")
+        if action_space is not None and not isinstance(action_space, gym.spaces.Space):
+            raise InitialEnvError(
+                f"InitialEnv {self._label(env)}: expected action_space to be a gymnasium Space, got {action_space!r}"
+            )
+        parsed_bounds = []
+        for f, b in (bounds or {}).items():
+            if f not in names:
+                raise InitialEnvError(
+                    f"InitialEnv {self._label(env)}: bounds name unknown feature {f!r}; known features: {', '.join(names)}"
+                )
+            try:
+                lo, hi = (float(v) for v in b)
+            except (TypeError, ValueError):
+                raise InitialEnvError(
+                    f"InitialEnv {self._label(env)}: bounds for {f!r} must be a pair (lo, hi), got {b!r}"
+                ) from None
+            if math.isnan(lo) or math.isnan(hi) or lo > hi:
+                raise InitialEnvError(
+                    f"InitialEnv {self._label(env)}: bounds for {f!r} must satisfy lo <= hi, got {b!r}"
+                )
+            parsed_bounds.append((f, lo, hi))
+        object.__setattr__(self, "env", env)
+        object.__setattr__(self, "features", names)
+        object.__setattr__(self, "state", state)
+        object.__setattr__(self, "execute", execute)
+        object.__setattr__(self, "bounds", tuple(parsed_bounds))
+        object.__setattr__(self, "action_space", action_space)
+        object.__setattr__(self, "make_kwargs", dict(make_kwargs))
+
+    @staticmethod
+    def _label(env: object) -> str:
+        return repr(env) if isinstance(env, str) else getattr(env, "__qualname__", repr(env))
+
+    @property
+    def label(self) -> str:
+        """The env id, or the factory's name."""
+        return self._label(self.env)
+
+    def make(self, **overrides: Any) -> gym.Env:
+        """Build the base environment (``gymnasium.make`` for an id).
+
+        Raises:
+            InitialEnvError: the env cannot be built (e.g. a missing optional
+                dependency such as ``box2d``), with Gymnasium's message.
+        """
+        kwargs = {**self.make_kwargs, **overrides}
+        try:
+            if isinstance(self.env, str):
+                return gym.make(self.env, **kwargs)
+            built = self.env(**kwargs)
+        except gym.error.DependencyNotInstalled as e:
+            raise InitialEnvError(
+                f"InitialEnv {self.label}: a dependency is missing ({e}); "
+                'for Box2D envs such as LunarLander install "gymnasium[box2d]"'
+            ) from e
+        if not isinstance(built, gym.Env):
+            raise InitialEnvError(
+                f"InitialEnv {self.label}: the factory returned {type(built).__name__}, expected a gymnasium.Env"
+            )
+        return built
+
+    def feature_bounds(self, observation_space: gym.Space[Any]) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper bounds of every feature, finite wherever they are known."""
+        n = len(self.features)
+        lo = np.full(n, -np.inf)
+        hi = np.full(n, np.inf)
+        if self.state is None and isinstance(observation_space, gym.spaces.Box):
+            lo[:] = observation_space.low.reshape(-1)[:n]
+            hi[:] = observation_space.high.reshape(-1)[:n]
+        index = {f: i for i, f in enumerate(self.features)}
+        for f, b_lo, b_hi in self.bounds:
+            lo[index[f]], hi[index[f]] = b_lo, b_hi
+        return lo, hi
+
+    def __repr__(self) -> str:
+        extra = "".join(
+            f", {k}={getattr(v, '__qualname__', v)!s}"
+            for k, v in (("state", self.state), ("execute", self.execute))
+            if v is not None
+        )
+        kwargs = "".join(f", {k}={v!r}" for k, v in self.make_kwargs.items())
+        return f"InitialEnv({self.label}, features={self.features!r}{extra}{kwargs})"
