@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -138,17 +138,20 @@ class CompiledTree:
 
     @property
     def source(self) -> str:
-        """The generated per-step membership function, for reading and debugging."""
-        return _members_source(self)
+        """The generated per-step code (``members`` and ``step``), for reading and debugging."""
+        return _members_source(self) + "\n" + _step_source(self)
 
     def evaluator(self) -> Evaluator:
         """A fresh per-episode evaluator (one per env)."""
         return Evaluator(self)
 
 
-def _members_source(tree: CompiledTree) -> str:
-    names = [f"f{i}" for i in range(len(tree.features))]
-    lines = ["def members(f):", f"    ({', '.join(names)},) = f"]
+def _unpack(tree: CompiledTree) -> str:
+    return f"    ({', '.join(f'f{i}' for i in range(len(tree.features)))},) = f"
+
+
+def _members_lines(tree: CompiledTree) -> list[str]:
+    lines = [_unpack(tree)]
     # Children come after parents in ``paths``: emit in reverse so a parent
     # reuses its children's results (G = intersection of G_i).
     for i in reversed(range(len(tree.paths))):
@@ -156,19 +159,63 @@ def _members_source(tree: CompiledTree) -> str:
             expr = " and ".join(f"m{c}" for c in tree.children[i])
         else:
             tests = []
-            for j, name in enumerate(names):
+            for j in range(len(tree.features)):
                 lo, hi = float(tree.lo[i, j]), float(tree.hi[i, j])
                 if lo == hi:
-                    tests.append(f"{name} == {lo!r}")
+                    tests.append(f"f{j} == {lo!r}")
                 elif lo > -math.inf and hi < math.inf:
-                    tests.append(f"{lo!r} <= {name} <= {hi!r}")
+                    tests.append(f"{lo!r} <= f{j} <= {hi!r}")
                 elif lo > -math.inf:
-                    tests.append(f"{lo!r} <= {name}")
+                    tests.append(f"{lo!r} <= f{j}")
                 elif hi < math.inf:
-                    tests.append(f"{name} <= {hi!r}")
+                    tests.append(f"f{j} <= {hi!r}")
             expr = " and ".join(tests) or "True"
         lines.append(f"    m{i} = {expr}  # {tree.paths[i]}")
-    lines.append(f"    return ({', '.join(f'm{i}' for i in range(len(tree.paths)))},)")
+    return lines
+
+
+def _members_tuple(tree: CompiledTree) -> str:
+    return f"({', '.join(f'm{i}' for i in range(len(tree.paths)))},)"
+
+
+def _members_source(tree: CompiledTree) -> str:
+    return "\n".join(["def members(f):", *_members_lines(tree), f"    return {_members_tuple(tree)}"]) + "\n"
+
+
+def _step_source(tree: CompiledTree) -> str:
+    """``step(f, m, s, q, c, a)``: features of s', memberships, state and distances of s, counters, action.
+
+    Straight-line code: one line per goal and per reward term, the weights
+    folded into constants. User functions are globals ``_fn<k>``.
+    """
+    lines = ["def step(f, m, s, q, c, a):", *_members_lines(tree)]
+    lines.append("    s2 = _make(f)" if tree.distances or tree.constraints else "    s2 = None")
+    names, distances = [], []
+    slot = 0
+    for k, t in enumerate(tree.terms):
+        if t.kind == "leaf":
+            term = f"{t.coef!r} * (m{t.node} - m[{t.node}])"
+        elif t.kind == "distance":
+            d = f"d{len(distances)}"
+            lines.append(f"    {d} = _float(_fn{k}(s2))  # {t.key}")
+            term = f"{t.coef!r} * (q[{len(distances)}] - {d})"
+            distances.append(d)
+        else:
+            lines.append(f"    v{slot} = _fn{k}(s, a)  # {t.key}")
+            lines.append(f"    if v{slot}:")
+            lines.append(f"        c[{slot}] -= 1")
+            term = f"-{t.coef!r} if v{slot} else 0.0"
+            slot += 1
+        names.append(f"t{k}")
+        lines.append(f"    t{k} = {term}")
+    if distances:
+        lines.append(f"    if not ({' and '.join(f'{d} >= 0.0' for d in distances)}):")
+        lines.append("        raise ValueError('negative distance')")
+    lines.append(f"    r = {' + '.join(names)}")
+    pairs = ", ".join(f"{t.key!r}: t{k}" for k, t in enumerate(tree.terms))
+    ended = " or ".join(["m0", *(f"c[{i}] == 0" for i in range(slot))])
+    distance_tuple = f"({', '.join(distances)},)" if distances else "()"
+    lines.append(f"    return r, {ended}, {_members_tuple(tree)}, s2, {distance_tuple}, {{{pairs}}}")
     return "\n".join(lines) + "\n"
 
 
@@ -243,23 +290,15 @@ class Evaluator:
         self.paths = tree.paths
         self.counter_keys = tree.counter_keys
         self.budgets = tree.budgets
-        namespace: dict[str, Any] = {}
-        exec(compile(tree.source, f"<specguard members of {tree.paths[0]!r}>", "exec"), namespace)
-        self._members: Callable[[Sequence[float]], tuple[bool, ...]] = namespace["members"]
         self._state_cls = state_type(tree.features)
-        self._needs_state = any(t.kind != "leaf" for t in tree.terms)
-        # One tuple per term, the fields the step loop reads (kind code, coef, node, fn, counter slot).
-        plan = []
-        slot = 0
-        for t in tree.terms:
-            if t.kind == "constraint":
-                plan.append((2, t.coef, slot, t.fn, t.key))
-                slot += 1
-            else:
-                plan.append((0 if t.kind == "leaf" else 1, t.coef, t.node, t.fn, t.key))
-        self._plan = tuple(plan)
+        namespace: dict[str, Any] = {"_make": self._state_cls._make, "_float": float}
+        namespace.update({f"_fn{k}": t.fn for k, t in enumerate(tree.terms) if t.fn is not None})
+        exec(compile(tree.source, f"<specguard evaluator of {tree.paths[0]!r}>", "exec"), namespace)
+        self._members: Callable[[Sequence[float]], tuple[bool, ...]] = namespace["members"]
+        self._step: Callable[..., Any] = namespace["step"]
+        self._needs_state = bool(tree.distances or tree.constraints)
         self._m: tuple[bool, ...] = ()
-        self._phi: dict[str, float] = {}
+        self._q: tuple[float, ...] = ()
         self._s: Any = None
         self.counters: list[int] = list(self.budgets)
 
@@ -269,7 +308,7 @@ class Evaluator:
         self.counters = list(self.budgets)
         if self._needs_state:
             self._s = self._state_cls._make(f)
-            self._phi = {t.key: self._distance(t.key, t.fn, self._s) for t in self.tree.distances}
+            self._q = tuple(self._distance(t, self._s) for t in self.tree.distances)
         return self._m
 
     def step(self, action: Any, f: Sequence[float]) -> tuple[float, bool, tuple[bool, ...], dict[str, float]]:
@@ -278,54 +317,42 @@ class Evaluator:
         Returns:
             The reward, whether the spec ends the episode (root goal reached or
             a counter at 0), every node's membership of ``f`` and the weighted
-            reward terms by key.
+            reward terms by key (Algorithm 1's processing order).
         """
-        m2 = self._members(f)
-        m = self._m
-        s = self._s
-        s2 = self._state_cls._make(f) if self._needs_state else None
-        phi = self._phi
-        counters = self.counters
-        terms = {}
-        ended = m2[0]
-        for kind, coef, i, fn, key in self._plan:
-            if kind == 0:
-                terms[key] = coef * (m2[i] - m[i])
-            elif kind == 1:
-                d = self._distance(key, fn, s2)
-                terms[key] = coef * (phi[key] - d)
-                phi[key] = d
-            else:
-                if self._violates(key, fn, s, action):
-                    terms[key] = -coef
-                    counters[i] -= 1
-                    if counters[i] == 0:
-                        ended = True
-                else:
-                    terms[key] = 0.0
-        self._m = m2
-        self._s = s2
-        reward = sum(terms.values())
-        if not math.isfinite(reward):
+        counters = list(self.counters)  # the episode state changes only once the step succeeded
+        try:
+            r, ended, m2, s2, q2, terms = self._step(f, self._m, self._s, self._q, counters, action)
+        except Exception as e:
+            self._diagnose(action, f, e)
+        if not math.isfinite(r):
             bad = {k: v for k, v in terms.items() if not math.isfinite(v)}
-            raise EvaluationError(f"non-finite reward {reward}: the terms {bad} are not finite")
-        return reward, ended, m2, terms
+            raise EvaluationError(f"non-finite reward {r}: the terms {bad} are not finite")
+        self._m, self._s, self._q, self.counters = m2, s2, q2, counters
+        return float(r), ended, m2, terms
+
+    def _diagnose(self, action: Any, f: Sequence[float], error: Exception) -> NoReturn:
+        """Re-run the user functions one by one to name the one at fault."""
+        s2 = self._state_cls._make(f)
+        for t in self.tree.distances:
+            self._distance(t, s2)
+        for t in self.tree.constraints:
+            assert t.fn is not None
+            try:
+                t.fn(self._s, action)
+            except Exception as e:
+                raise EvaluationError(
+                    f"{t.key}: the constraint function raised {type(e).__name__}: {e} "
+                    f"(state {self._s}, action {action!r})"
+                ) from e
+        raise EvaluationError(f"evaluating the step failed with {type(error).__name__}: {error}") from error
 
     @staticmethod
-    def _distance(key: str, fn: Callable[[Any], float], s: Any) -> float:
+    def _distance(t: _Term, s: Any) -> float:
+        assert t.fn is not None
         try:
-            d = fn(s)
+            d = float(t.fn(s))
         except Exception as e:
-            raise EvaluationError(f"{key}: the distance function raised {type(e).__name__}: {e} (state {s})") from e
-        if not (d >= 0.0):  # also catches NaN
-            raise EvaluationError(f"{key}: expected a distance >= 0, got {d!r} (state {s})")
-        return float(d)
-
-    @staticmethod
-    def _violates(key: str, fn: Callable[[Any, Any], bool], s: Any, a: Any) -> bool:
-        try:
-            return bool(fn(s, a))
-        except Exception as e:
-            raise EvaluationError(
-                f"{key}: the constraint function raised {type(e).__name__}: {e} (state {s}, action {a!r})"
-            ) from e
+            raise EvaluationError(f"{t.key}: the distance function raised {type(e).__name__}: {e} (state {s})") from e
+        if not d >= 0.0:  # also catches NaN
+            raise EvaluationError(f"{t.key}: expected a distance >= 0, got {d!r} (state {s})")
+        return d

@@ -148,10 +148,7 @@ class GoalEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
     def _observation(self, obs: Any, f: list[float]) -> np.ndarray:
         if self._passthrough:
             return obs  # type: ignore[no-any-return]
-        out = np.empty(self.observation_space.shape, dtype=np.float32)
-        out[: self._n] = f
-        out[self._n :] = self.evaluator.counters
-        return out
+        return np.array(f + self.evaluator.counters, dtype=np.float32)
 
     # -- gymnasium API -------------------------------------------------------
 

@@ -1,0 +1,135 @@
+"""Overhead of the constructed env over the raw env, measured in one run.
+
+Steps the raw ``gym.make(env_id)`` env and the env constructed from a goal tree
+in lockstep, with the same pre-sampled actions and the same reset seeds, so both
+see the same states (when the constructed env ends an episode earlier, both are
+reset). Then trains PPO with the same hyperparameters and seed on each and
+compares throughput. Prints per-step times and ratios; exits 0 whatever the
+figures (targets are reported, not asserted: machines are shared and noisy).
+
+Targets (issue 2): LunarLander (c) <= 1.25x, Pendulum (w) <= 1.5x per step;
+PPO throughput on the constructed env >= 0.9x the raw env's.
+
+Usage:
+    python benchmarks/bench_env.py [--steps 20000] [--rounds 5] [--ppo-steps 8192] [--skip-ppo]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+from collections.abc import Callable
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import specguard as sg
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the case studies live beside the package
+from example_specs import acrobot, lunar_lander, mountain_car, pendulum
+
+CASES: list[tuple[str, Any, str, float | None]] = [
+    # (label, module, tree key, target ratio)
+    ("Pendulum (w)", pendulum, "w", 1.5),
+    ("LunarLander (c)", lunar_lander, "c", 1.25),
+    ("Acrobot (c)", acrobot, "c", None),
+    ("MountainCarContinuous (c)", mountain_car, "c", None),
+]
+
+
+def lockstep(raw: gym.Env, built: gym.Env, actions: list[Any], seed: int) -> tuple[float, float]:
+    """Seconds spent in ``step`` by each env over ``actions``, on identical trajectories."""
+    t_raw = t_built = 0.0
+    episode = seed
+    raw.reset(seed=episode)
+    built.reset(seed=episode)
+    clock = time.perf_counter
+    for a in actions:
+        t0 = clock()
+        _, _, te1, tr1, _ = raw.step(a)
+        t1 = clock()
+        _, _, te2, tr2, _ = built.step(a)
+        t2 = clock()
+        t_raw += t1 - t0
+        t_built += t2 - t1
+        if te1 or tr1 or te2 or tr2:
+            episode += 1
+            raw.reset(seed=episode)
+            built.reset(seed=episode)
+    return t_raw, t_built
+
+
+def bench_steps(n_steps: int, rounds: int) -> None:
+    print(f"Per-step time, {n_steps} steps x {rounds} rounds, lockstep on the same states (median of rounds)")
+    print(f"{'case':28s} {'raw us':>8s} {'built us':>9s} {'ratio':>7s} {'target':>7s}")
+    for label, module, key, target in CASES:
+        initial_env: sg.InitialEnv = module.initial_env
+        assert isinstance(initial_env.env, str)
+        raw = gym.make(initial_env.env)
+        built = sg.make_env(initial_env, module.trees[key])
+        raw.action_space.seed(0)
+        actions = [raw.action_space.sample() for _ in range(n_steps)]
+        lockstep(raw, built, actions[: n_steps // 10], seed=10_000)  # warm-up
+        raws, builts, ratios = [], [], []
+        for r in range(rounds):
+            t_raw, t_built = lockstep(raw, built, actions, seed=r * 1000)
+            raws.append(t_raw / n_steps * 1e6)
+            builts.append(t_built / n_steps * 1e6)
+            ratios.append(t_built / t_raw)
+        ratio = statistics.median(ratios)
+        verdict = "" if target is None else f"<= {target}" + (" ok" if ratio <= target else " MISSED")
+        print(f"{label:28s} {statistics.median(raws):8.2f} {statistics.median(builts):9.2f} {ratio:7.3f} {verdict}")
+        raw.close()
+        built.close()
+
+
+def ppo_throughput(make: Callable[[], gym.Env], steps: int, kwargs: dict[str, Any]) -> float:
+    from stable_baselines3 import PPO
+
+    model = PPO("MlpPolicy", make(), seed=0, device="cpu", verbose=0, **kwargs)
+    start = time.perf_counter()
+    model.learn(total_timesteps=steps)
+    return steps / (time.perf_counter() - start)
+
+
+def bench_ppo(steps: int, rounds: int) -> None:
+    import torch
+
+    torch.set_num_threads(1)
+    print(f"\nPPO training throughput, {steps} steps, SB3 defaults (n_steps 2048), seed 0, alternating, median of {rounds}")
+    print(f"{'case':28s} {'raw steps/s':>12s} {'built steps/s':>14s} {'ratio':>7s} {'target':>7s}")
+    for label, module, key, _ in CASES[:2]:
+        initial_env: sg.InitialEnv = module.initial_env
+        assert isinstance(initial_env.env, str)
+        env_id = initial_env.env
+        raw_rates, built_rates = [], []
+        for _ in range(rounds):
+            raw_rates.append(ppo_throughput(lambda: gym.make(env_id), steps, {}))
+            built_rates.append(
+                ppo_throughput(lambda: sg.make_env(initial_env, module.trees[key]), steps, {})
+            )
+        raw_rate, built_rate = statistics.median(raw_rates), statistics.median(built_rates)
+        ratio = built_rate / raw_rate
+        print(f"{label:28s} {raw_rate:12.0f} {built_rate:14.0f} {ratio:7.3f} >= 0.9{' ok' if ratio >= 0.9 else ' MISSED'}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=20_000)
+    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--ppo-steps", type=int, default=8192)
+    parser.add_argument("--ppo-rounds", type=int, default=3)
+    parser.add_argument("--skip-ppo", action="store_true")
+    args = parser.parse_args()
+    np.random.seed(0)
+    bench_steps(args.steps, args.rounds)
+    if not args.skip_ppo:
+        bench_ppo(args.ppo_steps, args.ppo_rounds)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,188 @@
+"""Hypothesis strategies for goal trees, states and trajectories.
+
+Public so that authors of custom operators and annotations can property-test
+them the way specguard tests its own definitions (``tests/test_reference.py``).
+Importing this module needs ``hypothesis`` (``pip install "specguard[hypothesis]"``).
+
+Example:
+    >>> from hypothesis import given
+    >>> from specguard import strategies as sgst
+    >>> @given(sgst.feature_names().flatmap(lambda fs: sgst.trees(fs)))
+    ... def test_every_tree_has_a_root_path(tree):
+    ...     assert next(tree.walk())[0] == tree.name
+    >>> test_every_tree_has_a_root_path()
+"""
+
+from __future__ import annotations
+
+import keyword
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from hypothesis import strategies as st
+
+from specguard.nodes import All, Annotation, Constraint, Distance, Goal, Node
+
+__all__ = [
+    "feature_names",
+    "node_names",
+    "bounds",
+    "goals",
+    "distances",
+    "constraints",
+    "trees",
+    "refinements",
+    "states",
+    "trajectories",
+]
+
+# Goal bounds and state values share one small grid plus arbitrary floats in
+# [-LIMIT, LIMIT]: the grid makes states land exactly on box edges often.
+LIMIT = 4.0
+GRID = (-2.0, -1.0, -0.5, 0.0, 0.5, 1.0, 2.0)
+
+_values = st.one_of(
+    st.sampled_from(GRID),
+    st.floats(-LIMIT, LIMIT, allow_nan=False, allow_infinity=False),
+)
+
+
+def feature_names(min_size: int = 1, max_size: int = 5) -> st.SearchStrategy[tuple[str, ...]]:
+    """Tuples of distinct feature names usable as ``InitialEnv(features=...)``."""
+    name = st.from_regex(r"[a-z][a-z0-9_]{0,6}", fullmatch=True).filter(lambda s: not keyword.iskeyword(s))
+    return st.lists(name, min_size=min_size, max_size=max_size, unique=True).map(tuple)
+
+
+def node_names() -> st.SearchStrategy[str]:
+    """Valid node names (no ``/`` or ``:``)."""
+    return st.from_regex(r"[A-Za-z][A-Za-z0-9_\-]{0,8}", fullmatch=True)
+
+
+@st.composite
+def bounds(draw: st.DrawFn, values: st.SearchStrategy[float] = _values) -> tuple[float | None, float | None]:
+    """An inclusive interval ``(lo, hi)``, ``lo <= hi``, either side possibly open (``None``)."""
+    a, b = sorted((draw(values), draw(values)))
+    lo = None if draw(st.integers(0, 5)) == 0 else a
+    hi = None if draw(st.integers(0, 5)) == 0 else b
+    return lo, hi
+
+
+@st.composite
+def goals(draw: st.DrawFn, features: Sequence[str], name: str | None = None) -> Goal:
+    """A leaf with a box on a non-empty subset of ``features``."""
+    chosen = draw(st.lists(st.sampled_from(list(features)), min_size=1, max_size=len(features), unique=True))
+    return Goal(name or draw(node_names()), **{f: draw(bounds()) for f in chosen})
+
+
+def _distance_fn(feature: str, target: float) -> Any:
+    def fn(s: Any) -> Any:
+        return abs(getattr(s, feature) - target)
+
+    fn.__qualname__ = f"|{feature} - {target:g}|"
+    return fn
+
+
+def _constraint_fn(feature: str, threshold: float) -> Any:
+    def fn(s: Any, a: Any) -> Any:
+        return getattr(s, feature) > threshold
+
+    fn.__qualname__ = f"{feature} > {threshold:g}"
+    return fn
+
+
+@st.composite
+def distances(draw: st.DrawFn, features: Sequence[str], name: str = "distance") -> Distance:
+    """A distance ``|s.f - c|`` with a random scale and weight (works on scalars and column arrays)."""
+    f = draw(st.sampled_from(list(features)))
+    weight = draw(st.none() | st.floats(0.0, 10.0))
+    return Distance(_distance_fn(f, draw(_values)), scale=draw(st.floats(0.1, 10.0)), weight=weight, name=name)
+
+
+@st.composite
+def constraints(draw: st.DrawFn, features: Sequence[str], name: str = "constraint") -> Constraint:
+    """A constraint ``s.f > c`` with a small budget."""
+    f = draw(st.sampled_from(list(features)))
+    weight = draw(st.none() | st.floats(0.0, 10.0))
+    return Constraint(_constraint_fn(f, draw(_values)), budget=draw(st.integers(1, 4)), weight=weight, name=name)
+
+
+@st.composite
+def _annotations(draw: st.DrawFn, features: Sequence[str], allow: bool) -> tuple[Annotation, ...]:
+    if not allow:
+        return ()
+    out: list[Annotation] = []
+    for i in range(draw(st.integers(0, 2))):
+        if draw(st.booleans()):
+            out.append(draw(distances(features, name=f"distance{i}")))
+        else:
+            out.append(draw(constraints(features, name=f"constraint{i}")))
+    return tuple(out)
+
+
+@st.composite
+def trees(
+    draw: st.DrawFn,
+    features: Sequence[str],
+    max_depth: int = 3,
+    max_children: int = 3,
+    annotations: bool = True,
+    name: str | None = None,
+) -> Node:
+    """Random goal trees of ``Goal`` and ``All`` nodes over ``features``, optionally annotated."""
+    name = name or draw(node_names())
+    if max_depth <= 1 or draw(st.integers(0, 2)) == 0:
+        node: Node = draw(goals(features, name=name))
+    else:
+        n = draw(st.integers(1, max_children))
+        names = draw(st.lists(node_names(), min_size=n, max_size=n, unique=True))
+        kids = [draw(trees(features, max_depth - 1, max_children, annotations, name=k)) for k in names]
+        weights = draw(st.none() | st.lists(st.floats(0.0, 10.0), min_size=n, max_size=n))
+        node = All(*kids, name=name, weights=weights)
+    extra = draw(_annotations(features, annotations))
+    return node.annotate(*extra) if extra else node
+
+
+@st.composite
+def refinements(draw: st.DrawFn, leaf: Goal, max_children: int = 3, loosen: bool = True) -> All:
+    """An ``All`` whose children's boxes intersect to exactly ``leaf``'s box.
+
+    Each of the leaf's bounds goes to at least one child. With ``loosen``,
+    children may also carry looser bounds on features that another child
+    bounds exactly, which leaves the intersection unchanged.
+    """
+    items = list(leaf.bounds)
+    n = draw(st.integers(1, max_children))
+    owner = [draw(st.integers(0, n - 1)) for _ in items]
+    children = []
+    for k in range(n):
+        box: dict[str, tuple[float | None, float | None]] = {}
+        for (f, lo, hi), o in zip(items, owner):
+            if o == k:
+                box[f] = (None if math.isinf(lo) else lo, None if math.isinf(hi) else hi)
+            elif loosen and draw(st.booleans()):
+                wider_lo = None if math.isinf(lo) or draw(st.booleans()) else lo - draw(st.floats(0.0, 1.0))
+                wider_hi = None if math.isinf(hi) or draw(st.booleans()) else hi + draw(st.floats(0.0, 1.0))
+                box[f] = (wider_lo, wider_hi)
+        if not box:  # a child must bound something: repeat an exact bound
+            f, lo, hi = items[k % len(items)]
+            box[f] = (None if math.isinf(lo) else lo, None if math.isinf(hi) else hi)
+        children.append(Goal(f"part{k}", **box))
+    weights = draw(st.none() | st.lists(st.floats(0.0, 10.0), min_size=n, max_size=n))
+    return All(*children, name=leaf.name, weights=weights)
+
+
+def states(features: Sequence[str]) -> st.SearchStrategy[list[float]]:
+    """Feature vectors (Python floats), often exactly on box edges."""
+    return st.lists(_values, min_size=len(features), max_size=len(features))
+
+
+def trajectories(features: Sequence[str], min_size: int = 2, max_size: int = 12) -> st.SearchStrategy[list[list[float]]]:
+    """Sequences of feature vectors ``s_0 .. s_T``."""
+    return st.lists(states(features), min_size=min_size, max_size=max_size)
+
+
+def as_array(trajectory: Sequence[Sequence[float]]) -> np.ndarray:
+    """A trajectory as a ``(T, features)`` float64 array."""
+    return np.asarray(trajectory, dtype=np.float64)

@@ -1,0 +1,53 @@
+"""Test doubles for checking constructions without a simulator.
+
+Example:
+    >>> import specguard as sg
+    >>> from specguard.testing import ReplayEnv
+    >>> initial = sg.InitialEnv(lambda: ReplayEnv([[0.0], [1.0]]), features=("x",))
+    >>> env = sg.make_env(initial, sg.Goal("up", x=(0.5, None)))
+    >>> _ = env.reset(seed=0)
+    >>> env.step(0)[1:3]
+    (1.0, True)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+__all__ = ["ReplayEnv"]
+
+
+class ReplayEnv(gym.Env[np.ndarray, int]):
+    """Replays a fixed trajectory of observations, whatever the actions.
+
+    ``reset`` returns ``trajectory[0]``; step ``t`` returns ``trajectory[t]``
+    and truncates at the last one. Rewards are 0; it never terminates itself.
+
+    Args:
+        trajectory: the observations ``s_0 .. s_T``, at least two.
+        n_actions: the size of the ``Discrete`` action space.
+    """
+
+    metadata: dict[str, Any] = {"render_modes": []}
+
+    def __init__(self, trajectory: Sequence[Sequence[float]], n_actions: int = 3) -> None:
+        self.trajectory = np.asarray(trajectory, dtype=np.float32)
+        if self.trajectory.ndim != 2 or len(self.trajectory) < 2:
+            raise ValueError(f"expected at least two observations of equal length, got shape {self.trajectory.shape}")
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=self.trajectory.shape[1:], dtype=np.float32)
+        self.action_space = gym.spaces.Discrete(n_actions)
+        self._t = 0
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        self._t = 0
+        return self.trajectory[0].copy(), {}
+
+    def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        self._t += 1
+        truncated = self._t >= len(self.trajectory) - 1
+        return self.trajectory[self._t].copy(), 0.0, False, truncated, {}

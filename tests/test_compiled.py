@@ -1,0 +1,134 @@
+"""The flat evaluator agrees with the reference Algorithm 1 (differential tests)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+import specguard as sg
+from specguard import strategies as sgst
+from specguard.compiled import compile_tree
+from specguard.initial_env import state_type
+from specguard.reference import ExtendedState, ReferenceEvaluator, process
+
+FEATURES = ("a", "b", "c")
+State = state_type(FEATURES)
+
+
+@given(sgst.trees(FEATURES), sgst.trajectories(FEATURES, max_size=25), st.data())
+def test_flat_and_reference_agree_step_by_step(tree, trajectory, data):
+    actions = data.draw(st.lists(st.integers(0, 2), min_size=len(trajectory), max_size=len(trajectory)))
+    flat = compile_tree(tree, FEATURES).evaluator()
+    ref = ReferenceEvaluator(tree, FEATURES)
+    assert flat.paths == ref.paths
+    assert flat.counter_keys == ref.counter_keys
+    assert flat.reset(trajectory[0]) == ref.reset(trajectory[0])
+    for a, f in zip(actions, trajectory[1:]):
+        r1, end1, goals1, terms1 = flat.step(a, f)
+        r2, end2, goals2, terms2 = ref.step(a, f)
+        assert type(r1) is float
+        assert r1 == pytest.approx(r2, rel=1e-9, abs=1e-12)
+        assert (end1, goals1) == (end2, goals2)
+        assert list(terms1) == list(terms2)
+        assert list(terms1.values()) == pytest.approx(list(terms2.values()), rel=1e-9, abs=1e-12)
+        assert sum(terms1.values()) == pytest.approx(r1)
+        assert flat.counters == ref.counters
+        if end1:
+            break
+
+
+@given(sgst.trees(FEATURES), st.lists(sgst.states(FEATURES), min_size=1, max_size=30))
+def test_batch_membership_agrees_with_reference(tree, batch):
+    compiled = compile_tree(tree, FEATURES)
+    goals = process(tree).goals
+    members = compiled.members(np.asarray(batch))
+    assert members.shape == (len(batch), len(compiled.paths))
+    for row, f in zip(members, batch):
+        s = State._make(f)
+        assert row.tolist() == [goals[p](s) for p in compiled.paths]
+
+
+@given(sgst.trees(FEATURES), st.data())
+def test_batch_rewards_agree_with_reference(tree, data):
+    n = data.draw(st.integers(1, 20))
+    s = data.draw(st.lists(sgst.states(FEATURES), min_size=n, max_size=n))
+    s2 = data.draw(st.lists(sgst.states(FEATURES), min_size=n, max_size=n))
+    actions = data.draw(st.lists(st.integers(0, 2), min_size=n, max_size=n))
+    compiled = compile_tree(tree, FEATURES)
+    req = process(tree)
+    terms = compiled.reward_terms(np.asarray(s), np.asarray(actions), np.asarray(s2))
+    counters = {k: b for k, b, _ in req.counters}
+    for i in range(n):
+        ext, ext2 = ExtendedState(State._make(s[i]), counters), ExtendedState(State._make(s2[i]), counters)
+        expected = req.reward(ext, actions[i], ext2)
+        assert list(expected) == list(compiled.term_keys)
+        assert terms[i].tolist() == pytest.approx(list(expected.values()), rel=1e-9, abs=1e-12)
+    assert compiled.rewards(np.asarray(s), np.asarray(actions), np.asarray(s2)) == pytest.approx(terms.sum(axis=1))
+
+
+def test_batch_falls_back_to_rows_for_python_branching_functions():
+    def crash(s, a):
+        return abs(s.a) >= 0.2 and s.b <= 0.2  # `and` cannot take arrays
+
+    tree = sg.Goal("g", a=(0, 1)).annotate(sg.Constraint(crash, budget=2))
+    compiled = compile_tree(tree, FEATURES)
+    s = np.array([[0.5, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    assert compiled.reward_terms(s, np.zeros(2), s)[:, 1].tolist() == [-1.0, 0.0]
+
+
+def test_every_node_goal_is_the_intersection_box():
+    tree = sg.All(sg.Goal("p", a=(0, 1)), sg.Goal("q", a=(0.5, None), b=2.0), name="r")
+    compiled = compile_tree(tree, FEATURES)
+    assert compiled.paths == ("r", "r/p", "r/q")
+    assert compiled.lo[0].tolist() == [0.5, 2.0, -np.inf]
+    assert compiled.hi[0].tolist() == [1.0, 2.0, np.inf]
+
+
+def test_weights_are_folded_into_one_coefficient_per_leaf():
+    d = sg.Distance(lambda s: abs(s.a), scale=4.0)
+    tree = sg.All(sg.Goal("p", a=(0, 1)).annotate(d), sg.Goal("q", b=(0, 1)), name="r", weights=(0.8, 0.2))
+    compiled = compile_tree(tree, FEATURES)
+    coefs = {t.key: t.coef for t in compiled.terms}
+    assert coefs == pytest.approx({"r/p": 0.4, "r/p:distance": 0.4 / 4.0, "r/q": 0.2})
+
+
+def test_generated_source_is_readable():
+    tree = sg.All(sg.Goal("p", a=(0, 1)), sg.Goal("q", b=(None, 2.0)), name="r")
+    source = compile_tree(tree, FEATURES).source
+    assert "0.0 <= f0 <= 1.0  # r/p" in source
+    assert "f1 <= 2.0  # r/q" in source
+    assert "m0 = m1 and m2  # r" in source
+
+
+def test_unknown_feature_names_the_path_and_lists_known_features():
+    tree = sg.All(sg.Goal("p", z=(0, 1)), name="r")
+    with pytest.raises(sg.UnknownFeature, match=r"r/p: goal names unknown feature 'z'; known features: a, b, c"):
+        compile_tree(tree, FEATURES)
+
+
+def test_user_function_errors_name_the_annotation():
+    tree = sg.Goal("g", a=(0, 1)).annotate(sg.Distance(lambda s: s.zz, scale=1.0))
+    ev = compile_tree(tree, FEATURES).evaluator()
+    with pytest.raises(sg.EvaluationError, match=r"g:distance: the distance function raised AttributeError"):
+        ev.reset([0.0, 0.0, 0.0])
+
+
+def test_negative_distance_is_rejected_mid_episode():
+    tree = sg.Goal("g", a=(0, 1)).annotate(sg.Distance(lambda s: s.b, scale=1.0))
+    ev = compile_tree(tree, FEATURES).evaluator()
+    ev.reset([5.0, 1.0, 0.0])
+    with pytest.raises(sg.EvaluationError, match=r"g:distance: expected a distance >= 0, got -1.0"):
+        ev.step(0, [5.0, -1.0, 0.0])
+
+
+def test_failing_constraint_is_named():
+    def boom(s, a):
+        raise RuntimeError("no")
+
+    tree = sg.Goal("g", a=(0, 1)).annotate(sg.Constraint(boom, name="crash"))
+    ev = compile_tree(tree, FEATURES).evaluator()
+    ev.reset([5.0, 1.0, 0.0])
+    with pytest.raises(sg.EvaluationError, match=r"g:crash: the constraint function raised RuntimeError: no"):
+        ev.step(0, [5.0, -1.0, 0.0])
