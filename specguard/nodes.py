@@ -61,7 +61,8 @@ def _fmt(x: float) -> str:
 
 
 def _fn_label(fn: Callable[..., Any]) -> str:
-    return getattr(fn, "__qualname__", None) or repr(fn)
+    name = getattr(fn, "__qualname__", None)
+    return name.rsplit("<locals>.", 1)[-1] if isinstance(name, str) else repr(fn)
 
 
 # ---------------------------------------------------------------------------

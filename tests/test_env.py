@@ -1,0 +1,221 @@
+"""The constructed environment: Gymnasium API, SPEC.md section 2 on real and replayed envs."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env as gym_check_env
+from hypothesis import given
+from hypothesis import strategies as st
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+import specguard as sg
+from example_specs import acrobot, lunar_lander, mountain_car, pendulum
+from specguard import strategies as sgst
+from specguard.testing import ReplayEnv
+
+CASES = [(m, key) for m in (acrobot, pendulum, mountain_car, lunar_lander) for key in m.trees]
+IDS = [f"{m.__name__.split('.')[-1]}-{key}" for m, key in CASES]
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+@pytest.mark.parametrize(("module", "key"), CASES, ids=IDS)
+def test_case_study_envs_pass_both_checkers(module, key):
+    env = sg.make_env(module.initial_env, module.trees[key])
+    gym_check_env(env)  # also re-creates the env from env.spec
+    sb3_check_env(env, warn=False)
+    env.close()
+
+
+@pytest.mark.parametrize(("module", "key"), CASES, ids=IDS)
+def test_case_study_rollout_reports_goals_and_terms(module, key):
+    env = sg.make_env(module.initial_env, module.trees[key])
+    obs, info = env.reset(seed=1)
+    assert set(info["goals"]) == {p for p, _ in module.trees[key].walk()}
+    env.action_space.seed(1)
+    for _ in range(50):
+        obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+        assert type(reward) is float and type(terminated) is bool and type(truncated) is bool
+        assert obs in env.observation_space
+        assert sum(info["reward_terms"].values()) == pytest.approx(reward)
+        assert isinstance(info["base_reward"], float)
+        if terminated or truncated:
+            break
+    env.close()
+
+
+def test_env_is_recreated_from_its_spec():
+    env = sg.make_env(pendulum.initial_env, pendulum.trees["w"])
+    again = gym.make(env.spec)
+    assert isinstance(again, sg.GoalEnv)
+    assert again.tree == env.tree
+    rollouts = []
+    for e in (env, again):
+        e.reset(seed=3)
+        rollouts.append([e.step(np.array([0.5], dtype=np.float32))[1] for _ in range(20)])
+    assert rollouts[0] == rollouts[1]
+
+
+def test_env_works_with_sb3_vector_envs():
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    for cls in (None, SubprocVecEnv):
+        kwargs = {} if cls is None else {"vec_env_cls": cls}
+        venv = make_vec_env(lambda: sg.make_env(pendulum.initial_env, pendulum.trees["c"]), n_envs=2, seed=0, **kwargs)
+        obs = venv.reset()
+        assert obs.shape == (2, 3)
+        obs, rewards, dones, infos = venv.step(np.zeros((2, 1), dtype=np.float32))
+        assert "pendulum/position:distance" in infos[0]["reward_terms"]
+        venv.close()
+
+
+def test_reference_and_flat_envs_give_the_same_rollout():
+    rollouts = []
+    for evaluator in ("flat", "reference"):
+        env = sg.make_env(lunar_lander.initial_env, lunar_lander.trees["w"], evaluator=evaluator)
+        env.reset(seed=7)
+        env.action_space.seed(7)
+        steps = []
+        for _ in range(300):
+            obs, r, te, tr, info = env.step(env.action_space.sample())
+            steps.append((obs.tolist(), r, te, tr, info["goals"]))
+            if te or tr:
+                break
+        rollouts.append(steps)
+    assert len(rollouts[0]) == len(rollouts[1])
+    for a, b in zip(*rollouts):
+        assert a[0] == b[0] and a[2:] == b[2:]
+        assert a[1] == pytest.approx(b[1], rel=1e-9, abs=1e-12)
+
+
+def test_base_termination_and_truncation_are_kept():
+    never = sg.Goal("never", x=(5.0, None))  # outside Pendulum's range: the spec never ends it
+    env = sg.make_env(pendulum.initial_env, never)
+    env.reset(seed=0)
+    for t in range(1, 201):
+        _, _, terminated, truncated, _ = env.step(np.zeros(1, dtype=np.float32))
+        assert not terminated
+        if truncated:
+            break
+    assert t == 200  # Pendulum-v1's TimeLimit
+
+    lander = sg.make_env(lunar_lander.initial_env, sg.Goal("never", leg1=(2.0, None)))
+    lander.reset(seed=0)
+    for _ in range(1000):
+        _, _, terminated, truncated, _ = lander.step(0)  # falls and crashes: the base env ends it
+        if terminated or truncated:
+            break
+    assert terminated
+
+
+def _replay(trajectory, tree, features):
+    initial = sg.InitialEnv(lambda: ReplayEnv(trajectory), features=features)
+    return sg.make_env(initial, tree)
+
+
+FEATURES = ("a", "b")
+
+
+@given(sgst.trees(FEATURES), sgst.trajectories(FEATURES, max_size=15), st.data())
+def test_observations_counters_and_termination(tree, trajectory, data):
+    env = _replay(trajectory, tree, FEATURES)
+    keys = env.evaluator.counter_keys
+    obs, info = env.reset(seed=0)
+    assert obs in env.observation_space
+    assert obs[2:].tolist() == list(env.evaluator.budgets)
+    previous = obs[2:]
+    for _ in trajectory[1:]:
+        obs, reward, terminated, truncated, info = env.step(data.draw(st.integers(0, 2)))
+        assert obs in env.observation_space
+        counters = obs[2:]
+        assert len(counters) == len(keys)
+        assert np.all(counters <= previous) and np.all(counters >= 0)  # never increase
+        assert terminated == (info["goals"][tree.name] or bool(np.any(counters == 0)))
+        previous = counters
+        if terminated or truncated:
+            break
+
+
+def test_constraint_counter_ends_the_episode_exactly_at_zero():
+    high = sg.Constraint(lambda s, a: s.a > 0.5, budget=2, name="high")
+    tree = sg.Goal("g", b=(10.0, None)).annotate(high)
+    trajectory = [[1.0, 0.0], [0.0, 0.0], [1.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]]
+    env = _replay(trajectory, tree, FEATURES)
+    obs, _ = env.reset()
+    seen = [(obs[2], False)]
+    for _ in range(5):
+        obs, reward, terminated, _, info = env.step(0)
+        seen.append((obs[2], terminated))
+        if terminated:
+            break
+    # Violations are judged on (s, a): s_0 and s_2 have a > 0.5.
+    assert seen == [(2.0, False), (1.0, False), (1.0, False), (0.0, True)]
+    assert info["reward_terms"]["g:high"] == -1.0
+
+
+def test_execute_maps_actions_and_action_space_is_declared():
+    seen = []
+
+    def execute(a):
+        seen.append(a)
+        return np.array([2.0 * (a - 1)], dtype=np.float32)
+
+    initial = sg.InitialEnv(
+        "Pendulum-v1", features=("x", "y", "omega"), execute=execute, action_space=gym.spaces.Discrete(3)
+    )
+    env = sg.make_env(initial, pendulum.trees["b"])
+    assert env.action_space == gym.spaces.Discrete(3)
+    env.reset(seed=0)
+    env.step(2)
+    assert seen == [2]
+
+
+def test_state_of_wrong_length_is_reported():
+    initial = sg.InitialEnv("Pendulum-v1", features=("x", "y"), state=lambda o: o[:3])
+    env = sg.make_env(initial, sg.Goal("g", x=(0, 1)))
+    with pytest.raises(sg.StateMappingError, match=r"state\(\) must return 2 finite numbers for features \('x', 'y'\)"):
+        env.reset(seed=0)
+
+
+def test_state_with_non_finite_values_is_reported():
+    initial = sg.InitialEnv("Pendulum-v1", features=("x",), state=lambda o: [float("nan")])
+    env = sg.make_env(initial, sg.Goal("g", x=(0, 1)))
+    with pytest.raises(sg.StateMappingError, match=r"must return 1 finite numbers .* got \[nan\]"):
+        env.reset(seed=0)
+
+
+def test_state_that_raises_is_reported():
+    initial = sg.InitialEnv("Pendulum-v1", features=("x",), state=lambda o: o["x"])
+    env = sg.make_env(initial, sg.Goal("g", x=(0, 1)))
+    with pytest.raises(sg.StateMappingError, match=r"g: state\(\) raised IndexError"):
+        env.reset(seed=0)
+
+
+def test_identity_state_needs_one_feature_per_observation():
+    initial = sg.InitialEnv("Pendulum-v1", features=("x", "y"))
+    with pytest.raises(sg.StateMappingError, match=r"identity state\(\) needs a flat Box observation of 2 features"):
+        sg.make_env(initial, sg.Goal("g", x=(0, 1)))
+
+
+def test_unknown_feature_fails_before_the_env_is_built():
+    with pytest.raises(sg.UnknownFeature, match=r"pendulum/speed: goal names unknown feature 'v'; known features: x, y, omega"):
+        sg.make_env(pendulum.initial_env, sg.All(sg.Goal("speed", v=(0, 1)), name="pendulum"))
+
+
+def test_make_env_rejects_wrong_argument_types():
+    with pytest.raises(sg.InitialEnvError, match="expected an InitialEnv"):
+        sg.make_env("Pendulum-v1", pendulum.trees["a"])
+    with pytest.raises(sg.InvalidSpec, match="expected a Goal or All node as tree"):
+        sg.make_env(pendulum.initial_env, {"x": (0, 1)})
+    with pytest.raises(sg.InvalidSpec, match="expected 'flat' or 'reference'"):
+        sg.make_env(pendulum.initial_env, pendulum.trees["a"], evaluator="fast")
+
+
+def test_acrobot_height_feature_comes_from_state():
+    env = sg.make_env(acrobot.initial_env, acrobot.trees["c"])
+    obs, _ = env.reset(seed=0)
+    cos1, sin1, cos2, sin2 = obs[:4]
+    assert obs[6] == pytest.approx(-cos1 - (cos1 * cos2 - sin1 * sin2), abs=1e-6)
+    assert env.observation_space.low[6] == -2.0 and env.observation_space.high[6] == 2.0
