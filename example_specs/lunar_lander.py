@@ -12,9 +12,7 @@ import numpy as np
 
 import specguard as sg
 
-initial_env = sg.InitialEnv(
-    "LunarLander-v3", features=("x", "y", "vx", "vy", "angle", "angular_vel", "leg1", "leg2")
-)
+initial_env = sg.InitialEnv("LunarLander-v3", features=("x", "y", "vx", "vy", "angle", "angular_vel", "leg1", "leg2"))
 
 BOUNDS = {
     "position": {"x": (-0.2, 0.2), "y": (-0.05, 0.05)},

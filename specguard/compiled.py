@@ -91,7 +91,7 @@ class CompiledTree:
     def members(self, states: np.ndarray) -> np.ndarray:
         """``(B, nodes)`` membership of every state of ``states`` (shape ``(B, features)``) in every goal."""
         s = np.asarray(states, dtype=np.float64)[:, None, :]
-        return ((s >= self.lo) & (s <= self.hi)).all(axis=2)
+        return np.asarray(((s >= self.lo) & (s <= self.hi)).all(axis=2))
 
     def reward_terms(self, states: np.ndarray, actions: Any, next_states: np.ndarray) -> np.ndarray:
         """``(B, terms)`` weighted reward components of the transitions ``(s, a, s')``.
@@ -114,7 +114,7 @@ class CompiledTree:
 
     def rewards(self, states: np.ndarray, actions: Any, next_states: np.ndarray) -> np.ndarray:
         """``(B,)`` rewards of the transitions: the sum of :meth:`reward_terms`."""
-        return self.reward_terms(states, actions, next_states).sum(axis=1)
+        return np.asarray(self.reward_terms(states, actions, next_states).sum(axis=1))
 
     def _apply(self, t: _Term, s: np.ndarray, actions: Any = None) -> np.ndarray:
         # Most user functions are written with numpy and accept column arrays;
@@ -131,8 +131,8 @@ class CompiledTree:
             pass
         rows = [cls._make(row) for row in s.tolist()]
         if t.kind == "distance":
-            return np.array([float(t.fn(r)) for r in rows])
-        return np.array([1.0 if t.fn(r, a) else 0.0 for r, a in zip(rows, actions)])
+            return np.array([float(t.fn(r)) for r in rows], dtype=np.float64)
+        return np.array([1.0 if t.fn(r, a) else 0.0 for r, a in zip(rows, actions)], dtype=np.float64)
 
     # -- the per-step kernel -------------------------------------------------
 
@@ -190,7 +190,8 @@ def _step_source(tree: CompiledTree) -> str:
     """
     lines = ["def step(f, m, s, q, c, a):", *_members_lines(tree)]
     lines.append("    s2 = _make(f)" if tree.distances or tree.constraints else "    s2 = None")
-    names, distances = [], []
+    names: list[str] = []
+    distances: list[str] = []
     slot = 0
     for k, t in enumerate(tree.terms):
         if t.kind == "leaf":

@@ -129,7 +129,7 @@ class GoalEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
 
     def _features(self, obs: Any) -> list[float]:
         if self._state is None:
-            f = obs.tolist()
+            f: list[float] = obs.tolist()
         else:
             try:
                 raw = self._state(obs)
@@ -152,7 +152,9 @@ class GoalEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
 
     # -- gymnasium API -------------------------------------------------------
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
         obs, info = self.env.reset(seed=seed, options=options)
         f = self._features(obs)
         members = self.evaluator.reset(f)

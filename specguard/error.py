@@ -8,12 +8,12 @@ catch :class:`SpecError` to handle all of them.
 from __future__ import annotations
 
 __all__ = [
-    "SpecError",
-    "InvalidSpec",
-    "UnknownFeature",
-    "InitialEnvError",
-    "StateMappingError",
     "EvaluationError",
+    "InitialEnvError",
+    "InvalidSpec",
+    "SpecError",
+    "StateMappingError",
+    "UnknownFeature",
 ]
 
 

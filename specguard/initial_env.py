@@ -19,7 +19,7 @@ import math
 from collections import namedtuple
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cache
 from typing import Any
 
 import gymnasium as gym
@@ -30,8 +30,8 @@ from specguard.error import InitialEnvError
 __all__ = ["InitialEnv", "state_type"]
 
 
-@lru_cache(maxsize=None)
-def state_type(features: tuple[str, ...]) -> type:
+@cache
+def state_type(features: tuple[str, ...]) -> Any:
     """The namedtuple class that user functions receive as ``s`` (``s.x`` by feature name).
 
     One class per feature tuple, so building a state each step costs one
@@ -42,9 +42,7 @@ def state_type(features: tuple[str, ...]) -> type:
 
 def _check_features(features: object) -> tuple[str, ...]:
     if isinstance(features, str) or not isinstance(features, Sequence) or not features:
-        raise InitialEnvError(
-            f"InitialEnv features: expected a non-empty sequence of feature names, got {features!r}"
-        )
+        raise InitialEnvError(f"InitialEnv features: expected a non-empty sequence of feature names, got {features!r}")
     for f in features:
         if not isinstance(f, str) or not f.isidentifier() or keyword.iskeyword(f) or f.startswith("_"):
             raise InitialEnvError(
@@ -106,9 +104,7 @@ class InitialEnv:
             except gym.error.Error as e:
                 raise InitialEnvError(f"InitialEnv {env!r}: no such Gymnasium environment id ({e})") from None
         elif not callable(env):
-            raise InitialEnvError(
-                f"InitialEnv: expected an env id or a factory returning a gymnasium.Env, got {env!r}"
-            )
+            raise InitialEnvError(f"InitialEnv: expected an env id or a factory returning a gymnasium.Env, got {env!r}")
         names = _check_features(features)
         for label, fn in (("state", state), ("execute", execute)):
             if fn is not None and not callable(fn):
@@ -121,7 +117,8 @@ class InitialEnv:
         for f, b in (bounds or {}).items():
             if f not in names:
                 raise InitialEnvError(
-                    f"InitialEnv {self._label(env)}: bounds name unknown feature {f!r}; known features: {', '.join(names)}"
+                    f"InitialEnv {self._label(env)}: bounds name unknown feature {f!r}; "
+                    f"known features: {', '.join(names)}"
                 )
             try:
                 lo, hi = (float(v) for v in b)

@@ -26,7 +26,7 @@ from typing import Any, ClassVar
 
 from specguard.error import InvalidSpec
 
-__all__ = ["Node", "Goal", "All", "Annotation", "Distance", "Constraint"]
+__all__ = ["All", "Annotation", "Constraint", "Distance", "Goal", "Node"]
 
 PATH_SEPARATOR = "/"
 ANNOTATION_SEPARATOR = ":"
@@ -82,7 +82,7 @@ class Annotation:
 
     normalised: ClassVar[bool] = True
     symbol: ClassVar[str] = "A"
-    name: str
+    name: str | None
     weight: float | None
 
 
@@ -418,7 +418,5 @@ def component_weights(node: Node) -> tuple[float, tuple[float, ...]]:
     """
     n = 1 + sum(1 for a in node.annotations if a.normalised)
     default = 1.0 / n
-    ann = tuple(
-        a.weight if a.weight is not None else (default if a.normalised else 1.0) for a in node.annotations
-    )
+    ann = tuple(a.weight if a.weight is not None else (default if a.normalised else 1.0) for a in node.annotations)
     return default, ann

@@ -18,7 +18,7 @@ from typing import Any, NamedTuple
 from specguard.initial_env import state_type
 from specguard.nodes import ANNOTATION_SEPARATOR, All, Constraint, Distance, Goal, Node, component_weights
 
-__all__ = ["Requirements", "ExtendedState", "process", "ReferenceEvaluator"]
+__all__ = ["ExtendedState", "ReferenceEvaluator", "Requirements", "process"]
 
 
 class ExtendedState(NamedTuple):
@@ -134,9 +134,7 @@ def process(node: Node, path: str | None = None, *, root: bool = True) -> Requir
     # Step 3: the root goal ends the episode, for all actions.
     if root:
         inner, goal = req.terminal, req.goal
-        req = Requirements(
-            req.goal, req.reward, lambda s: inner(s) or goal(s.s), req.counters, req.goals
-        )
+        req = Requirements(req.goal, req.reward, lambda s: inner(s) or goal(s.s), req.counters, req.goals)
     return req
 
 

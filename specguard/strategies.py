@@ -26,16 +26,16 @@ from hypothesis import strategies as st
 from specguard.nodes import All, Annotation, Constraint, Distance, Goal, Node
 
 __all__ = [
-    "feature_names",
-    "node_names",
     "bounds",
-    "goals",
-    "distances",
     "constraints",
-    "trees",
+    "distances",
+    "feature_names",
+    "goals",
+    "node_names",
     "refinements",
     "states",
     "trajectories",
+    "trees",
 ]
 
 # Goal bounds and state values share one small grid plus arbitrary floats in
@@ -178,7 +178,9 @@ def states(features: Sequence[str]) -> st.SearchStrategy[list[float]]:
     return st.lists(_values, min_size=len(features), max_size=len(features))
 
 
-def trajectories(features: Sequence[str], min_size: int = 2, max_size: int = 12) -> st.SearchStrategy[list[list[float]]]:
+def trajectories(
+    features: Sequence[str], min_size: int = 2, max_size: int = 12
+) -> st.SearchStrategy[list[list[float]]]:
     """Sequences of feature vectors ``s_0 .. s_T``."""
     return st.lists(states(features), min_size=min_size, max_size=max_size)
 

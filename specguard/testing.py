@@ -32,17 +32,19 @@ class ReplayEnv(gym.Env[np.ndarray, int]):
         n_actions: the size of the ``Discrete`` action space.
     """
 
-    metadata: dict[str, Any] = {"render_modes": []}
+    metadata = {"render_modes": []}  # noqa: RUF012  # Gymnasium declares it per instance
 
     def __init__(self, trajectory: Sequence[Sequence[float]], n_actions: int = 3) -> None:
         self.trajectory = np.asarray(trajectory, dtype=np.float32)
         if self.trajectory.ndim != 2 or len(self.trajectory) < 2:
             raise ValueError(f"expected at least two observations of equal length, got shape {self.trajectory.shape}")
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=self.trajectory.shape[1:], dtype=np.float32)
-        self.action_space = gym.spaces.Discrete(n_actions)
+        self.action_space = gym.spaces.Discrete(n_actions)  # type: ignore[assignment]
         self._t = 0
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
         self._t = 0
         return self.trajectory[0].copy(), {}

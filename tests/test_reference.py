@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from itertools import pairwise
 
 import pytest
 from hypothesis import assume, given
@@ -49,7 +50,7 @@ def test_leaf_rewards_telescope_to_final_minus_initial_membership(goal, trajecto
 def test_reentering_a_leaf_is_never_paid_twice(goal, trajectory):
     req = process(sg.All(goal, name="root"), root=False)  # no root termination: the whole trajectory runs
     ext = [ExtendedState(State._make(f), {}) for f in trajectory]
-    rewards = [sum(req.reward(s, 0, s2).values()) for s, s2 in zip(ext, ext[1:])]
+    rewards = [sum(req.reward(s, 0, s2).values()) for s, s2 in pairwise(ext)]
     running = 0.0
     for r in rewards:
         running += r
@@ -64,7 +65,7 @@ def test_distance_shaping_telescopes(goal, distance, trajectory):
     ext = [ExtendedState(State._make(f), {}) for f in trajectory]
     key = f"root/{goal.name}:{distance.name}"
     _, weights = sg.nodes.component_weights(goal.annotate(distance))
-    shaped = sum(req.reward(s, 0, s2)[key] for s, s2 in zip(ext, ext[1:]))
+    shaped = sum(req.reward(s, 0, s2)[key] for s, s2 in pairwise(ext))
     expected = weights[0] * (distance.fn(ext[0].s) - distance.fn(ext[-1].s)) / distance.scale
     assert shaped == pytest.approx(expected, abs=1e-9)
 
