@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
+from numbers import Integral, Real
 from typing import Any, ClassVar
 
 from specguard.error import InvalidSpec
@@ -48,7 +49,7 @@ def _check_name(kind: str, name: object) -> str:
 def _check_weight(where: str, weight: object) -> float | None:
     if weight is None:
         return None
-    if isinstance(weight, bool) or not isinstance(weight, (int, float)):
+    if isinstance(weight, bool) or not isinstance(weight, Real):
         raise InvalidSpec(where, f"expected weight to be a number, got {weight!r}")
     value = float(weight)
     if not math.isfinite(value) or value < 0:
@@ -113,7 +114,7 @@ class Distance(Annotation):
         if not callable(self.fn):
             raise InvalidSpec(where, f"expected fn to be callable as fn(s), got {self.fn!r}")
         scale = self.scale
-        if isinstance(scale, bool) or not isinstance(scale, (int, float)):
+        if isinstance(scale, bool) or not isinstance(scale, Real):
             raise InvalidSpec(where, f"expected scale to be a number, got {scale!r}")
         if not math.isfinite(scale) or scale <= 0:
             raise InvalidSpec(
@@ -159,11 +160,12 @@ class Constraint(Annotation):
         if not callable(self.fn):
             raise InvalidSpec(where, f"expected fn to be callable as fn(s, a), got {self.fn!r}")
         budget = self.budget
-        if isinstance(budget, bool) or not isinstance(budget, int) or budget < 1:
+        if isinstance(budget, bool) or not isinstance(budget, Integral) or budget < 1:
             raise InvalidSpec(
                 where,
                 f"expected budget to be an integer >= 1 (violations allowed per episode), got {budget!r}",
             )
+        object.__setattr__(self, "budget", int(budget))
         object.__setattr__(self, "weight", _check_weight(where, self.weight))
 
     def __repr__(self) -> str:
@@ -255,7 +257,7 @@ Bound = tuple[float, float]
 
 def _parse_bound(goal: str, feature: str, value: object) -> Bound:
     where = f"Goal {goal!r}, feature {feature!r}"
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
+    if isinstance(value, Real) and not isinstance(value, bool):
         lo = hi = value  # a scalar states an exact value, e.g. leg1=1
     elif isinstance(value, Sequence) and not isinstance(value, str) and len(value) == 2:
         lo, hi = value
@@ -266,7 +268,7 @@ def _parse_bound(goal: str, feature: str, value: object) -> Bound:
         if v is None:
             out.append(open_value)
             continue
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
+        if isinstance(v, bool) or not isinstance(v, Real):
             raise InvalidSpec(where, f"expected {side} to be a number or None (open side), got {v!r}")
         f = float(v)
         if math.isnan(f):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import numpy as np
 import pytest
 
 import specguard as sg
@@ -20,6 +21,13 @@ def test_goal_records_inclusive_bounds_with_open_sides():
     assert g.bounds == (("x", 0.0, 1.0), ("y", -math.inf, 2.0), ("z", -1.0, math.inf), ("leg", 1.0, 1.0))
     assert repr(g) == "Goal('g', x=(0, 1), y=(None, 2), z=(-1, None), leg=(1, 1))"
     assert g.describe() == "Goal 'g': 0 <= x <= 1, y <= 2, z >= -1, leg == 1"
+
+
+def test_numpy_numbers_are_numbers():
+    g = sg.Goal("g", x=(np.float32(0.5), np.int64(2)))
+    assert g.bounds == (("x", 0.5, 2.0),)
+    assert sg.Constraint(lambda s, a: False, budget=np.int64(2)).budget == 2
+    assert sg.Distance(abs, scale=np.float32(2.0)).scale == 2.0
 
 
 def test_a_feature_may_be_called_name():
