@@ -20,8 +20,9 @@ Example:
     'R = 0.8*(0.5*R[position] + 0.5*D[position]) + 0.2*R[stabilization]'
 """
 
+from specguard.budget import Budget
 from specguard.compiled import CompiledTree, compile_tree
-from specguard.env import GoalEnv, make_env
+from specguard.env import GoalEnv, GoalInfo, make_baseline_env, make_env
 from specguard.error import (
     EvaluationError,
     InitialEnvError,
@@ -33,27 +34,32 @@ from specguard.error import (
 from specguard.formula import formula
 from specguard.initial_env import InitialEnv
 from specguard.nodes import All, Annotation, Constraint, Distance, Goal, Node
+from specguard.spec import Spec
 
 __version__ = "0.1.0"
 
 __all__ = [
     "All",
     "Annotation",
+    "Budget",
     "CompiledTree",
     "Constraint",
     "Distance",
     "EvaluationError",
     "Goal",
     "GoalEnv",
+    "GoalInfo",
     "InitialEnv",
     "InitialEnvError",
     "InvalidSpec",
     "Node",
+    "Spec",
     "SpecError",
     "StateMappingError",
     "UnknownFeature",
     "__version__",
     "compile_tree",
     "formula",
+    "make_baseline_env",
     "make_env",
 ]

@@ -295,7 +295,8 @@ class Evaluator:
         namespace: dict[str, Any] = {"_make": self._state_cls._make, "_float": float}
         namespace.update({f"_fn{k}": t.fn for k, t in enumerate(tree.terms) if t.fn is not None})
         exec(compile(tree.source, f"<specguard evaluator of {tree.paths[0]!r}>", "exec"), namespace)
-        self._members: Callable[[Sequence[float]], tuple[bool, ...]] = namespace["members"]
+        self.members: Callable[[Sequence[float]], tuple[bool, ...]] = namespace["members"]
+        """Every node's membership of one feature vector (no episode state)."""
         self._step: Callable[..., Any] = namespace["step"]
         self._needs_state = bool(tree.distances or tree.constraints)
         self._m: tuple[bool, ...] = ()
@@ -305,7 +306,7 @@ class Evaluator:
 
     def reset(self, f: Sequence[float]) -> tuple[bool, ...]:
         """Start an episode in features ``f``; returns every node's membership."""
-        self._m = self._members(f)
+        self._m = self.members(f)
         self.counters = list(self.budgets)
         if self._needs_state:
             self._s = self._state_cls._make(f)

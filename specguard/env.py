@@ -36,9 +36,27 @@ from specguard.initial_env import InitialEnv
 from specguard.nodes import Node
 from specguard.reference import ReferenceEvaluator
 
-__all__ = ["GoalEnv", "make_env"]
+__all__ = ["GoalEnv", "GoalInfo", "make_baseline_env", "make_env"]
 
 EvaluatorName = Literal["flat", "reference"]
+
+
+def _features(obs: Any, state: Callable[[Any], Any] | None, features: tuple[str, ...], where: str) -> list[float]:
+    """``state(obs)`` as a list of finite Python floats, one per feature."""
+    if state is None:
+        f: list[float] = obs.tolist()
+    else:
+        try:
+            raw = state(obs)
+            f = raw.tolist() if isinstance(raw, np.ndarray) else [float(v) for v in raw]
+        except Exception as e:
+            raise StateMappingError(f"{where}: state() raised {type(e).__name__}: {e} on observation {obs!r}") from e
+    if len(f) != len(features) or not math.isfinite(sum(f)):
+        raise StateMappingError(
+            f"{where}: state() must return {len(features)} finite numbers for features "
+            f"{features}, got {f!r} (from observation {obs!r})"
+        )
+    return f
 
 
 class GoalEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
@@ -127,24 +145,6 @@ class GoalEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
 
     # -- mapping ---------------------------------------------------------------
 
-    def _features(self, obs: Any) -> list[float]:
-        if self._state is None:
-            f: list[float] = obs.tolist()
-        else:
-            try:
-                raw = self._state(obs)
-                f = raw.tolist() if isinstance(raw, np.ndarray) else [float(v) for v in raw]
-            except Exception as e:
-                raise StateMappingError(
-                    f"{self.tree.name}: state() raised {type(e).__name__}: {e} on observation {obs!r}"
-                ) from e
-        if len(f) != self._n or not math.isfinite(sum(f)):
-            raise StateMappingError(
-                f"{self.tree.name}: state() must return {self._n} finite numbers for features "
-                f"{self.features}, got {f!r} (from observation {obs!r})"
-            )
-        return f
-
     def _observation(self, obs: Any, f: list[float]) -> np.ndarray:
         if self._passthrough:
             return obs  # type: ignore[no-any-return]
@@ -156,7 +156,7 @@ class GoalEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         obs, info = self.env.reset(seed=seed, options=options)
-        f = self._features(obs)
+        f = _features(obs, self._state, self.features, self.tree.name)
         members = self.evaluator.reset(f)
         info["goals"] = dict(zip(self.evaluator.paths, members))
         return self._observation(obs, f), info
@@ -164,12 +164,58 @@ class GoalEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
     def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
         base_action = action if self._execute is None else self._execute(action)
         obs, base_reward, terminated, truncated, info = self.env.step(base_action)
-        f = self._features(obs)
+        f = _features(obs, self._state, self.features, self.tree.name)
         reward, ended, members, terms = self.evaluator.step(action, f)
         info["goals"] = dict(zip(self.evaluator.paths, members))
         info["reward_terms"] = terms
         info["base_reward"] = float(base_reward)
         return self._observation(obs, f), reward, bool(terminated or ended), bool(truncated), info
+
+
+class GoalInfo(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
+    """Reports ``info["goals"]`` of a goal tree and changes nothing else.
+
+    The paper's *baseline*: the initial env keeps its own observation, reward
+    and termination, and its episodes are judged by the same goals.
+
+    Args:
+        env: the base (initial) env.
+        tree: the goal tree.
+        features: the feature names.
+        state: ``state(obs*)``; ``None`` for the identity.
+    """
+
+    def __init__(
+        self, env: gym.Env, tree: Node, features: Sequence[str], state: Callable[[Any], Any] | None = None
+    ) -> None:
+        RecordConstructorArgs.__init__(self, tree=tree, features=tuple(features), state=state)
+        gym.Wrapper.__init__(self, env)
+        self.tree = tree
+        self.features = tuple(features)
+        self.evaluator = compile_tree(tree, self.features).evaluator()
+        self._state = state
+
+    def _goals(self, obs: Any) -> dict[str, bool]:
+        f = _features(obs, self._state, self.features, self.tree.name)
+        return dict(zip(self.evaluator.paths, self.evaluator.members(f)))
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        obs, info = self.env.reset(seed=seed, options=options)
+        info["goals"] = self._goals(obs)
+        return obs, info
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        info["goals"] = self._goals(obs)
+        return obs, reward, terminated, truncated, info
+
+
+def make_baseline_env(initial_env: InitialEnv, tree: Node, **make_kwargs: Any) -> GoalInfo:
+    """The initial env with its own reward, reporting the goals of ``tree`` (the paper's baseline)."""
+    if not isinstance(initial_env, InitialEnv):
+        raise InitialEnvError(f"make_baseline_env: expected an InitialEnv as first argument, got {initial_env!r}")
+    compile_tree(tree, initial_env.features)
+    return GoalInfo(initial_env.make(**make_kwargs), tree=tree, features=initial_env.features, state=initial_env.state)
 
 
 def make_env(initial_env: InitialEnv, tree: Node, *, evaluator: EvaluatorName = "flat", **make_kwargs: Any) -> GoalEnv:

@@ -222,3 +222,15 @@ def test_acrobot_height_feature_comes_from_state():
     cos1, sin1, cos2, sin2 = obs[:4]
     assert obs[6] == pytest.approx(-cos1 - (cos1 * cos2 - sin1 * sin2), abs=1e-6)
     assert env.observation_space.low[6] == -2.0 and env.observation_space.high[6] == 2.0
+
+
+def test_baseline_env_keeps_the_initial_env_and_reports_goals():
+    baseline = sg.make_baseline_env(acrobot.initial_env, acrobot.trees["c"])
+    raw = gym.make("Acrobot-v1")
+    (obs_b, info_b), (obs_r, _) = baseline.reset(seed=4), raw.reset(seed=4)
+    assert obs_b.tolist() == obs_r.tolist() and info_b["goals"] == {"height": False}
+    for _ in range(20):
+        step_b, step_r = baseline.step(1), raw.step(1)
+        assert step_b[0].tolist() == step_r[0].tolist() and step_b[1:4] == step_r[1:4]
+        assert set(step_b[4]["goals"]) == {"height"}
+    gym_check_env(baseline, skip_render_check=True)

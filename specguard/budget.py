@@ -1,0 +1,93 @@
+"""What a spec may spend: training steps, seeds, evaluation episodes, wall-clock time.
+
+Budgets are what make CI affordable. Pick ``timesteps`` from a run you trust
+(the smallest budget at which the spec's goals are met on your machine), keep
+``min_seeds`` at 2 for a pull-request check (two runs in parallel on a 2-core
+machine), and raise ``max_seeds`` where a quorum should be judged over more
+runs. ``eval_episodes`` sets how narrow a run's interval gets: with 30
+episodes and 30 successes the 95% interval is ``[0.884, 1]``.
+
+Example:
+    >>> Budget(timesteps=50_000, min_seeds=2, max_seeds=4)
+    Budget(timesteps=50000, min_seeds=2, max_seeds=4, eval_episodes=30, max_eval_episodes=120, wall_clock_s=None)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from numbers import Integral, Real
+
+from specguard.error import InvalidSpec
+
+__all__ = ["Budget"]
+
+
+def _positive_int(field: str, value: object) -> int:
+    if isinstance(value, bool) or not isinstance(value, Integral) or value < 1:
+        raise InvalidSpec(f"Budget.{field}", f"expected an integer >= 1, got {value!r}")
+    return int(value)
+
+
+@dataclass(frozen=True)
+class Budget:
+    """Training and evaluation budget of a spec.
+
+    Args:
+        timesteps: environment steps of training per seed.
+        min_seeds: runs always trained.
+        max_seeds: runs trained at most, while a quorum is still open
+            (default: ``min_seeds``).
+        eval_episodes: evaluation episodes per run.
+        max_eval_episodes: evaluation episodes an undecided run may get in
+            total before it is called (default: 4x ``eval_episodes``).
+        wall_clock_s: optional cap in seconds on one run's training.
+    """
+
+    timesteps: int
+    min_seeds: int = 2
+    max_seeds: int | None = None
+    eval_episodes: int = 30
+    max_eval_episodes: int | None = None
+    wall_clock_s: float | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "timesteps", _positive_int("timesteps", self.timesteps))
+        object.__setattr__(self, "min_seeds", _positive_int("min_seeds", self.min_seeds))
+        max_seeds = self.min_seeds if self.max_seeds is None else _positive_int("max_seeds", self.max_seeds)
+        if max_seeds < self.min_seeds:
+            raise InvalidSpec(
+                "Budget.max_seeds",
+                f"expected max_seeds >= min_seeds, got max_seeds={max_seeds} < min_seeds={self.min_seeds}",
+            )
+        object.__setattr__(self, "max_seeds", max_seeds)
+        object.__setattr__(self, "eval_episodes", _positive_int("eval_episodes", self.eval_episodes))
+        max_eval = (
+            4 * self.eval_episodes
+            if self.max_eval_episodes is None
+            else _positive_int("max_eval_episodes", self.max_eval_episodes)
+        )
+        if max_eval < self.eval_episodes:
+            raise InvalidSpec(
+                "Budget.max_eval_episodes",
+                f"expected max_eval_episodes >= eval_episodes, got {max_eval} < {self.eval_episodes}",
+            )
+        object.__setattr__(self, "max_eval_episodes", max_eval)
+        if self.wall_clock_s is not None:
+            w = self.wall_clock_s
+            if isinstance(w, bool) or not isinstance(w, Real) or not math.isfinite(w) or w <= 0:
+                raise InvalidSpec("Budget.wall_clock_s", f"expected a number of seconds > 0 or None, got {w!r}")
+            object.__setattr__(self, "wall_clock_s", float(w))
+
+    def scaled(self, factor: float) -> Budget:
+        """This budget with ``timesteps`` multiplied by ``factor`` (at least 1 step), e.g. 0.25 for a quick check."""
+        if isinstance(factor, bool) or not isinstance(factor, Real) or not math.isfinite(factor) or factor <= 0:
+            raise InvalidSpec("budget scale", f"expected a number > 0, got {factor!r}")
+        return Budget(
+            timesteps=max(1, round(self.timesteps * factor)),
+            min_seeds=self.min_seeds,
+            max_seeds=self.max_seeds,
+            eval_episodes=self.eval_episodes,
+            max_eval_episodes=self.max_eval_episodes,
+            wall_clock_s=self.wall_clock_s,
+        )

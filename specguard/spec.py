@@ -1,0 +1,167 @@
+"""A spec: what to train (initial env + goal tree + algorithm), on what budget, and what to expect.
+
+Example:
+    >>> import specguard as sg
+    >>> from example_specs import pendulum
+    >>> spec = sg.Spec(
+    ...     pendulum.initial_env,
+    ...     pendulum.trees["w"],
+    ...     budget=sg.Budget(timesteps=100_000),
+    ...     expect={"pendulum": 0.8, "position": 0.9},
+    ... )
+    >>> spec.thresholds
+    {'pendulum': 0.8, 'pendulum/position': 0.9}
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from numbers import Real
+from typing import Any
+
+from specguard.budget import Budget
+from specguard.error import InvalidSpec
+from specguard.initial_env import InitialEnv
+from specguard.nodes import Node
+
+__all__ = ["ALGORITHMS", "Spec"]
+
+# stable-baselines3 algorithms by name, and the action spaces each can act in.
+ALGORITHMS: dict[str, tuple[str, ...]] = {
+    "PPO": ("Box", "Discrete", "MultiDiscrete", "MultiBinary"),
+    "A2C": ("Box", "Discrete", "MultiDiscrete", "MultiBinary"),
+    "DQN": ("Discrete",),
+    "SAC": ("Box",),
+    "TD3": ("Box",),
+    "DDPG": ("Box",),
+}
+
+UNDECIDED_OUTCOMES = ("fail", "pass")
+
+
+@dataclass(frozen=True)
+class Spec:
+    """A goal tree over an initial env, trained and judged against per-goal thresholds.
+
+    Args:
+        initial_env: the initial environment.
+        tree: the goal tree.
+        budget: training and evaluation budget.
+        expect: ``{node path or unique node name: minimum success}``, or one
+            number for the root goal. Empty: measure only.
+        algorithm: a stable-baselines3 algorithm name that fits the action space.
+        hyperparameters: keyword arguments for the algorithm (``n_steps``, ...).
+        n_envs: parallel environments per run (a ``DummyVecEnv``).
+        normalize: wrap the training env in ``VecNormalize``.
+        quorum: runs that must meet each threshold; default every run
+            (``budget.max_seeds``).
+        deterministic: evaluate the policy's deterministic action.
+        confidence: the confidence of the success intervals.
+        undecided: what a verdict still undecided at the end counts as: "fail" or "pass".
+        baseline: train on the initial env's own reward, termination and
+            observation, and evaluate the same goals (the paper's baseline).
+        name: a label for reports; defaults to the root's name.
+    """
+
+    initial_env: InitialEnv
+    tree: Node
+    budget: Budget
+    expect: Mapping[str, float] | float = field(default_factory=dict)
+    algorithm: str = "PPO"
+    hyperparameters: Mapping[str, Any] = field(default_factory=dict)
+    n_envs: int = 1
+    normalize: bool = False
+    quorum: int | None = None
+    deterministic: bool = True
+    confidence: float = 0.95
+    undecided: str = "fail"
+    baseline: bool = False
+    name: str | None = None
+
+    def __post_init__(self) -> None:
+        label = f"Spec {self.label!r}"
+        if not isinstance(self.initial_env, InitialEnv):
+            raise InvalidSpec(f"{label}.initial_env", f"expected an InitialEnv, got {self.initial_env!r}")
+        if not isinstance(self.tree, Node):
+            raise InvalidSpec(f"{label}.tree", f"expected a Goal or All node, got {self.tree!r}")
+        if not isinstance(self.budget, Budget):
+            raise InvalidSpec(f"{label}.budget", f"expected a Budget, got {self.budget!r}")
+        if self.algorithm not in ALGORITHMS:
+            raise InvalidSpec(
+                f"{label}.algorithm",
+                f"unknown algorithm {self.algorithm!r}; expected one of {', '.join(ALGORITHMS)}",
+            )
+        if not isinstance(self.hyperparameters, Mapping):
+            raise InvalidSpec(f"{label}.hyperparameters", f"expected a mapping, got {self.hyperparameters!r}")
+        if isinstance(self.n_envs, bool) or not isinstance(self.n_envs, int) or self.n_envs < 1:
+            raise InvalidSpec(f"{label}.n_envs", f"expected an integer >= 1, got {self.n_envs!r}")
+        assert self.budget.max_seeds is not None
+        if self.quorum is not None and not (isinstance(self.quorum, int) and 1 <= self.quorum <= self.budget.max_seeds):
+            raise InvalidSpec(
+                f"{label}.quorum",
+                f"expected an integer in [1, budget.max_seeds={self.budget.max_seeds}], got {self.quorum!r}",
+            )
+        if not (isinstance(self.confidence, Real) and 0.0 < self.confidence < 1.0):
+            raise InvalidSpec(f"{label}.confidence", f"expected a number in (0, 1), got {self.confidence!r}")
+        if self.undecided not in UNDECIDED_OUTCOMES:
+            raise InvalidSpec(f"{label}.undecided", f"expected one of {UNDECIDED_OUTCOMES}, got {self.undecided!r}")
+        object.__setattr__(self, "expect", self._resolve_thresholds(label))
+
+    @property
+    def label(self) -> str:
+        return self.name or str(getattr(self.tree, "name", "?"))
+
+    @property
+    def thresholds(self) -> dict[str, float]:
+        """The thresholds by full node path."""
+        assert isinstance(self.expect, Mapping)
+        return dict(self.expect)
+
+    @property
+    def required_runs(self) -> int:
+        """Runs that must meet each threshold."""
+        assert self.budget.max_seeds is not None
+        return self.quorum if self.quorum is not None else self.budget.max_seeds
+
+    def _resolve_thresholds(self, label: str) -> dict[str, float]:
+        expect = self.expect
+        if isinstance(expect, Real) and not isinstance(expect, bool):
+            expect = {self.tree.name: float(expect)}
+        if not isinstance(expect, Mapping):
+            raise InvalidSpec(
+                f"{label}.expect", f"expected {{node path or name: min success}} or a number, got {expect!r}"
+            )
+        paths = [p for p, _ in self.tree.walk()]
+        by_name: dict[str, list[str]] = {}
+        for p in paths:
+            by_name.setdefault(p.rsplit("/", 1)[-1], []).append(p)
+        resolved: dict[str, float] = {}
+        for key, value in expect.items():
+            if key in paths:
+                path = key
+            elif len(by_name.get(key, ())) == 1:
+                path = by_name[key][0]
+            elif key in by_name:
+                raise InvalidSpec(
+                    f"{label}.expect[{key!r}]",
+                    f"the name {key!r} is ambiguous; use one of the paths {', '.join(by_name[key])}",
+                )
+            else:
+                raise InvalidSpec(
+                    f"{label}.expect[{key!r}]",
+                    f"no node is named {key!r}; nodes: {', '.join(paths)}",
+                )
+            if isinstance(value, bool) or not isinstance(value, Real) or not 0.0 <= value <= 1.0:
+                raise InvalidSpec(f"{label}.expect[{key!r}]", f"expected a success rate in [0, 1], got {value!r}")
+            if value == 1.0:
+                raise InvalidSpec(
+                    f"{label}.expect[{key!r}]",
+                    "a threshold of 1.0 can never be confirmed from finitely many episodes",
+                    hint="ask for e.g. 0.95: a run meets it when its whole confidence interval lies above",
+                )
+            if not math.isfinite(value):
+                raise InvalidSpec(f"{label}.expect[{key!r}]", f"expected a finite number, got {value!r}")
+            resolved[path] = float(value)
+        return resolved

@@ -1,0 +1,66 @@
+"""Spec: thresholds by path or name, and validation errors naming the spec and field."""
+
+from __future__ import annotations
+
+import pytest
+
+import specguard as sg
+from example_specs import lunar_lander, pendulum
+
+BUDGET = sg.Budget(timesteps=1000)
+
+
+def spec(**kwargs):
+    return sg.Spec(pendulum.initial_env, pendulum.trees["w"], budget=BUDGET, **kwargs)
+
+
+def test_thresholds_resolve_names_to_paths():
+    assert spec(expect={"position": 0.5, "pendulum": 0.8}).thresholds == {"pendulum/position": 0.5, "pendulum": 0.8}
+    assert spec(expect=0.7).thresholds == {"pendulum": 0.7}
+    assert spec().thresholds == {}
+
+
+def test_quorum_defaults_to_every_run():
+    assert spec().required_runs == 2
+    assert sg.Spec(pendulum.initial_env, pendulum.trees["w"], budget=sg.Budget(10, 2, 10), quorum=6).required_runs == 6
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"expect": {"pendulum": 1.5}}, r"Spec 'pendulum'.expect\['pendulum'\]: expected a success rate in \[0, 1\]"),
+        ({"expect": {"pendulum": -0.1}}, r"expected a success rate in \[0, 1\], got -0.1"),
+        ({"expect": {"pendulum": 1.0}}, r"a threshold of 1.0 can never be confirmed"),
+        (
+            {"expect": {"height": 0.5}},
+            r"expect\['height'\]: no node is named 'height'; nodes: pendulum, pendulum/position",
+        ),
+        ({"expect": "high"}, r"Spec 'pendulum'.expect: expected"),
+        ({"algorithm": "PPO2"}, r"Spec 'pendulum'.algorithm: unknown algorithm 'PPO2'; expected one of PPO, A2C"),
+        ({"n_envs": 0}, r"Spec 'pendulum'.n_envs: expected an integer >= 1, got 0"),
+        ({"quorum": 3}, r"Spec 'pendulum'.quorum: expected an integer in \[1, budget.max_seeds=2\], got 3"),
+        ({"confidence": 1.0}, r"Spec 'pendulum'.confidence: expected a number in \(0, 1\)"),
+        ({"undecided": "xfail"}, r"Spec 'pendulum'.undecided: expected one of \('fail', 'pass'\)"),
+        ({"hyperparameters": [1]}, r"Spec 'pendulum'.hyperparameters: expected a mapping"),
+        ({"name": "mine", "n_envs": -1}, r"Spec 'mine'.n_envs"),
+    ],
+)
+def test_bad_specs(kwargs, message):
+    with pytest.raises(sg.InvalidSpec, match=message):
+        spec(**kwargs)
+
+
+def test_ambiguous_names_ask_for_a_path():
+    tree = sg.All(sg.All(sg.Goal("x", a=0), name="l"), sg.All(sg.Goal("x", a=1), name="r"), name="root")
+    initial = sg.InitialEnv(lambda: None, features=("a",))
+    with pytest.raises(sg.InvalidSpec, match=r"the name 'x' is ambiguous; use one of the paths root/l/x, root/r/x"):
+        sg.Spec(initial, tree, budget=BUDGET, expect={"x": 0.5})
+
+
+def test_wrong_field_types():
+    with pytest.raises(sg.InvalidSpec, match=r"\.budget: expected a Budget"):
+        sg.Spec(pendulum.initial_env, pendulum.trees["w"], budget=1000)
+    with pytest.raises(sg.InvalidSpec, match=r"\.initial_env: expected an InitialEnv"):
+        sg.Spec("Pendulum-v1", pendulum.trees["w"], budget=BUDGET)
+    with pytest.raises(sg.InvalidSpec, match=r"\.tree: expected a Goal or All node"):
+        sg.Spec(lunar_lander.initial_env, "lander", budget=BUDGET)
