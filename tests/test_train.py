@@ -1,0 +1,84 @@
+"""Training one run and measuring its goals, with tiny budgets."""
+
+from __future__ import annotations
+
+import json
+
+import gymnasium as gym
+import pytest
+
+import specguard as sg
+from example_specs import pendulum
+from specguard.testing import ReplayEnv
+from specguard.train import EVAL_SEED_BASE, TrainingError, evaluate, train_run
+
+TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
+
+
+def tiny_spec(**kwargs):
+    kwargs.setdefault("budget", sg.Budget(timesteps=128, eval_episodes=2, max_eval_episodes=4))
+    kwargs.setdefault("hyperparameters", TINY)
+    return sg.Spec(pendulum.initial_env, pendulum.trees["w"], **kwargs)
+
+
+def test_run_result_is_plain_data_and_deterministic_per_seed():
+    spec = tiny_spec(expect={"position": 0.2})
+    first, model = train_run(spec, seed=3)
+    again, _ = train_run(spec, seed=3)
+    data = first.to_dict()
+    assert json.loads(json.dumps(data)) == data
+    assert set(first.successes) == {"pendulum", "pendulum/position", "pendulum/stabilization"}
+    assert first.timesteps == 128 and first.episodes in (2, 4)
+    assert (first.successes, first.episodes) == (again.successes, again.episodes)
+    assert hasattr(model, "predict")
+
+
+def test_evaluate_counts_the_last_state_of_each_episode():
+    initial = sg.InitialEnv(lambda: ReplayEnv([[0.0], [1.0], [0.0], [1.0]]), features=("x",))
+    tree = sg.All(sg.Goal("up", x=(0.5, None)), sg.Goal("any", x=(None, None)), name="root")
+    env = sg.make_baseline_env(initial, tree)  # the replay truncates after 3 steps, in "up"
+    counts = evaluate(lambda obs: 0, env, episodes=3, seeds=[EVAL_SEED_BASE, EVAL_SEED_BASE + 1, EVAL_SEED_BASE + 2])
+    assert counts == {"root": 3, "root/up": 3, "root/any": 3}
+
+
+def test_algorithm_must_fit_the_action_space():
+    with pytest.raises(sg.InvalidSpec, match=r"Spec 'pendulum'.algorithm: DQN cannot act in a Box action space"):
+        train_run(tiny_spec(algorithm="DQN"), seed=0)
+
+
+def test_hyperparameters_sb3_rejects_are_attributed_to_the_spec():
+    with pytest.raises(sg.InvalidSpec, match=r"Spec 'pendulum'.hyperparameters: PPO rejected them: .*n_stepz"):
+        train_run(tiny_spec(hyperparameters={"n_stepz": 64}), seed=0)
+
+
+class Exploding(gym.Wrapper):
+    def __init__(self, env, at):
+        super().__init__(env)
+        self.at, self.t = at, 0
+
+    def step(self, action):
+        self.t += 1
+        if self.t == self.at:
+            raise RuntimeError("simulator diverged")
+        return self.env.step(action)
+
+
+def test_env_failures_name_the_seed_and_step():
+    initial = sg.InitialEnv(lambda: Exploding(gym.make("Pendulum-v1"), at=50), features=("x", "y", "omega"))
+    spec = sg.Spec(initial, pendulum.trees["b"], budget=sg.Budget(timesteps=128), hyperparameters=TINY)
+    with pytest.raises(
+        TrainingError, match=r"Spec 'pendulum', seed 5, training step 4\d: .*RuntimeError: simulator diverged"
+    ):
+        train_run(spec, seed=5)
+
+
+def test_baseline_trains_on_the_initial_env_and_reports_goals():
+    result, model = train_run(tiny_spec(baseline=True), seed=0)
+    assert model.observation_space.shape == (3,)
+    assert set(result.successes) == {"pendulum", "pendulum/position", "pendulum/stabilization"}
+
+
+def test_wall_clock_cap_stops_training():
+    spec = tiny_spec(budget=sg.Budget(timesteps=100_000, eval_episodes=1, wall_clock_s=0.5))
+    result, _ = train_run(spec, seed=0)
+    assert result.stopped_early and result.timesteps < 100_000
