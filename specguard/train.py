@@ -155,7 +155,8 @@ def train_run(spec: Spec, seed: int) -> tuple[RunResult, Any]:
         venv.close()
         raise InvalidSpec(
             f"{label}.algorithm",
-            f"{spec.algorithm} cannot act in a {space} action space; it handles {', '.join(ALGORITHMS[spec.algorithm])}",
+            f"{spec.algorithm} cannot act in a {space} action space; "
+            f"it handles {', '.join(ALGORITHMS[spec.algorithm])}",
         )
     if spec.normalize:
         venv = VecNormalize(venv)
