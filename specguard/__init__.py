@@ -21,7 +21,9 @@ Example:
 """
 
 from specguard.budget import Budget
+from specguard.cache import Cache
 from specguard.compiled import CompiledTree, compile_tree
+from specguard.engine import GoalVerdict, SpecResult, run_spec
 from specguard.env import GoalEnv, GoalInfo, make_baseline_env, make_env
 from specguard.error import (
     EvaluationError,
@@ -42,6 +44,7 @@ __all__ = [
     "All",
     "Annotation",
     "Budget",
+    "Cache",
     "CompiledTree",
     "Constraint",
     "Distance",
@@ -49,12 +52,14 @@ __all__ = [
     "Goal",
     "GoalEnv",
     "GoalInfo",
+    "GoalVerdict",
     "InitialEnv",
     "InitialEnvError",
     "InvalidSpec",
     "Node",
     "Spec",
     "SpecError",
+    "SpecResult",
     "StateMappingError",
     "UnknownFeature",
     "__version__",
@@ -62,4 +67,5 @@ __all__ = [
     "formula",
     "make_baseline_env",
     "make_env",
+    "run_spec",
 ]

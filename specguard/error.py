@@ -31,10 +31,16 @@ class InvalidSpec(SpecError, ValueError):
 
     def __init__(self, where: str, message: str, hint: str | None = None) -> None:
         self.where = where
+        self.message = message
+        self.hint = hint
         text = f"{where}: {message}"
         if hint:
             text += f"\nHint: {hint}"
         super().__init__(text)
+
+    def __reduce__(self) -> tuple[type, tuple[str, str, str | None]]:
+        # Raised in training worker processes: must survive pickling.
+        return type(self), (self.where, self.message, self.hint)
 
 
 class UnknownFeature(InvalidSpec):
