@@ -135,12 +135,15 @@ class SpecResult:
         return "\n".join(lines)
 
 
-def _train_in_worker(payload: bytes, seed: int, cache_dir: str | None) -> dict[str, Any]:
-    """Process entry point: unpickle the spec (cloudpickle carries lambdas), train, store."""
+def _train_in_worker(payload: bytes, seed: int, cache_dir: str | None, report: bool) -> dict[str, Any]:
+    """Process entry point: unpickle the spec (cloudpickle carries lambdas), train, store.
+
+    Progress lines go straight to the inherited stderr, which CI logs capture.
+    """
     spec: Spec = cloudpickle.loads(payload)
     from specguard.train import train_run
 
-    result, model = train_run(spec, seed)
+    result, model = train_run(spec, seed, progress=_stderr if report else None)
     if cache_dir is not None:
         Cache(Path(cache_dir)).store(spec, seed, result, model)
     return result.to_dict()
@@ -228,7 +231,7 @@ def run_spec(
                     pool = cf.ProcessPoolExecutor(max_workers=n_workers, mp_context=context)
                 say(f"[specguard] {spec.label}: training seed {seed} ({spec.budget.timesteps} steps)")
                 cache_arg = None if cache is None else str(cache.root)
-                pending[pool.submit(_train_in_worker, payload, seed, cache_arg)] = seed
+                pending[pool.submit(_train_in_worker, payload, seed, cache_arg, progress is not None)] = seed
             for future in cf.as_completed(pending):
                 seed = pending[future]
                 try:

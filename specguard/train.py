@@ -102,8 +102,13 @@ def _make_single_env(spec: Spec) -> gym.Env:
 class _GoalCurve:
     """An SB3 callback body: success per goal over finished training episodes, and the wall-clock cap."""
 
-    def __init__(self, every: int, wall_clock_s: float | None) -> None:
+    def __init__(
+        self, every: int, wall_clock_s: float | None, total: int, report: Callable[[str], None] | None
+    ) -> None:
         self.every = max(1, every)
+        self.total = total
+        self.report = report
+        self.start = time.perf_counter()
         self.deadline = None if wall_clock_s is None else time.perf_counter() + wall_clock_s
         self.points: list[dict[str, Any]] = []
         self._counts: dict[str, int] = {}
@@ -122,6 +127,12 @@ class _GoalCurve:
             if self._episodes:
                 rates = {p: c / self._episodes for p, c in self._counts.items()}
                 self.points.append({"timesteps": num_timesteps, "episodes": self._episodes, "success": rates})
+            if self.report is not None:
+                root = "-"
+                if self._episodes:
+                    root = f"{next(iter(rates.values())):.0%} of {self._episodes} training episodes"
+                elapsed = time.perf_counter() - self.start
+                self.report(f"{num_timesteps}/{self.total} steps, {elapsed:.0f}s, root goal reached in {root}")
             self._counts, self._episodes = {}, 0
         if self.deadline is not None and time.perf_counter() > self.deadline:
             self.stopped_early = True
@@ -129,8 +140,11 @@ class _GoalCurve:
         return True
 
 
-def train_run(spec: Spec, seed: int) -> tuple[RunResult, Any]:
+def train_run(spec: Spec, seed: int, progress: Callable[[str], None] | None = None) -> tuple[RunResult, Any]:
     """Train and evaluate one run of ``spec`` with ``seed``.
+
+    ``progress``, if given, receives a line at each of the learning curve's
+    points (every tenth of the budget), for CI logs.
 
     Returns:
         The result and the trained model (an SB3 ``BaseAlgorithm``).
@@ -168,7 +182,8 @@ def train_run(spec: Spec, seed: int) -> tuple[RunResult, Any]:
         raise InvalidSpec(f"{label}.hyperparameters", f"{spec.algorithm} rejected them: {e}") from e
 
     budget = spec.budget
-    curve = _GoalCurve(budget.timesteps // CURVE_POINTS, budget.wall_clock_s)
+    report = None if progress is None else (lambda line: progress(f"[specguard] {spec.label} seed {seed}: {line}"))
+    curve = _GoalCurve(budget.timesteps // CURVE_POINTS, budget.wall_clock_s, budget.timesteps, report)
 
     class Callback(BaseCallback):  # type: ignore[misc]
         def _on_step(self) -> bool:

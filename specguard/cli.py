@@ -1,0 +1,178 @@
+"""The ``specguard`` command line.
+
+``specguard show PATH[::NAME]`` prints the tree and the reward formula of the
+specs (or trees) a Python file defines; ``specguard run PATH[::NAME]`` trains
+them within their budgets and prints the per-goal table. A file's specs are its
+module-level ``Spec`` objects (named by variable) and the values of its
+module-level dicts of specs (named by key); ``show`` also lists goal trees.
+
+Exit status of ``run``: 0 when every spec passed, 1 when one failed, 2 for a
+usage or spec error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import importlib.util
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import cloudpickle
+
+from specguard.error import SpecError
+from specguard.formula import formula
+from specguard.nodes import Node
+from specguard.spec import Spec
+
+__all__ = ["load_objects", "main"]
+
+
+def _import_file(path: Path) -> ModuleType:
+    if not path.is_file():
+        raise SpecError(f"{path}: no such file")
+    name = f"specguard_user_{abs(hash(path.resolve()))}"
+    sys.path.insert(0, str(path.resolve().parent))  # let the file import its neighbours
+    module_spec = importlib.util.spec_from_file_location(name, path)
+    assert module_spec is not None and module_spec.loader is not None
+    module = importlib.util.module_from_spec(module_spec)
+    sys.modules[name] = module
+    try:
+        module_spec.loader.exec_module(module)
+    except SpecError:
+        raise
+    except Exception as e:
+        raise SpecError(f"{path}: importing it raised {type(e).__name__}: {e}") from e
+    # Workers are separate processes: ship this file's functions by value.
+    cloudpickle.register_pickle_by_value(module)
+    return module
+
+
+def load_objects(target: str, kinds: tuple[type, ...] = (Spec,)) -> dict[str, Any]:
+    """The specs (or other ``kinds``) named by ``PATH[::NAME]``, by name, in file order."""
+    path_text, _, wanted = target.partition("::")
+    module = _import_file(Path(path_text))
+    found: dict[str, Any] = {}
+    for kind in kinds:  # earlier kinds win a shared name: specs["w"] over trees["w"]
+        for attr, value in vars(module).items():
+            if attr.startswith("_"):
+                continue
+            if isinstance(value, kind):
+                found.setdefault(attr, value)
+            elif isinstance(value, dict):
+                for key, item in value.items():
+                    if isinstance(key, str) and isinstance(item, kind):
+                        found.setdefault(key, item)
+    if wanted:
+        if wanted not in found:
+            known = ", ".join(found) or "none"
+            raise SpecError(f"{path_text}: nothing named {wanted!r}; it defines: {known}")
+        return {wanted: found[wanted]}
+    if not found:
+        raise SpecError(f"{path_text}: defines no {' or '.join(k.__name__ for k in kinds)} objects")
+    return found
+
+
+def _show(target: str) -> int:
+    for name, obj in load_objects(target, (Spec, Node)).items():
+        tree = obj.tree if isinstance(obj, Spec) else obj
+        print(f"== {name}")
+        if isinstance(obj, Spec):
+            kind = "baseline: the initial env's own reward" if obj.baseline else "constructed env"
+            print(f"{obj.initial_env!r}, {obj.algorithm}, {kind}")
+            print(f"budget: {obj.budget}")
+            if obj.thresholds:
+                print("expect: " + ", ".join(f"{p} >= {t:g}" for p, t in obj.thresholds.items()))
+        print(tree.pretty())
+        print(formula(tree))
+        print()
+    return 0
+
+
+def _run(args: argparse.Namespace) -> int:
+    from specguard.engine import run_spec
+
+    specs = load_objects(args.target)
+    results = {}
+    failed = False
+    for name, spec in specs.items():
+        if args.budget_scale != 1.0:
+            spec = dataclasses.replace(spec, budget=spec.budget.scaled(args.budget_scale))
+        result = run_spec(
+            spec,
+            workers=args.workers,
+            cache_dir=None if args.no_cache else args.cache_dir,
+            progress=None if args.quiet else _stderr,
+        )
+        results[name] = result.to_dict()
+        print(f"== {name}: {'passed' if result.passed else 'FAILED'} ({result.seconds:.1f}s)")
+        print(result.table())
+        print()
+        failed = failed or not result.passed
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=1))
+    return 1 if failed else 0
+
+
+def _stderr(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
+def _workers(text: str) -> int | str:
+    if text == "auto":
+        return text
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1 or 'auto', got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1 or 'auto', got {text!r}")
+    return value
+
+
+def _scale(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="specguard", description="Goal-tree specifications for RL: show and run.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    show = sub.add_parser("show", help="print the tree and reward formula of specs in a file")
+    show.add_argument("target", metavar="PATH[::NAME]")
+    run = sub.add_parser("run", help="train specs within their budgets and print per-goal verdicts")
+    run.add_argument("target", metavar="PATH[::NAME]")
+    run.add_argument("--workers", type=_workers, default="auto", help="parallel training processes (default: auto)")
+    run.add_argument("--cache-dir", default=".specguard/cache", help="run cache (default: .specguard/cache)")
+    run.add_argument("--no-cache", action="store_true", help="neither read nor write the cache")
+    run.add_argument("--budget-scale", type=_scale, default=1.0, help="multiply training timesteps, e.g. 0.25")
+    run.add_argument("--json", metavar="FILE", help="also write the results as JSON")
+    run.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        if args.command == "show":
+            return _show(args.target)
+        return _run(args)
+    except SpecError as e:
+        print(f"specguard: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("specguard: interrupted; finished runs are cached, unfinished ones were not stored", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,94 @@
+"""The command line: show and run on spec files, and its errors."""
+
+from __future__ import annotations
+
+import json
+import textwrap
+
+import pytest
+
+from specguard.cli import main
+
+SPEC_FILE = textwrap.dedent(
+    """
+    import specguard as sg
+
+    pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
+    tree = sg.All(
+        sg.Goal("position", x=(0.966, 1.0)).annotate(sg.Distance(lambda s: abs(s.x - 1.0), scale=2.0)),
+        sg.Goal("stabilization", omega=(-0.25, 0.25)),
+        name="pendulum",
+    )
+    budget = sg.Budget(timesteps=128, min_seeds=1, eval_episodes=2)
+    tiny = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
+    easy = sg.Spec(pendulum, tree, budget=budget, expect={"stabilization": 0.0}, hyperparameters=tiny)
+    specs = {"hard": sg.Spec(pendulum, tree, budget=budget, expect={"pendulum": 0.99}, hyperparameters=tiny)}
+    """
+)
+
+
+@pytest.fixture
+def spec_file(tmp_path):
+    path = tmp_path / "my_specs.py"
+    path.write_text(SPEC_FILE)
+    return path
+
+
+def test_show_prints_tree_and_formula(spec_file, capsys):
+    assert main(["show", f"{spec_file}::easy"]) == 0
+    out = capsys.readouterr().out
+    assert "== easy" in out
+    assert "R = 0.5*(0.5*R[position] + 0.5*D[position]) + 0.5*R[stabilization]" in out
+    assert "expect: pendulum/stabilization >= 0" in out
+
+
+def test_show_lists_everything_without_a_name(spec_file, capsys):
+    assert main(["show", str(spec_file)]) == 0
+    out = capsys.readouterr().out
+    assert "== easy" in out and "== hard" in out and "== tree" in out
+
+
+def test_run_passes_and_fails_with_exit_status(spec_file, tmp_path, capsys):
+    report = tmp_path / "out.json"
+    args = ["--workers", "1", "--cache-dir", str(tmp_path / "cache"), "--quiet"]
+    assert main(["run", f"{spec_file}::easy", *args, "--json", str(report)]) == 0
+    out = capsys.readouterr().out
+    assert "== easy: passed" in out and "pendulum/stabilization" in out
+    assert json.loads(report.read_text())["easy"]["passed"] is True
+    assert main(["run", f"{spec_file}::hard", *args]) == 1
+    assert "== hard: FAILED" in capsys.readouterr().out
+
+
+def test_run_prints_progress_lines(spec_file, tmp_path, capsys):
+    main(["run", f"{spec_file}::easy", "--workers", "1", "--no-cache", "--budget-scale", "2"])
+    err = capsys.readouterr().err
+    assert "[specguard] pendulum: training seed 0 (256 steps)" in err
+    assert "[specguard] pendulum: seed 0 done" in err
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["show", "nowhere.py"], "nowhere.py: no such file"),
+        (["show", "{file}::nope"], "nothing named 'nope'; it defines: easy, hard, tree"),
+    ],
+)
+def test_errors_name_the_file_and_spec(spec_file, capsys, argv, message):
+    argv = [a.replace("{file}", str(spec_file)) for a in argv]
+    assert main(argv) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_a_file_that_raises_on_import(tmp_path, capsys):
+    bad = tmp_path / "bad.py"
+    bad.write_text("import specguard as sg\nsg.Goal('g', x=(2, 1))\n")
+    assert main(["show", str(bad)]) == 2
+    assert "Goal 'g', feature 'x': expected lo <= hi" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("option", [["--workers", "0"], ["--budget-scale", "-1"]])
+def test_bad_option_values_are_usage_errors(spec_file, option, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["run", str(spec_file), *option])
+    assert exit_info.value.code == 2
+    assert "expected" in capsys.readouterr().err
