@@ -31,7 +31,7 @@ import numpy as np
 from gymnasium.utils import RecordConstructorArgs
 
 from specguard.compiled import compile_tree
-from specguard.error import InitialEnvError, InvalidSpec, SpecError, StateMappingError
+from specguard.error import EvaluationError, InitialEnvError, InvalidSpec, SpecError, StateMappingError
 from specguard.initial_env import InitialEnv
 from specguard.nodes import Node
 from specguard.reference import ReferenceEvaluator
@@ -206,6 +206,8 @@ class GoalInfo(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
+        if not math.isfinite(reward):
+            raise EvaluationError(f"{self.tree.name}: the initial env returned a non-finite reward {reward!r}")
         info["goals"] = self._goals(obs)
         return obs, reward, terminated, truncated, info
 

@@ -234,3 +234,17 @@ def test_baseline_env_keeps_the_initial_env_and_reports_goals():
         assert step_b[0].tolist() == step_r[0].tolist() and step_b[1:4] == step_r[1:4]
         assert set(step_b[4]["goals"]) == {"height"}
     gym_check_env(baseline, skip_render_check=True)
+
+
+class NanReward(gym.Wrapper):
+    def step(self, action):
+        obs, _, terminated, truncated, info = self.env.step(action)
+        return obs, float("nan"), terminated, truncated, info
+
+
+def test_baseline_env_rejects_non_finite_rewards():
+    initial = sg.InitialEnv(lambda: NanReward(gym.make("Pendulum-v1")), features=("x", "y", "omega"))
+    env = sg.make_baseline_env(initial, pendulum.trees["b"])
+    env.reset(seed=0)
+    with pytest.raises(sg.EvaluationError, match=r"pendulum: the initial env returned a non-finite reward nan"):
+        env.step(np.zeros(1, dtype=np.float32))
