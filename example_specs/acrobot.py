@@ -7,6 +7,7 @@ The height of the tip is not an observation, so ``state()`` appends it:
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -58,19 +59,12 @@ ppo_kwargs: dict[str, object] = {}  # SB3 defaults (paper, Table 1)
 ZOO_PPO: dict[str, object] = {"n_steps": 256, "gae_lambda": 0.94, "n_epochs": 4, "ent_coef": 0.0}
 BUDGET = sg.Budget(timesteps=150_000, min_seeds=2, eval_episodes=30)
 
+EXPECT = {"a": 0.8, "c": 0.8, "baseline": 0.8}
+COMMON: dict[str, Any] = dict(budget=BUDGET, hyperparameters=ZOO_PPO, n_envs=16)
+
 specs: dict[str, sg.Spec] = {
-    key: sg.Spec(
-        initial_env, tree, budget=BUDGET, expect=0.8, hyperparameters=ZOO_PPO, n_envs=16, name=f"acrobot-{key}"
-    )
-    for key, tree in trees.items()
+    key: sg.Spec(initial_env, tree, expect=EXPECT[key], name=f"acrobot-{key}", **COMMON) for key, tree in trees.items()
 }
 specs["baseline"] = sg.Spec(
-    initial_env,
-    trees["c"],
-    budget=BUDGET,
-    expect=0.8,
-    hyperparameters=ZOO_PPO,
-    n_envs=16,
-    baseline=True,
-    name="acrobot-baseline",
+    initial_env, trees["c"], expect=EXPECT["baseline"], baseline=True, name="acrobot-baseline", **COMMON
 )

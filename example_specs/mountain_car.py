@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import specguard as sg
 
 initial_env = sg.InitialEnv("MountainCarContinuous-v0", features=("x", "vel"))
@@ -27,16 +29,13 @@ ppo_kwargs: dict[str, object] = {"use_sde": True}  # paper, Table 1
 # section 5): baseline 100%, (a) 100%, (b) 0%, (c) one seed 100% one 0%.
 BUDGET = sg.Budget(timesteps=50_000, min_seeds=2, eval_episodes=30)
 
+EXPECT = {"a": 0.8, "b": 0.8, "c": 0.8, "baseline": 0.8}
+COMMON: dict[str, Any] = dict(budget=BUDGET, hyperparameters=ppo_kwargs)
+
 specs: dict[str, sg.Spec] = {
-    key: sg.Spec(initial_env, tree, budget=BUDGET, expect=0.8, hyperparameters=ppo_kwargs, name=f"mountain_car-{key}")
+    key: sg.Spec(initial_env, tree, expect=EXPECT[key], name=f"mountain_car-{key}", **COMMON)
     for key, tree in trees.items()
 }
 specs["baseline"] = sg.Spec(
-    initial_env,
-    trees["c"],
-    budget=BUDGET,
-    expect=0.8,
-    hyperparameters=ppo_kwargs,
-    baseline=True,
-    name="mountain_car-baseline",
+    initial_env, trees["c"], expect=EXPECT["baseline"], baseline=True, name="mountain_car-baseline", **COMMON
 )

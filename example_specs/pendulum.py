@@ -6,6 +6,8 @@ formulas and a short rollout of the constructed env.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 import specguard as sg
@@ -45,29 +47,15 @@ ZOO_PPO: dict[str, object] = {
     "sde_sample_freq": 4,
 }
 BUDGET = sg.Budget(timesteps=100_000, min_seeds=2, eval_episodes=30)
-EXPECT = {"a": 0.8, "b": 0.8, "c": 0.6, "w": 0.8}
+
+EXPECT = {"a": 0.8, "b": 0.8, "c": 0.6, "w": 0.8, "baseline": 0.8}
+COMMON: dict[str, Any] = dict(budget=BUDGET, hyperparameters=ZOO_PPO, n_envs=4)
 
 specs: dict[str, sg.Spec] = {
-    key: sg.Spec(
-        initial_env,
-        tree,
-        budget=BUDGET,
-        expect=EXPECT[key],
-        hyperparameters=ZOO_PPO,
-        n_envs=4,
-        name=f"pendulum-{key}",
-    )
-    for key, tree in trees.items()
+    key: sg.Spec(initial_env, tree, expect=EXPECT[key], name=f"pendulum-{key}", **COMMON) for key, tree in trees.items()
 }
 specs["baseline"] = sg.Spec(
-    initial_env,
-    trees["w"],
-    budget=BUDGET,
-    expect=0.8,
-    hyperparameters=ZOO_PPO,
-    n_envs=4,
-    baseline=True,
-    name="pendulum-baseline",
+    initial_env, trees["w"], expect=EXPECT["baseline"], baseline=True, name="pendulum-baseline", **COMMON
 )
 
 

@@ -93,3 +93,12 @@ def test_a_run_killed_midway_leaves_nothing_trusted(tmp_path):
     partial.mkdir(parents=True)
     (partial / "result.json").write_text(json.dumps({"fingerprint": entry.name}))
     assert cache.load(s, 0) is None
+
+
+def test_a_second_writer_of_the_same_entry_leaves_it_intact(tmp_path):
+    s = spec()
+    result, model = train_run(s, 0)
+    first, second = Cache(tmp_path), Cache(tmp_path)  # e.g. two xdist workers
+    assert first.store(s, 0, result, model) == second.store(s, 0, result, model)
+    assert first.load(s, 0) == result
+    assert not [p for p in first.entry(s, 0).parent.iterdir() if p.name.startswith(".tmp-")]
