@@ -1,7 +1,11 @@
 """specguard: pytest for reinforcement-learning specifications.
 
 State what an agent must achieve as a goal tree, get a trainable Gymnasium
-environment built from it (SPEC.md, Algorithm 1), and check it.
+environment built from it (SPEC.md, Algorithm 1), train it within a budget and
+judge every goal.
+
+The public names below are imported on first use (PEP 562), so ``import
+specguard`` and the pytest plugin stay cheap in projects that do not run specs.
 
 Example:
     >>> import numpy as np
@@ -20,25 +24,42 @@ Example:
     'R = 0.8*(0.5*R[position] + 0.5*D[position]) + 0.2*R[stabilization]'
 """
 
-from specguard.budget import Budget
-from specguard.cache import Cache
-from specguard.compiled import CompiledTree, compile_tree
-from specguard.engine import GoalVerdict, SpecResult, run_spec
-from specguard.env import GoalEnv, GoalInfo, make_baseline_env, make_env
-from specguard.error import (
-    EvaluationError,
-    InitialEnvError,
-    InvalidSpec,
-    SpecError,
-    StateMappingError,
-    UnknownFeature,
-)
-from specguard.formula import formula
-from specguard.initial_env import InitialEnv
-from specguard.nodes import All, Annotation, Constraint, Distance, Goal, Node
-from specguard.spec import Spec
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
 
 __version__ = "0.1.0"
+
+_EXPORTS = {
+    "All": "specguard.nodes",
+    "Annotation": "specguard.nodes",
+    "Budget": "specguard.budget",
+    "Cache": "specguard.cache",
+    "CompiledTree": "specguard.compiled",
+    "Constraint": "specguard.nodes",
+    "Distance": "specguard.nodes",
+    "EvaluationError": "specguard.error",
+    "Goal": "specguard.nodes",
+    "GoalEnv": "specguard.env",
+    "GoalInfo": "specguard.env",
+    "GoalVerdict": "specguard.engine",
+    "InitialEnv": "specguard.initial_env",
+    "InitialEnvError": "specguard.error",
+    "InvalidSpec": "specguard.error",
+    "Node": "specguard.nodes",
+    "Spec": "specguard.spec",
+    "SpecError": "specguard.error",
+    "SpecResult": "specguard.engine",
+    "StateMappingError": "specguard.error",
+    "UnknownFeature": "specguard.error",
+    "compile_tree": "specguard.compiled",
+    "formula": "specguard.reward_formula",
+    "goal_spec": "specguard.declare",
+    "make_baseline_env": "specguard.env",
+    "make_env": "specguard.env",
+    "run_spec": "specguard.engine",
+}
 
 __all__ = [
     "All",
@@ -65,7 +86,42 @@ __all__ = [
     "__version__",
     "compile_tree",
     "formula",
+    "goal_spec",
     "make_baseline_env",
     "make_env",
     "run_spec",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'specguard' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))
+
+
+if TYPE_CHECKING:
+    from specguard.budget import Budget
+    from specguard.cache import Cache
+    from specguard.compiled import CompiledTree, compile_tree
+    from specguard.declare import goal_spec
+    from specguard.engine import GoalVerdict, SpecResult, run_spec
+    from specguard.env import GoalEnv, GoalInfo, make_baseline_env, make_env
+    from specguard.error import (
+        EvaluationError,
+        InitialEnvError,
+        InvalidSpec,
+        SpecError,
+        StateMappingError,
+        UnknownFeature,
+    )
+    from specguard.initial_env import InitialEnv
+    from specguard.nodes import All, Annotation, Constraint, Distance, Goal, Node
+    from specguard.reward_formula import formula
+    from specguard.spec import Spec

@@ -25,8 +25,8 @@ from typing import Any
 import cloudpickle
 
 from specguard.error import SpecError
-from specguard.formula import formula
 from specguard.nodes import Node
+from specguard.reward_formula import formula
 from specguard.spec import Spec
 
 __all__ = ["load_objects", "main"]

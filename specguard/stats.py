@@ -32,8 +32,6 @@ from __future__ import annotations
 import enum
 from collections.abc import Sequence
 
-from scipy.stats import binomtest
-
 __all__ = ["QuorumVerdict", "RunVerdict", "quorum_verdict", "run_verdict", "success_interval"]
 
 
@@ -69,6 +67,8 @@ def success_interval(successes: int, episodes: int, confidence: float = 0.95) ->
     _check_counts(successes, episodes)
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"expected a confidence in (0, 1), got {confidence!r}")
+    from scipy.stats import binomtest  # scipy.stats takes ~1 s to import: only when needed
+
     ci = binomtest(int(successes), int(episodes)).proportion_ci(confidence_level=confidence, method="exact")
     return float(ci.low), float(ci.high)
 

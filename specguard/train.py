@@ -128,11 +128,11 @@ class _GoalCurve:
                 rates = {p: c / self._episodes for p, c in self._counts.items()}
                 self.points.append({"timesteps": num_timesteps, "episodes": self._episodes, "success": rates})
             if self.report is not None:
-                root = "-"
+                root = "no training episode finished yet"
                 if self._episodes:
-                    root = f"{next(iter(rates.values())):.0%} of {self._episodes} training episodes"
+                    root = f"reached in {next(iter(rates.values())):.0%} of {self._episodes} training episodes"
                 elapsed = time.perf_counter() - self.start
-                self.report(f"{num_timesteps}/{self.total} steps, {elapsed:.0f}s, root goal reached in {root}")
+                self.report(f"{num_timesteps}/{self.total} steps, {elapsed:.0f}s, root goal: {root}")
             self._counts, self._episodes = {}, 0
         if self.deadline is not None and time.perf_counter() > self.deadline:
             self.stopped_early = True

@@ -1,0 +1,91 @@
+"""Declaring goal specs in pytest: the ``@sg.goal_spec`` decorator.
+
+A goal spec is a test function that takes fixtures (initial envs, trees,
+anything) and returns an :class:`specguard.Spec`. ``pytest --goal-specs``
+trains it within its budget and asserts its thresholds; without the flag the
+items are skipped with a reason saying how to run them.
+
+Example:
+    >>> import specguard as sg
+    >>> @sg.goal_spec(expect={"pendulum": 0.8, "position": 0.9}, xfail={"position": "the paper's local optimum"})
+    ... def test_pendulum_refined(pendulum_env, refined_tree):
+    ...     return sg.Spec(pendulum_env, refined_tree, budget=sg.Budget(timesteps=100_000))
+    >>> [m.name for m in test_pendulum_refined.pytestmark]
+    ['usefixtures', 'goal_spec']
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from numbers import Real
+from typing import Any, TypeVar
+
+from specguard.error import InvalidSpec
+
+__all__ = ["GOAL_FIXTURE", "ROOT", "goal_spec"]
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+GOAL_FIXTURE = "specguard_goal"  # the plugin's fixture the goal items are parametrised over
+ROOT = "root"  # the id of the root goal when ``expect`` is a single number
+
+
+def _check_expect(where: str, expect: object) -> dict[str, float] | None:
+    if expect is None:
+        return None
+    if isinstance(expect, Real) and not isinstance(expect, bool):
+        expect = {ROOT: float(expect)}
+    if not isinstance(expect, Mapping) or not expect:
+        raise InvalidSpec(where, f"expected expect to be {{goal: min success}} or a number, got {expect!r}")
+    out = {}
+    for goal, value in expect.items():
+        if not isinstance(goal, str):
+            raise InvalidSpec(where, f"expected goal names or paths as keys of expect, got {goal!r}")
+        if isinstance(value, bool) or not isinstance(value, Real) or not 0.0 <= float(value) < 1.0:
+            raise InvalidSpec(where, f"expect[{goal!r}]: expected a success rate in [0, 1), got {value!r}")
+        out[goal] = float(value)
+    return out
+
+
+def goal_spec(
+    expect: Mapping[str, float] | float | None = None,
+    *,
+    xfail: Mapping[str, str] | Sequence[str] | None = None,
+) -> Callable[[F], F]:
+    """Mark a test function returning a ``Spec`` as a goal spec.
+
+    Args:
+        expect: ``{goal name or path: min success}``, or one number for the
+            root goal. Given here, each goal becomes its own test item (the
+            report shows which goal failed) and these thresholds replace the
+            spec's own ``expect``. ``None``: one item asserting the spec's ``expect``.
+        xfail: goals expected to miss their threshold, with the reason
+            (``{goal: reason}`` or a list of goals): they report XFAIL, and
+            XPASS once they start passing.
+
+    Raises:
+        InvalidSpec: malformed ``expect`` or ``xfail`` (at import, so pytest
+            reports a collection error naming the file).
+    """
+
+    def apply(fn: F) -> F:
+        import pytest
+
+        where = f"goal_spec {getattr(fn, '__qualname__', fn)!r}"
+        thresholds = _check_expect(where, expect)
+        if xfail is None:
+            reasons: dict[str, str] = {}
+        elif isinstance(xfail, Mapping):
+            reasons = {str(k): str(v) for k, v in xfail.items()}
+        elif isinstance(xfail, Sequence) and not isinstance(xfail, str):
+            reasons = {str(k): "expected to miss its threshold" for k in xfail}
+        else:
+            raise InvalidSpec(where, f"expected xfail to be {{goal: reason}} or a list of goals, got {xfail!r}")
+        if thresholds is not None:
+            unknown = [g for g in reasons if g not in thresholds]
+            if unknown:
+                raise InvalidSpec(where, f"xfail names goals {unknown} that expect does not list: {list(thresholds)}")
+        marked = pytest.mark.usefixtures(GOAL_FIXTURE)(fn)
+        return pytest.mark.goal_spec(expect=thresholds, xfail=reasons)(marked)  # type: ignore[no-any-return]
+
+    return apply

@@ -1,0 +1,146 @@
+"""Judging one goal of a trained spec for a test item: outcome, message, figures.
+
+Plain logic over :class:`specguard.engine.SpecResult`, used by the pytest
+plugin and unit-tested without pytest.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+from specguard.engine import SpecResult
+from specguard.nodes import Distance, Node
+from specguard.spec import Spec
+from specguard.stats import QuorumVerdict, RunVerdict
+
+__all__ = ["GoalCheck", "check_goal", "resolve_goal"]
+
+
+@dataclass
+class GoalCheck:
+    """One (spec, goal) item's figures and outcome; ``to_row()`` is plain data.
+
+    Attributes:
+        outcome: ``"passed"``, ``"failed"``, or ``"inconclusive"`` (the goal
+            failed only because runs stayed undecided: none missed, none crashed).
+    """
+
+    group: str
+    spec: str
+    goal: str
+    threshold: float
+    outcome: str
+    success: float
+    interval: tuple[float, float]
+    successes: int
+    episodes: int
+    runs_met: int
+    runs: int
+    required: int
+    per_seed: list[dict[str, Any]]
+    train_seconds: float
+    cached: bool
+    errors: dict[int, str] = field(default_factory=dict)
+    hint: str | None = None
+
+    def message(self) -> str:
+        verb = {"passed": "met", "failed": "missed", "inconclusive": "could not be decided for"}[self.outcome]
+        lo, hi = self.interval
+        seeds = ", ".join(str(s["seed"]) for s in self.per_seed) or "none"
+        lines = [
+            f"goal {self.goal!r} of spec {self.spec!r} {verb} its threshold",
+            f"  success {self.success:.0%} ({self.successes}/{self.episodes}), interval [{lo:.2f}, {hi:.2f}], "
+            f"threshold >= {self.threshold:g}",
+            f"  runs: {self.runs_met} of {self.runs} met ({self.required} required); seeds {seeds}",
+            "  per seed: "
+            + (
+                ", ".join(f"seed {s['seed']}: {s['successes']}/{s['episodes']} ({s['verdict']})" for s in self.per_seed)
+                or "-"
+            ),
+        ]
+        lines += [f"  seed {seed} failed: {error}" for seed, error in self.errors.items()]
+        if self.hint:
+            lines.append(f"  hint: {self.hint}")
+        return "\n".join(lines)
+
+    def to_row(self) -> dict[str, Any]:
+        row = asdict(self)
+        row["interval"] = list(self.interval)
+        row["errors"] = {str(k): v for k, v in self.errors.items()}
+        return row
+
+
+def resolve_goal(spec: Spec, goal: str) -> str:
+    """The full path of ``goal`` (a path, a unique name, or ``"root"``) in the spec's tree."""
+    paths = [p for p, _ in spec.tree.walk()]
+    if goal in paths:
+        return goal
+    if goal == "root":
+        return paths[0]
+    named = [p for p in paths if p.rsplit("/", 1)[-1] == goal]
+    if len(named) == 1:
+        return named[0]
+    from specguard.error import InvalidSpec
+
+    if named:
+        raise InvalidSpec(f"Spec {spec.label!r}", f"goal {goal!r} is ambiguous; use one of the paths {named}")
+    raise InvalidSpec(f"Spec {spec.label!r}", f"no goal named {goal!r}; the tree's goals are {', '.join(paths)}")
+
+
+def _node(tree: Node, path: str) -> Node:
+    return dict(tree.walk())[path]
+
+
+def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[str]) -> str | None:
+    runs = result.runs
+    never = [r.seed for r in runs if r.successes[path] == 0]
+    shaped = any(isinstance(a, Distance) for _, n in _node(spec.tree, path).walk() for a in n.annotations)
+    if never and not shaped:
+        return (
+            f"sparse goal never reached in {len(never)}/{len(runs)} seeds: consider a Distance annotation on {path!r}"
+        )
+    if never:
+        return f"goal never reached in {len(never)}/{len(runs)} seeds: consider a larger budget or other weights"
+    if RunVerdict.UNDECIDED.value in verdicts:
+        return (
+            f"runs stayed undecided after {spec.budget.max_eval_episodes} evaluation episodes: "
+            "raise budget.max_eval_episodes, or ask for a threshold further from the measured rate"
+        )
+    if any(r.stopped_early for r in runs):
+        return "training stopped at the budget's wall-clock cap in some seeds"
+    return None
+
+
+def check_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalCheck:
+    """The figures and outcome of goal ``path`` (which must have a threshold in ``spec``)."""
+    verdict = result.goals[path]
+    per_seed = [
+        {"seed": r.seed, "successes": r.successes[path], "episodes": r.episodes, "verdict": v}
+        for r, v in zip(result.runs, verdict.runs)
+    ]
+    if verdict.verdict == QuorumVerdict.PASSED.value:
+        outcome = "passed"
+    elif not result.errors and RunVerdict.MISSED.value not in verdict.runs and verdict.runs:
+        outcome = "inconclusive"
+    else:
+        outcome = "failed"
+    return GoalCheck(
+        group=group,
+        spec=spec.label,
+        goal=path,
+        threshold=verdict.threshold,
+        outcome=outcome,
+        success=verdict.success,
+        interval=verdict.interval,
+        successes=verdict.successes,
+        episodes=verdict.episodes,
+        runs_met=verdict.runs.count(RunVerdict.MET.value),
+        runs=len(verdict.runs) + len(result.errors),
+        required=verdict.required,
+        per_seed=per_seed,
+        train_seconds=sum(r.train_seconds for r in result.runs),
+        cached=bool(result.cached) and all(result.cached.values()),
+        errors=dict(result.errors),
+        hint=None if outcome == "passed" else _hint(spec, path, result, verdict.runs),
+    )

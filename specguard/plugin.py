@@ -1,0 +1,404 @@
+"""The pytest plugin: ``pytest --goal-specs`` (registered through the ``pytest11`` entry point).
+
+Options, ini settings, markers and hooks only; the logic lives in
+:mod:`specguard.gate`, :mod:`specguard.compare`, :mod:`specguard.report` and
+:mod:`specguard.engine`, which are imported when a goal spec actually runs, so
+plain ``pytest`` in a project with specguard installed stays fast.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import warnings
+from collections.abc import Callable, Generator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from specguard.declare import GOAL_FIXTURE
+
+MARKER = "goal_spec"
+PROPERTY = "specguard"
+INCONCLUSIVE = ("fail", "xfail", "pass")
+SKIP_REASON = "goal spec: run `pytest --goal-specs` to train it and check its goals"
+
+
+class GoalMissed(AssertionError):
+    """A goal missed its threshold (the failure an ``xfail`` goal expects)."""
+
+
+@dataclasses.dataclass
+class _Options:
+    enabled: bool
+    budget_scale: float
+    workers: int | str
+    cache_dir: str | None
+    inconclusive: str
+    report_dir: Path | None
+    save: str | None
+    compare: str | None
+    baseline_dir: Path
+
+
+@dataclasses.dataclass
+class _Session:
+    options: _Options
+    baseline: dict[str, list[tuple[int, int]]] | None = None
+    memo: dict[str, Any] = dataclasses.field(default_factory=dict)
+    rows: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+
+
+_SESSION = pytest.StashKey[_Session]()
+
+# (option, ini name, ini type, default, help)
+_SETTINGS: list[tuple[str, str, str, Any, str]] = [
+    (
+        "--goal-specs-budget-scale",
+        "goal_specs_budget_scale",
+        "string",
+        "1",
+        "multiply training timesteps (0.25: quick PR check)",
+    ),
+    (
+        "--goal-specs-workers",
+        "goal_specs_workers",
+        "string",
+        "auto",
+        "parallel training processes per pytest process: N or auto",
+    ),
+    ("--goal-specs-cache-dir", "goal_specs_cache_dir", "string", ".specguard/cache", "where trained runs are cached"),
+    (
+        "--goal-specs-inconclusive",
+        "goal_specs_inconclusive",
+        "string",
+        "fail",
+        "what an undecided goal does: fail, xfail or pass (with a warning)",
+    ),
+    (
+        "--goal-specs-report",
+        "goal_specs_report",
+        "string",
+        "",
+        "write JSON, Markdown and PNG reports to this directory",
+    ),
+    (
+        "--goal-specs-baseline-dir",
+        "goal_specs_baseline_dir",
+        "string",
+        ".specguard/baselines",
+        "where saved baselines live",
+    ),
+]
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    group = parser.getgroup("specguard", "goal specs (specguard)")
+    group.addoption("--goal-specs", action="store_true", default=None, help="train goal specs and check their goals")
+    parser.addini("goal_specs", type="bool", default=False, help="run goal specs without --goal-specs")
+    for option, ini, kind, default, text in _SETTINGS:
+        group.addoption(option, default=None, help=f"{text} (ini: {ini}, default: {default or 'none'})")
+        parser.addini(ini, type=kind, default=default, help=text)  # type: ignore[arg-type]
+    group.addoption(
+        "--goal-specs-no-cache", action="store_true", default=False, help="neither read nor write the cache"
+    )
+    group.addoption(
+        "--goal-specs-save", metavar="NAME", default=None, help="store this session's results as baseline NAME"
+    )
+    group.addoption(
+        "--goal-specs-compare",
+        metavar="NAME",
+        nargs="?",
+        const="latest",
+        default=None,
+        help="fail goals whose success dropped against baseline NAME (default: the latest saved)",
+    )
+
+
+def _setting(config: pytest.Config, option: str, ini: str) -> str:
+    value = config.getoption(option.lstrip("-").replace("-", "_"))
+    return str(value if value is not None else config.getini(ini))
+
+
+def _parse_options(config: pytest.Config) -> _Options:
+    def get(option: str) -> str:
+        ini = next(i for o, i, *_ in _SETTINGS if o == option)
+        return _setting(config, option, ini)
+
+    try:
+        scale = float(get("--goal-specs-budget-scale"))
+        if not scale > 0:
+            raise ValueError
+    except ValueError:
+        raise pytest.UsageError(
+            f"--goal-specs-budget-scale: expected a number > 0, got {get('--goal-specs-budget-scale')!r}"
+        ) from None
+    workers_text = get("--goal-specs-workers")
+    workers: int | str = workers_text
+    if workers_text != "auto":
+        if not workers_text.isdigit() or int(workers_text) < 1:
+            raise pytest.UsageError(f"--goal-specs-workers: expected an integer >= 1 or 'auto', got {workers_text!r}")
+        workers = int(workers_text)
+    inconclusive = get("--goal-specs-inconclusive")
+    if inconclusive not in INCONCLUSIVE:
+        raise pytest.UsageError(
+            f"--goal-specs-inconclusive: expected one of {', '.join(INCONCLUSIVE)}, got {inconclusive!r}"
+        )
+    report = get("--goal-specs-report")
+    return _Options(
+        enabled=bool(config.getoption("goal_specs") or config.getini("goal_specs")),
+        budget_scale=scale,
+        workers=workers,
+        cache_dir=None if config.getoption("goal_specs_no_cache") else get("--goal-specs-cache-dir"),
+        inconclusive=inconclusive,
+        report_dir=Path(report) if report else None,
+        save=config.getoption("goal_specs_save"),
+        compare=config.getoption("goal_specs_compare"),
+        baseline_dir=Path(get("--goal-specs-baseline-dir")),
+    )
+
+
+def _baseline_path(options: _Options, name: str) -> Path:
+    if name == "latest":
+        saved = sorted(options.baseline_dir.glob("*.json"), key=lambda p: p.stat().st_mtime)
+        if not saved:
+            raise pytest.UsageError(
+                f"--goal-specs-compare: no baseline saved in {str(options.baseline_dir)!r}; "
+                "store one first with --goal-specs-save NAME"
+            )
+        return saved[-1]
+    return options.baseline_dir / f"{name}.json"
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line(
+        "markers",
+        f"{MARKER}(expect=None, xfail=None): a test returning a specguard.Spec, trained and checked by "
+        "`pytest --goal-specs` (declare it with @specguard.goal_spec)",
+    )
+    options = _parse_options(config)
+    state = _Session(options)
+    if options.enabled and options.compare:
+        from specguard.compare import BaselineError, load_baseline
+
+        try:
+            state.baseline = load_baseline(_baseline_path(options, options.compare))
+        except BaselineError as e:
+            raise pytest.UsageError(f"--goal-specs-compare: {e}") from None
+    config.stash[_SESSION] = state
+    config.pluginmanager.register(_Recorder(config, state), "specguard-recorder")
+
+
+# -- declaring and collecting -----------------------------------------------------
+
+
+@pytest.fixture
+def specguard_goal(request: pytest.FixtureRequest) -> Any:
+    """The goal a goal-spec item asserts (``None``: every threshold of the spec)."""
+    return getattr(request, "param", None)
+
+
+@pytest.fixture
+def goal_spec_result(request: pytest.FixtureRequest) -> Callable[[Any], Any]:
+    """Train a spec (with the session's goal-spec options) and return its ``SpecResult``.
+
+    Tests that use it are skipped without ``--goal-specs``.
+    """
+    state = request.config.stash[_SESSION]
+    if not state.options.enabled:
+        pytest.skip(SKIP_REASON)
+    return lambda spec: _run(state, _scaled(state, spec))
+
+
+def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
+    marker = metafunc.definition.get_closest_marker(MARKER)
+    if marker is None or GOAL_FIXTURE not in metafunc.fixturenames:
+        return
+    expect = marker.kwargs.get("expect")
+    goals = list(expect) if expect else [None]
+    metafunc.parametrize(GOAL_FIXTURE, goals, ids=[g or "spec" for g in goals], indirect=True)
+
+
+def _group(item: pytest.Item) -> str:
+    """The item's spec: its test without the goal parameter (one training for all its goals)."""
+    assert isinstance(item, pytest.Function)
+    callspec = getattr(item, "callspec", None)
+    ids = list(getattr(callspec, "_idlist", []))
+    params = list(callspec.params) if callspec is not None else []
+    if callspec is not None and GOAL_FIXTURE in params and len(ids) == len(params):
+        del ids[params.index(GOAL_FIXTURE)]
+    suffix = f"[{'-'.join(ids)}]" if ids else ""
+    return f"{item.path.name}::{item.originalname}{suffix}"
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    state = config.stash[_SESSION]
+    for item in items:
+        marker = item.get_closest_marker(MARKER)
+        if marker is None or not isinstance(item, pytest.Function):
+            continue
+        if not state.options.enabled:
+            item.add_marker(pytest.mark.skip(reason=SKIP_REASON))
+            continue
+        item.add_marker(pytest.mark.xdist_group(name=_group(item)))
+        goal = item.callspec.params.get(GOAL_FIXTURE) if hasattr(item, "callspec") else None
+        reasons = marker.kwargs.get("xfail") or {}
+        if goal is not None and goal in reasons:
+            item.add_marker(pytest.mark.xfail(reason=reasons[goal], raises=GoalMissed, strict=False))
+
+
+# -- running -------------------------------------------------------------------
+
+
+def _scaled(state: _Session, spec: Any) -> Any:
+    if state.options.budget_scale == 1.0:
+        return spec
+    return dataclasses.replace(spec, budget=spec.budget.scaled(state.options.budget_scale))
+
+
+def _run(state: _Session, spec: Any) -> Any:
+    from specguard.cache import fingerprint
+    from specguard.engine import run_spec
+
+    key = fingerprint(spec, 0)
+    if key not in state.memo:  # every goal item of a spec shares one training
+        state.memo[key] = run_spec(
+            spec, workers=state.options.workers, cache_dir=state.options.cache_dir, progress=_progress
+        )
+    return state.memo[key]
+
+
+def _progress(line: str) -> None:
+    import sys
+
+    print(line, file=sys.stderr, flush=True)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
+    marker = pyfuncitem.get_closest_marker(MARKER)
+    if marker is None:
+        return None
+    from specguard.error import SpecError
+    from specguard.gate import check_goal, resolve_goal
+    from specguard.spec import Spec
+
+    state = pyfuncitem.config.stash[_SESSION]
+    where = f"{pyfuncitem.path.name}::{pyfuncitem.name}"
+    args = {name: pyfuncitem.funcargs[name] for name in pyfuncitem._fixtureinfo.argnames}
+    spec = pyfuncitem.obj(**args)
+    if not isinstance(spec, Spec):
+        pytest.fail(f"{where}: a goal spec must return a specguard.Spec, got {type(spec).__name__}", pytrace=False)
+    expect = marker.kwargs.get("expect")
+    goal = pyfuncitem.funcargs.get(GOAL_FIXTURE)
+    try:
+        if expect:
+            thresholds = {resolve_goal(spec, g): t for g, t in expect.items()}
+            spec = dataclasses.replace(spec, expect=thresholds)
+        if not spec.thresholds:
+            raise SpecError(f"Spec {spec.label!r}: no thresholds to check; give expect= to the Spec or to @goal_spec")
+        paths = [resolve_goal(spec, str(goal))] if goal is not None else list(spec.thresholds)
+        result = _run(state, _scaled(state, spec))
+    except SpecError as e:
+        pytest.fail(f"{where}: {e}", pytrace=False)
+    group = _group(pyfuncitem)
+    failures, inconclusive = [], []
+    for path in paths:
+        check = check_goal(result, spec, path, group)
+        row = check.to_row()
+        key = f"{group}::{path}"
+        runs = [(s["successes"], s["episodes"]) for s in check.per_seed]
+        row["runs_counts"] = runs
+        if state.baseline is not None and key in state.baseline and runs:
+            from specguard.compare import compare
+
+            comparison = compare(state.baseline[key], runs)
+            row["comparison"] = comparison.describe()
+            if comparison.dropped and check.outcome == "passed":
+                check.outcome = "failed"
+                check.hint = f"success {comparison.describe()} against baseline {state.options.compare!r}"
+        if state.options.report_dir is not None:
+            row["curves"] = [r.curve for r in result.runs]
+        pyfuncitem.user_properties.append((PROPERTY, json.dumps(row)))
+        for name in ("success", "threshold", "successes", "episodes", "runs_met", "runs", "train_seconds"):
+            pyfuncitem.user_properties.append((f"{PROPERTY}.{path}.{name}", row[name]))
+        pyfuncitem.user_properties.append((f"{PROPERTY}.{path}.interval", "[{:.4f}, {:.4f}]".format(*check.interval)))
+        pyfuncitem.user_properties.append((f"{PROPERTY}.{path}.cached", check.cached))
+        if check.outcome == "failed":
+            failures.append(check.message())
+        elif check.outcome == "inconclusive":
+            inconclusive.append(check.message())
+    if failures or (inconclusive and state.options.inconclusive == "fail"):
+        raise GoalMissed("\n\n".join(failures + inconclusive))
+    if inconclusive and state.options.inconclusive == "xfail":
+        pytest.xfail("inconclusive: " + "\n\n".join(inconclusive))
+    if inconclusive:
+        warnings.warn(
+            "inconclusive goal spec passed by --goal-specs-inconclusive=pass:\n" + "\n".join(inconclusive), stacklevel=1
+        )
+    return True
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Generator[None, Any, Any]:
+    report = yield
+    if call.excinfo is not None and isinstance(call.excinfo.value, GoalMissed) and report.failed:
+        report.longrepr = str(call.excinfo.value)  # the figures, not a traceback into the plugin
+    return report
+
+
+# -- reporting -----------------------------------------------------------------
+
+
+def _verdict(report: pytest.TestReport) -> str:
+    if hasattr(report, "wasxfail"):
+        return "xpassed" if report.passed else "xfailed"
+    return report.outcome
+
+
+class _Recorder:
+    """Collects the figures of goal items as reports arrive (on the xdist controller too) and reports them."""
+
+    def __init__(self, config: pytest.Config, state: _Session) -> None:
+        self.config = config
+        self.state = state
+
+    def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
+        if report.when != "call":
+            return
+        for key, value in report.user_properties:
+            if key != PROPERTY:
+                continue
+            row = json.loads(str(value))
+            verdict = _verdict(report)
+            row["verdict"] = "inconclusive" if verdict == "passed" and row["outcome"] == "inconclusive" else verdict
+            self.state.rows.append(row)
+
+    def pytest_terminal_summary(self, terminalreporter: Any) -> None:
+        if not self.state.rows:
+            return
+        from specguard.report import table_lines
+
+        terminalreporter.write_sep("=", "specguard goal specs")
+        for line in table_lines(self.state.rows):
+            terminalreporter.write_line(line)
+        for path in _write_outputs(self.config, self.state):
+            terminalreporter.write_line(f"specguard: wrote {path}")
+
+
+def _write_outputs(config: pytest.Config, state: _Session) -> list[Path]:
+    if hasattr(config, "workerinput"):  # an xdist worker: the controller writes
+        return []
+    written: list[Path] = []
+    if state.options.report_dir is not None:
+        from specguard.report import write_reports
+
+        written += write_reports(state.options.report_dir, state.rows)
+    if state.options.save:
+        from specguard.compare import save_baseline
+
+        path = state.options.baseline_dir / f"{state.options.save}.json"
+        save_baseline(path, {f"{r['group']}::{r['goal']}": r["runs_counts"] for r in state.rows if r["runs_counts"]})
+        written.append(path)
+    return written

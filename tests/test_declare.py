@@ -1,0 +1,39 @@
+"""The @goal_spec decorator."""
+
+from __future__ import annotations
+
+import pytest
+
+import specguard as sg
+
+
+def test_marks_and_uses_the_goal_fixture():
+    @sg.goal_spec(expect={"a": 0.5}, xfail=["a"])
+    def test_x():
+        pass
+
+    marks = {m.name: m for m in test_x.pytestmark}
+    assert marks["usefixtures"].args == ("specguard_goal",)
+    assert marks["goal_spec"].kwargs == {"expect": {"a": 0.5}, "xfail": {"a": "expected to miss its threshold"}}
+
+
+def test_a_number_means_the_root():
+    @sg.goal_spec(0.7)
+    def test_x():
+        pass
+
+    assert test_x.pytestmark[-1].kwargs["expect"] == {"root": 0.7}
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"expect": {"a": 1.0}}, r"expect\['a'\]: expected a success rate in \[0, 1\), got 1.0"),
+        ({"expect": {}}, r"expected expect to be \{goal: min success\} or a number"),
+        ({"expect": {"a": 0.5}, "xfail": {"b": "why"}}, r"xfail names goals \['b'\] that expect does not list"),
+        ({"xfail": 3}, r"expected xfail to be \{goal: reason\} or a list of goals, got 3"),
+    ],
+)
+def test_bad_declarations(kwargs, message):
+    with pytest.raises(sg.InvalidSpec, match=message):
+        sg.goal_spec(**kwargs)(lambda: None)

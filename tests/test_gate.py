@@ -1,0 +1,83 @@
+"""Judging one goal of a SpecResult, without pytest."""
+
+from __future__ import annotations
+
+import pytest
+
+import specguard as sg
+from example_specs import pendulum
+from specguard.engine import SpecResult, _judge
+from specguard.gate import check_goal, resolve_goal
+from specguard.train import RunResult
+
+
+def result_of(spec, per_seed, errors=None):
+    runs = [
+        RunResult(
+            spec=spec.label,
+            seed=i,
+            timesteps=10,
+            episodes=n,
+            successes={p: k for p, _ in spec.tree.walk()},
+            train_seconds=1.0,
+        )
+        for i, (k, n) in enumerate(per_seed)
+    ]
+    result = SpecResult(spec=spec.label, runs=runs, goals={}, errors=errors or {})
+    result.goals = _judge(spec, runs, len(result.errors))
+    return result
+
+
+def spec(tree="b", expect=None, **budget):
+    return sg.Spec(
+        pendulum.initial_env,
+        pendulum.trees[tree],
+        budget=sg.Budget(timesteps=10, **budget),
+        expect=expect or {"pendulum": 0.8},
+    )
+
+
+def test_passed():
+    s = spec()
+    check = check_goal(result_of(s, [(30, 30), (29, 30)]), s, "pendulum", "g")
+    assert check.outcome == "passed" and check.hint is None
+    assert check.message().startswith("goal 'pendulum' of spec 'pendulum' met its threshold")
+
+
+def test_failed_sparse_goal_hints_at_a_distance():
+    s = spec()
+    check = check_goal(result_of(s, [(0, 30), (30, 30)]), s, "pendulum", "g")
+    assert check.outcome == "failed"
+    assert check.hint == "sparse goal never reached in 1/2 seeds: consider a Distance annotation on 'pendulum'"
+    assert "per seed: seed 0: 0/30 (missed), seed 1: 30/30 (met)" in check.message()
+
+
+def test_shaped_goal_gets_another_hint():
+    s = spec("c", expect={"position": 0.8})
+    check = check_goal(result_of(s, [(0, 30), (30, 30)]), s, "pendulum/position", "g")
+    assert check.hint.startswith("goal never reached in 1/2 seeds")
+
+
+def test_undecided_runs_are_inconclusive():
+    s = spec(max_eval_episodes=30)
+    check = check_goal(result_of(s, [(25, 30), (30, 30)]), s, "pendulum", "g")
+    assert check.outcome == "inconclusive"
+    assert "could not be decided" in check.message()
+    assert check.hint.startswith("runs stayed undecided after 30 evaluation episodes")
+
+
+def test_crashed_seeds_fail_and_are_listed():
+    s = spec()
+    check = check_goal(result_of(s, [(30, 30)], errors={1: "seed 1 exploded"}), s, "pendulum", "g")
+    assert check.outcome == "failed" and check.runs == 2
+    assert "seed 1 failed: seed 1 exploded" in check.message()
+    assert check.to_row()["errors"] == {"1": "seed 1 exploded"}
+
+
+def test_resolve_goal():
+    s = spec()
+    assert resolve_goal(s, "root") == "pendulum"
+    assert resolve_goal(s, "position") == "pendulum/position"
+    assert resolve_goal(s, "pendulum/stabilization") == "pendulum/stabilization"
+    with pytest.raises(sg.InvalidSpec, match="no goal named 'x'"):
+        resolve_goal(s, "x")

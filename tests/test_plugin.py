@@ -1,0 +1,340 @@
+"""The pytest plugin, driven through pytester on tiny budgets."""
+
+from __future__ import annotations
+
+import json
+import textwrap
+import xml.etree.ElementTree as ET
+
+import pytest
+
+HEADER = """
+import pytest
+import specguard as sg
+
+TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
+
+
+@pytest.fixture
+def pendulum():
+    return sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
+
+
+@pytest.fixture
+def tree():
+    return sg.All(
+        sg.Goal("position", x=(0.966, 1.0), y=(-0.259, 0.259)),
+        sg.Goal("stabilization", omega=(-0.25, 0.25)),
+        name="pendulum",
+    )
+
+
+def tiny(pendulum, tree, seeds=1, episodes=4, max_episodes=None):
+    budget = sg.Budget(timesteps=128, min_seeds=seeds, eval_episodes=episodes, max_eval_episodes=max_episodes)
+    return sg.Spec(pendulum, tree, budget=budget, hyperparameters=TINY)
+"""
+
+
+def write(pytester: pytest.Pytester, body: str) -> None:
+    pytester.makepyfile(test_specs=HEADER + textwrap.dedent(body))
+    pytester.makeini("[pytest]\ngoal_specs_workers = 1\n")
+
+
+def run(pytester: pytest.Pytester, *args: str) -> pytest.RunResult:
+    cache = pytester.path / "cache"
+    return pytester.runpytest_subprocess("-p", "no:cacheprovider", f"--goal-specs-cache-dir={cache}", *args)
+
+
+PASS_AND_XFAIL = """
+@sg.goal_spec(expect={"stabilization": 0.0, "position": 0.95}, xfail={"position": "never within 128 steps"})
+def test_tiny(pendulum, tree):
+    return tiny(pendulum, tree, seeds=2)
+
+
+@sg.goal_spec(expect=0.9)
+def test_root_fails(pendulum, tree):
+    return tiny(pendulum, tree)
+
+
+def test_ordinary():
+    assert True
+"""
+
+
+def test_items_are_skipped_without_the_flag(pytester):
+    write(pytester, PASS_AND_XFAIL)
+    result = pytester.runpytest("-p", "no:cacheprovider", "-rs", "--collect-only", "-q")
+    result.stdout.fnmatch_lines(
+        [
+            "test_specs.py::test_tiny[stabilization]",
+            "test_specs.py::test_tiny[position]",
+            "test_specs.py::test_root_fails[root]",
+        ]
+    )
+    result = pytester.runpytest("-p", "no:cacheprovider", "-rs")
+    result.assert_outcomes(passed=1, skipped=3)
+    result.stdout.fnmatch_lines(["*run `pytest --goal-specs` to train it and check its goals*"])
+
+
+def test_pass_fail_xfail_summary_and_junit(pytester):
+    write(pytester, PASS_AND_XFAIL)
+    junit = pytester.path / "junit.xml"
+    result = run(pytester, "--goal-specs", f"--junitxml={junit}")
+    result.assert_outcomes(passed=2, failed=1, xfailed=1)
+    result.stdout.fnmatch_lines(
+        [
+            "*goal 'pendulum' of spec 'pendulum' missed its threshold",
+            "*success 0% (0/4), interval [[]0.00, 0.60[]], threshold >= 0.9",
+            "*runs: 0 of 1 met (1 required); seeds 0",
+            "*per seed: seed 0: 0/4 (missed)",
+            "*hint: sparse goal never reached in 1/1 seeds: consider a Distance annotation on 'pendulum'",
+        ]
+    )
+    result.stdout.fnmatch_lines(
+        [
+            "*= specguard goal specs =*",
+            "spec*goal*success*interval*threshold*runs met*verdict*training*cached",
+            "test_specs.py::test_tiny*pendulum/stabilization*>= 0*2/2*passed*no",
+            "test_specs.py::test_tiny*pendulum/position*0% (0/8)*>= 0.95*0/2*xfailed*",
+            "test_specs.py::test_root_fails*pendulum*0% (0/4)*>= 0.9*0/1*failed*",
+        ]
+    )
+    props = {
+        p.get("name"): p.get("value")
+        for case in ET.parse(junit).getroot().iter("testcase")
+        if case.get("name") == "test_root_fails[root]"
+        for p in case.iter("property")
+    }
+    assert props["specguard.pendulum.threshold"] == "0.9"
+    assert props["specguard.pendulum.episodes"] == "4"
+    assert props["specguard.pendulum.interval"].startswith("[0.0000, 0.60")
+    assert json.loads(props["specguard"])["outcome"] == "failed"
+
+
+def test_xpass_when_an_expected_miss_starts_passing(pytester):
+    write(
+        pytester,
+        """
+        @sg.goal_spec(expect={"stabilization": 0.0}, xfail={"stabilization": "paper says it misses"})
+        def test_now_passes(pendulum, tree):
+            return tiny(pendulum, tree)
+        """,
+    )
+    run(pytester, "--goal-specs").assert_outcomes(xpassed=1)
+
+
+def test_one_item_for_the_specs_own_thresholds_and_the_result_fixture(pytester):
+    write(
+        pytester,
+        """
+        @sg.goal_spec()
+        def test_whole(pendulum, tree):
+            spec = tiny(pendulum, tree)
+            return sg.Spec(spec.initial_env, spec.tree, budget=spec.budget, hyperparameters=TINY,
+                           expect={"stabilization": 0.0})
+
+
+        def test_custom(goal_spec_result, pendulum, tree):
+            result = goal_spec_result(tiny(pendulum, tree))
+            assert [r.seed for r in result.runs] == [0]
+            assert result.runs[0].episodes == 4
+        """,
+    )
+    result = run(pytester, "--goal-specs", "-v")
+    result.assert_outcomes(passed=2)
+    result.stdout.fnmatch_lines(["*test_whole[[]spec[]] PASSED*"])
+    run(pytester).assert_outcomes(skipped=2)
+
+
+@pytest.mark.parametrize(("mode", "outcome"), [("fail", "failed"), ("xfail", "xfailed"), ("pass", "passed")])
+def test_inconclusive_modes(pytester, mode, outcome):
+    # Two evaluation episodes can never place a run's interval on one side of 0.5.
+    write(
+        pytester,
+        """
+        @sg.goal_spec(expect={"stabilization": 0.5})
+        def test_undecided(pendulum, tree):
+            return tiny(pendulum, tree, episodes=2, max_episodes=2)
+        """,
+    )
+    result = run(pytester, "--goal-specs", f"--goal-specs-inconclusive={mode}", "-rxs")
+    result.assert_outcomes(**{outcome: 1}, **({"warnings": 1} if mode == "pass" else {}))
+    if mode == "fail":
+        result.stdout.fnmatch_lines(["*could not be decided for its threshold*", "*hint: runs stayed undecided*"])
+
+
+def test_save_then_compare_gates_regressions(pytester):
+    write(
+        pytester,
+        """
+        @sg.goal_spec(expect={"stabilization": 0.0})
+        def test_gate(pendulum, tree):
+            return tiny(pendulum, tree, seeds=2)
+        """,
+    )
+    baselines = pytester.path / "baselines"
+    opts = [f"--goal-specs-baseline-dir={baselines}"]
+    saved = run(pytester, "--goal-specs", "--goal-specs-save", "main", *opts)
+    saved.assert_outcomes(passed=1)
+    stored = json.loads((baselines / "main.json").read_text())
+    key = "test_specs.py::test_gate::pendulum/stabilization"
+    assert len(stored["goals"][key]) == 2
+    same = run(pytester, "--goal-specs", "--goal-specs-compare", *opts)
+    same.assert_outcomes(passed=1)
+    same.stdout.fnmatch_lines(["*unchanged within chance*"])
+    # A baseline where every episode succeeded: the tiny policy's success is a drop.
+    stored["goals"][key] = [[40, 40], [40, 40]]
+    (baselines / "perfect.json").write_text(json.dumps(stored))
+    dropped = run(pytester, "--goal-specs", "--goal-specs-compare", "perfect", *opts)
+    dropped.assert_outcomes(failed=1)
+    dropped.stdout.fnmatch_lines(["*hint: success dropped: 100% -> *against baseline 'perfect'*"])
+
+
+def test_report_dir_has_json_markdown_and_plot(pytester):
+    write(
+        pytester,
+        """
+        @sg.goal_spec(expect={"stabilization": 0.0})
+        def test_report(pendulum, tree):
+            return tiny(pendulum, tree)
+        """,
+    )
+    report = pytester.path / "report"
+    run(pytester, "--goal-specs", f"--goal-specs-report={report}").assert_outcomes(passed=1)
+    data = json.loads((report / "goal-specs.json").read_text())
+    assert data["goals"][0]["goal"] == "pendulum/stabilization" and data["goals"][0]["curves"]
+    assert "| test_specs.py::test_report | `pendulum/stabilization` |" in (report / "goal-specs.md").read_text()
+    assert (report / "goal-specs.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_xdist_runs_each_spec_once_and_reports_on_the_controller(pytester):
+    write(
+        pytester,
+        """
+        @sg.goal_spec(expect={"stabilization": 0.0, "pendulum": 0.0})
+        def test_a(pendulum, tree):
+            return tiny(pendulum, tree)
+
+
+        @sg.goal_spec(expect={"stabilization": 0.0})
+        def test_b(pendulum, tree):
+            return tiny(pendulum, tree)
+        """,
+    )
+    result = run(pytester, "--goal-specs", "-n", "2", "--dist", "loadgroup")
+    result.assert_outcomes(passed=3)
+    result.stdout.fnmatch_lines(["*= specguard goal specs =*"])
+    assert result.stdout.str().count("test_specs.py::test_a ") == 2
+
+
+def test_bad_input_gives_one_clear_error_and_other_specs_still_run(pytester):
+    write(
+        pytester,
+        """
+        @sg.goal_spec(expect={"stabilization": 0.0})
+        def test_wrong_type(pendulum, tree):
+            return 42
+
+
+        @sg.goal_spec(expect={"altitude": 0.5})
+        def test_missing_goal(pendulum, tree):
+            return tiny(pendulum, tree)
+
+
+        @pytest.fixture
+        def broken():
+            raise RuntimeError("fixture broke")
+
+
+        @sg.goal_spec(expect={"stabilization": 0.0})
+        def test_failing_fixture(broken, tree):
+            return tree
+
+
+        @sg.goal_spec(expect={"stabilization": 0.0})
+        def test_fine(pendulum, tree):
+            return tiny(pendulum, tree)
+        """,
+    )
+    result = run(pytester, "--goal-specs")
+    result.assert_outcomes(passed=1, failed=2, errors=1)
+    result.stdout.fnmatch_lines(
+        [
+            "*test_specs.py::test_wrong_type[[]stabilization[]]: a goal spec must return a specguard.Spec, got int",
+            "*test_specs.py::test_missing_goal[[]altitude[]]: Spec 'pendulum': no goal named 'altitude'; "
+            "the tree's goals are pendulum, pendulum/position, pendulum/stabilization",
+        ]
+    )
+
+
+def test_malformed_decorator_is_a_collection_error(pytester):
+    write(
+        pytester,
+        """
+        @sg.goal_spec(expect={"stabilization": 1.5})
+        def test_bad(pendulum, tree):
+            return tiny(pendulum, tree)
+        """,
+    )
+    result = pytester.runpytest("-p", "no:cacheprovider")
+    result.assert_outcomes(errors=1)
+    result.stdout.fnmatch_lines(
+        ["*goal_spec 'test_bad': expect[[]'stabilization']: expected a success rate in [[]0, 1), got 1.5"]
+    )
+
+
+@pytest.mark.parametrize(
+    ("option", "message"),
+    [
+        (
+            "--goal-specs-inconclusive=maybe",
+            "--goal-specs-inconclusive: expected one of fail, xfail, pass, got 'maybe'",
+        ),
+        ("--goal-specs-budget-scale=0", "--goal-specs-budget-scale: expected a number > 0, got '0'"),
+        ("--goal-specs-workers=none", "--goal-specs-workers: expected an integer >= 1 or 'auto', got 'none'"),
+        ("--goal-specs-compare=nosuch", "--goal-specs-compare: baseline '*nosuch.json' does not exist*"),
+    ],
+)
+def test_bad_option_values_are_usage_errors(pytester, option, message):
+    write(pytester, PASS_AND_XFAIL)
+    result = pytester.runpytest("-p", "no:cacheprovider", "--goal-specs", option)
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    result.stderr.fnmatch_lines([f"ERROR: {message}"])
+
+
+def test_corrupt_baseline_is_a_usage_error(pytester):
+    write(pytester, PASS_AND_XFAIL)
+    (pytester.path / "b").mkdir()
+    (pytester.path / "b" / "main.json").write_text("{oops")
+    result = pytester.runpytest(
+        "-p", "no:cacheprovider", "--goal-specs", "--goal-specs-compare=main", "--goal-specs-baseline-dir=b"
+    )
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    result.stderr.fnmatch_lines(["ERROR: --goal-specs-compare: baseline 'b/main.json' is corrupt*"])
+
+
+def test_ini_settings_enable_and_scale(pytester):
+    pytester.makepyfile(
+        test_specs=HEADER
+        + textwrap.dedent(
+            """
+            def test_ini(goal_spec_result, pendulum, tree):
+                assert goal_spec_result(tiny(pendulum, tree)).runs[0].timesteps == 64
+            """
+        )
+    )
+    pytester.makeini("[pytest]\ngoal_specs = true\ngoal_specs_budget_scale = 0.5\ngoal_specs_workers = 1\n")
+    run(pytester).assert_outcomes(passed=1)
+
+
+def test_plain_pytest_does_not_import_heavy_modules(pytester):
+    pytester.makepyfile(
+        test_plain="""
+        import sys
+
+        def test_light():
+            heavy = {"torch", "stable_baselines3", "scipy.stats", "gymnasium"} & set(sys.modules)
+            assert not heavy, heavy
+        """
+    )
+    pytester.runpytest_subprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)
