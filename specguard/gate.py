@@ -102,6 +102,18 @@ def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[str]) -> str
         )
     if never:
         return f"goal never reached in {len(never)}/{len(runs)} seeds: consider a larger budget or other weights"
+    node = _node(spec.tree, path)
+    episodes = sum(r.episodes for r in runs)
+    if node.children and episodes:
+        rates = {
+            f"{path}/{c.name}": sum(r.successes[f"{path}/{c.name}"] for r in runs) / episodes for c in node.children
+        }
+        best, worst = max(rates, key=rates.__getitem__), min(rates, key=rates.__getitem__)
+        if rates[best] - rates[worst] >= 0.3:
+            return (
+                f"subgoals compete: {best!r} is reached in {rates[best]:.0%} of episodes, {worst!r} in "
+                f"{rates[worst]:.0%}; consider a Distance on {worst!r} or a larger weight for it"
+            )
     if RunVerdict.UNDECIDED.value in verdicts:
         return (
             f"runs stayed undecided after {spec.budget.max_eval_episodes} evaluation episodes: "

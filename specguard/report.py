@@ -93,9 +93,15 @@ def plot_curves(rows: Sequence[Row], path: Path) -> bool:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
-    fig, axes = plt.subplots(1, len(specs), figsize=(4.2 * len(specs), 3.4), squeeze=False, sharey=True)
-    for ax, (group, curves) in zip(axes[0], specs.items()):
+    ncols = min(4, len(specs))
+    nrows = -(-len(specs) // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 3.2 * nrows), squeeze=False, sharey=True)
+    flat = [ax for row in axes for ax in row]
+    for ax in flat[len(specs) :]:
+        ax.set_visible(False)
+    for ax, (group, curves) in zip(flat, specs.items()):
         goals = sorted({g for run in curves for point in run for g in point["success"]})
         for goal in goals:
             by_step: dict[int, list[float]] = {}
@@ -105,13 +111,15 @@ def plot_curves(rows: Sequence[Row], path: Path) -> bool:
                         by_step.setdefault(point["timesteps"], []).append(point["success"][goal])
             steps = sorted(by_step)
             ax.plot(steps, [sum(by_step[s]) / len(by_step[s]) for s in steps], label=goal, marker=".")
-        ax.set_title(group, fontsize=9)
+        ax.set_title(group.split("::", 1)[-1], fontsize=9)
         ax.set_xlabel("training steps")
+        ax.xaxis.set_major_locator(MaxNLocator(4))
         ax.set_ylim(-0.05, 1.05)
         ax.grid(alpha=0.3)
         if goals:
             ax.legend(fontsize=7)
-    axes[0][0].set_ylabel("success (training episodes)")
+    for row in axes:
+        row[0].set_ylabel("success (training episodes)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

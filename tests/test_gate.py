@@ -81,3 +81,25 @@ def test_resolve_goal():
     assert resolve_goal(s, "pendulum/stabilization") == "pendulum/stabilization"
     with pytest.raises(sg.InvalidSpec, match="no goal named 'x'"):
         resolve_goal(s, "x")
+
+
+def test_competing_subgoals_hint_at_weights():
+    s = spec()
+    runs = [
+        RunResult(
+            spec="pendulum",
+            seed=i,
+            timesteps=10,
+            episodes=30,
+            train_seconds=1.0,
+            successes={"pendulum": 10, "pendulum/position": 10, "pendulum/stabilization": 30},
+        )
+        for i in range(2)
+    ]
+    result = SpecResult(spec="pendulum", runs=runs, goals={})
+    result.goals = _judge(s, runs, 0)
+    check = check_goal(result, s, "pendulum", "g")
+    assert check.hint == (
+        "subgoals compete: 'pendulum/stabilization' is reached in 100% of episodes, 'pendulum/position' in 33%; "
+        "consider a Distance on 'pendulum/position' or a larger weight for it"
+    )

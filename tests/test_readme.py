@@ -18,3 +18,21 @@ def test_readme_language_example_prints_what_it_shows():
     with contextlib.redirect_stdout(out):
         exec(compile(example, str(README), "exec"), {})
     assert out.getvalue().splitlines() == shown
+
+
+def test_readme_goal_spec_example_collects_one_item_per_goal(pytester):
+    blocks = re.findall(r"```python\n(.*?)```", README.read_text(encoding="utf-8"), flags=re.S)
+    first = next(b for b in blocks if "test_pendulum_specs.py" in b)
+    second = next(b for b in blocks if "def test_weighted" in b)
+    pytester.makepyfile(test_pendulum_specs=first + "\n\n" + second)
+    result = pytester.runpytest("-p", "no:cacheprovider", "-q", "-rs")
+    result.assert_outcomes(skipped=4)
+    result = pytester.runpytest("-p", "no:cacheprovider", "--collect-only", "-q")
+    result.stdout.fnmatch_lines(
+        [
+            "test_pendulum_specs.py::test_refined[[]pendulum[]]",
+            "test_pendulum_specs.py::test_refined[[]stabilization[]]",
+            "test_pendulum_specs.py::test_weighted[[]pendulum[]]",
+            "test_pendulum_specs.py::test_weighted[[]position[]]",
+        ]
+    )
