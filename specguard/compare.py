@@ -19,6 +19,7 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -75,8 +76,10 @@ def compare(before: Runs, after: Runs, alpha: float = 0.05) -> Comparison:
     ka, na = sum(k for k, _ in after), sum(n for _, n in after)
     varies = len(set(rates_b)) > 1 or len(set(rates_a)) > 1
     if len(before) >= 2 and len(after) >= 2 and varies:
-        p_drop = float(ttest_ind(rates_a, rates_b, equal_var=False, alternative="less").pvalue)
-        p_rise = float(ttest_ind(rates_a, rates_b, equal_var=False, alternative="greater").pvalue)
+        with warnings.catch_warnings():  # identical samples: scipy warns, the p-value (0.5) is right
+            warnings.simplefilter("ignore", RuntimeWarning)
+            p_drop = float(ttest_ind(rates_a, rates_b, equal_var=False, alternative="less").pvalue)
+            p_rise = float(ttest_ind(rates_a, rates_b, equal_var=False, alternative="greater").pvalue)
         method = f"Welch t-test over {len(before)} vs {len(after)} seeds"
     else:
         table = [[ka, na - ka], [kb, nb - kb]]

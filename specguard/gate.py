@@ -14,7 +14,7 @@ from specguard.nodes import Distance, Node
 from specguard.spec import Spec
 from specguard.stats import QuorumVerdict, RunVerdict
 
-__all__ = ["GoalCheck", "check_goal", "resolve_goal"]
+__all__ = ["GoalCheck", "check_goal", "check_item", "resolve_goal", "with_thresholds"]
 
 
 @dataclass
@@ -43,6 +43,22 @@ class GoalCheck:
     cached: bool
     errors: dict[int, str] = field(default_factory=dict)
     hint: str | None = None
+    comparison: str | None = None
+
+    @property
+    def key(self) -> str:
+        """The goal's identity across sessions, for stored baselines."""
+        return f"{self.group}::{self.goal}"
+
+    @property
+    def runs_counts(self) -> list[tuple[int, int]]:
+        return [(s["successes"], s["episodes"]) for s in self.per_seed]
+
+    def junit_properties(self) -> list[tuple[str, Any]]:
+        """The figures as ``(name, value)`` pairs for JUnit XML properties."""
+        lo, hi = self.interval
+        names = ("success", "threshold", "successes", "episodes", "runs_met", "runs", "train_seconds", "cached")
+        return [(n, getattr(self, n)) for n in names] + [("interval", f"[{lo:.4f}, {hi:.4f}]")]
 
     def message(self) -> str:
         verb = {"passed": "met", "failed": "missed", "inconclusive": "could not be decided for"}[self.outcome]
@@ -68,6 +84,7 @@ class GoalCheck:
         row = asdict(self)
         row["interval"] = list(self.interval)
         row["errors"] = {str(k): v for k, v in self.errors.items()}
+        row["runs_counts"] = [list(r) for r in self.runs_counts]
         return row
 
 
@@ -156,3 +173,47 @@ def check_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalChe
         errors=dict(result.errors),
         hint=None if outcome == "passed" else _hint(spec, path, result, verdict.runs),
     )
+
+
+def with_thresholds(spec: Spec, expect: dict[str, float] | None, goal: str | None) -> tuple[Spec, list[str]]:
+    """The spec with a decorator's thresholds (if any) and the goal paths one item asserts.
+
+    Raises:
+        InvalidSpec: a goal the tree lacks; SpecError: nothing to check.
+    """
+    import dataclasses
+
+    from specguard.error import SpecError
+
+    if expect:
+        spec = dataclasses.replace(spec, expect={resolve_goal(spec, g): t for g, t in expect.items()})
+    if not spec.thresholds:
+        raise SpecError(f"Spec {spec.label!r}: no thresholds to check; give expect= to the Spec or to @goal_spec")
+    return spec, [resolve_goal(spec, goal)] if goal is not None else list(spec.thresholds)
+
+
+def check_item(
+    result: SpecResult,
+    spec: Spec,
+    paths: list[str],
+    group: str,
+    baseline: tuple[dict[str, list[tuple[int, int]]], str] | None = None,
+) -> list[GoalCheck]:
+    """Check the goals of one test item, failing a passing goal whose success dropped against ``baseline``.
+
+    Args:
+        baseline: the stored per-seed counts by :attr:`GoalCheck.key`, and the baseline's name.
+    """
+    checks = []
+    for path in paths:
+        check = check_goal(result, spec, path, group)
+        if baseline is not None and check.key in baseline[0] and check.runs_counts:
+            from specguard.compare import compare
+
+            comparison = compare(baseline[0][check.key], check.runs_counts)
+            check.comparison = comparison.describe()
+            if comparison.dropped and check.outcome == "passed":
+                check.outcome = "failed"
+                check.hint = f"success {check.comparison} against baseline {baseline[1]!r}"
+        checks.append(check)
+    return checks

@@ -281,7 +281,7 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     if marker is None:
         return None
     from specguard.error import SpecError
-    from specguard.gate import check_goal, resolve_goal
+    from specguard.gate import check_item, with_thresholds
     from specguard.spec import Spec
 
     state = pyfuncitem.config.stash[_SESSION]
@@ -290,41 +290,21 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     spec = pyfuncitem.obj(**args)
     if not isinstance(spec, Spec):
         pytest.fail(f"{where}: a goal spec must return a specguard.Spec, got {type(spec).__name__}", pytrace=False)
-    expect = marker.kwargs.get("expect")
     goal = pyfuncitem.funcargs.get(GOAL_FIXTURE)
     try:
-        if expect:
-            thresholds = {resolve_goal(spec, g): t for g, t in expect.items()}
-            spec = dataclasses.replace(spec, expect=thresholds)
-        if not spec.thresholds:
-            raise SpecError(f"Spec {spec.label!r}: no thresholds to check; give expect= to the Spec or to @goal_spec")
-        paths = [resolve_goal(spec, str(goal))] if goal is not None else list(spec.thresholds)
+        spec, paths = with_thresholds(spec, marker.kwargs.get("expect"), None if goal is None else str(goal))
         result = _run(state, _scaled(state, spec))
     except SpecError as e:
         pytest.fail(f"{where}: {e}", pytrace=False)
-    group = _group(pyfuncitem)
+    baseline = (state.baseline, state.options.compare or "latest") if state.baseline is not None else None
+    checks = check_item(result, spec, paths, _group(pyfuncitem), baseline=baseline)
     failures, inconclusive = [], []
-    for path in paths:
-        check = check_goal(result, spec, path, group)
+    for check in checks:
         row = check.to_row()
-        key = f"{group}::{path}"
-        runs = [(s["successes"], s["episodes"]) for s in check.per_seed]
-        row["runs_counts"] = runs
-        if state.baseline is not None and key in state.baseline and runs:
-            from specguard.compare import compare
-
-            comparison = compare(state.baseline[key], runs)
-            row["comparison"] = comparison.describe()
-            if comparison.dropped and check.outcome == "passed":
-                check.outcome = "failed"
-                check.hint = f"success {comparison.describe()} against baseline {state.options.compare!r}"
         if state.options.report_dir is not None:
             row["curves"] = [r.curve for r in result.runs]
         pyfuncitem.user_properties.append((PROPERTY, json.dumps(row)))
-        for name in ("success", "threshold", "successes", "episodes", "runs_met", "runs", "train_seconds"):
-            pyfuncitem.user_properties.append((f"{PROPERTY}.{path}.{name}", row[name]))
-        pyfuncitem.user_properties.append((f"{PROPERTY}.{path}.interval", "[{:.4f}, {:.4f}]".format(*check.interval)))
-        pyfuncitem.user_properties.append((f"{PROPERTY}.{path}.cached", check.cached))
+        pyfuncitem.user_properties += [(f"{PROPERTY}.{check.goal}.{k}", v) for k, v in check.junit_properties()]
         if check.outcome == "failed":
             failures.append(check.message())
         elif check.outcome == "inconclusive":

@@ -103,3 +103,28 @@ def test_competing_subgoals_hint_at_weights():
         "subgoals compete: 'pendulum/stabilization' is reached in 100% of episodes, 'pendulum/position' in 33%; "
         "consider a Distance on 'pendulum/position' or a larger weight for it"
     )
+
+
+def test_with_thresholds_resolves_decorator_goals():
+    from specguard.gate import with_thresholds
+
+    s, paths = with_thresholds(spec(), {"root": 0.5, "position": 0.7}, "position")
+    assert s.thresholds == {"pendulum": 0.5, "pendulum/position": 0.7} and paths == ["pendulum/position"]
+    assert with_thresholds(spec(), None, None)[1] == ["pendulum"]
+    with pytest.raises(sg.SpecError, match="no thresholds to check"):
+        with_thresholds(sg.Spec(pendulum.initial_env, pendulum.trees["b"], budget=sg.Budget(10)), None, None)
+
+
+def test_check_item_fails_a_passing_goal_that_dropped_against_the_baseline():
+    from specguard.gate import check_item
+
+    s = spec(expect={"pendulum": 0.3})
+    result = result_of(s, [(20, 30), (21, 30)])
+    key = "g::pendulum"
+    dropped = check_item(result, s, ["pendulum"], "g", baseline=({key: [(30, 30), (30, 30)]}, "main"))[0]
+    assert dropped.outcome == "failed"
+    assert dropped.hint.startswith("success dropped: 100% -> 68% (Fisher exact test")
+    assert dropped.hint.endswith("against baseline 'main'")
+    same = check_item(result, s, ["pendulum"], "g", baseline=({key: [(20, 30), (21, 30)]}, "main"))[0]
+    assert same.outcome == "passed" and same.comparison.startswith("unchanged within chance")
+    assert dict(same.junit_properties())["interval"].startswith("[0.")
