@@ -123,7 +123,7 @@ def test_check_item_fails_a_passing_goal_that_dropped_against_the_baseline():
     key = "g::pendulum"
     dropped = check_item(result, s, ["pendulum"], "g", baseline=({key: [(30, 30), (30, 30)]}, "main"))[0]
     assert dropped.outcome == "failed"
-    assert dropped.hint.startswith("success dropped: 100% -> 68% (Fisher exact test")
+    assert dropped.hint.startswith("success dropped: 100% -> 68% (Welch t-test over 2 vs 2 seeds")
     assert dropped.hint.endswith("against baseline 'main'")
     same = check_item(result, s, ["pendulum"], "g", baseline=({key: [(20, 30), (21, 30)]}, "main"))[0]
     assert same.outcome == "passed" and same.comparison.startswith("unchanged within chance")
