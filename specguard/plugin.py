@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import warnings
 from collections.abc import Callable, Generator
 from pathlib import Path
@@ -136,7 +137,12 @@ def _parse_options(config: pytest.Config) -> _Options:
         ) from None
     workers_text = get("--goal-specs-workers")
     workers: int | str = workers_text
-    if workers_text != "auto":
+    workerinput = getattr(config, "workerinput", None)
+    if workers_text == "auto" and workerinput is not None:
+        # Under xdist the cores are shared among its workers: do not oversubscribe them.
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+        workers = max(1, cores // int(workerinput.get("workercount", 1)))
+    elif workers_text != "auto":
         if not workers_text.isdigit() or int(workers_text) < 1:
             raise pytest.UsageError(f"--goal-specs-workers: expected an integer >= 1 or 'auto', got {workers_text!r}")
         workers = int(workers_text)
