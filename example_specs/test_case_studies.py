@@ -92,7 +92,7 @@ def test_mountain_car_distance(mountain_car_env):
 # -- LunarLander: rl-zoo PPO, 16 envs, 400k steps --------------------------------------
 
 
-@sg.goal_spec(expect={"lander": 0.05}, xfail={"lander": "measured 53% and 0% over two seeds at 400k"})
+@sg.goal_spec(expect={"lander": 0.05})
 def test_lunar_lander_baseline(lunar_lander_env):
     return sg.Spec(lunar_lander_env, lunar_lander.trees["w"], baseline=True, **lunar_lander.COMMON)
 
@@ -107,7 +107,10 @@ def test_lunar_lander_refined(lunar_lander_env):
     return sg.Spec(lunar_lander_env, lunar_lander.trees["b"], **lunar_lander.COMMON)
 
 
-@sg.goal_spec(expect={"lander": 0.05})
+@sg.goal_spec(
+    expect={"lander": 0.05},
+    xfail={"lander": "paper: stabilises without landing; measured: stabilisation only, root 0% at 400k"},
+)
 def test_lunar_lander_distance(lunar_lander_env):
     return sg.Spec(lunar_lander_env, lunar_lander.trees["c"], **lunar_lander.COMMON)
 
