@@ -94,7 +94,7 @@ def _show(target: str) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from specguard.engine import run_spec
+    from specguard.engine import print_progress, run_spec
 
     specs = load_objects(args.target)
     results = {}
@@ -106,7 +106,7 @@ def _run(args: argparse.Namespace) -> int:
             spec,
             workers=args.workers,
             cache_dir=None if args.no_cache else args.cache_dir,
-            progress=None if args.quiet else _stderr,
+            progress=None if args.quiet else print_progress,
         )
         results[name] = result.to_dict()
         print(f"== {name}: {'passed' if result.passed else 'FAILED'} ({result.seconds:.1f}s)")
@@ -116,10 +116,6 @@ def _run(args: argparse.Namespace) -> int:
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1))
     return 1 if failed else 0
-
-
-def _stderr(line: str) -> None:
-    print(line, file=sys.stderr, flush=True)
 
 
 def _workers(text: str) -> int | str:

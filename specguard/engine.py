@@ -39,7 +39,8 @@ __all__ = ["GoalVerdict", "SpecResult", "resolve_workers", "run_spec"]
 Progress = Callable[[str], None]
 
 
-def _stderr(line: str) -> None:
+def print_progress(line: str) -> None:
+    """The default progress sink: one flushed line on stderr, which CI logs capture."""
     print(line, file=sys.stderr, flush=True)
 
 
@@ -143,7 +144,7 @@ def _train_in_worker(payload: bytes, seed: int, cache_dir: str | None, report: b
     spec: Spec = cloudpickle.loads(payload)
     from specguard.train import train_run
 
-    result, model = train_run(spec, seed, progress=_stderr if report else None)
+    result, model = train_run(spec, seed, progress=print_progress if report else None)
     if cache_dir is not None:
         Cache(Path(cache_dir)).store(spec, seed, result, model)
     return result.to_dict()
@@ -189,7 +190,7 @@ def run_spec(
     *,
     workers: int | str = "auto",
     cache_dir: str | Path | None = ".specguard/cache",
-    progress: Progress | None = _stderr,
+    progress: Progress | None = print_progress,
 ) -> SpecResult:
     """Train and judge ``spec`` within its budget.
 

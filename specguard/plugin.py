@@ -265,20 +265,14 @@ def _scaled(state: _Session, spec: Any) -> Any:
 
 def _run(state: _Session, spec: Any) -> Any:
     from specguard.cache import fingerprint
-    from specguard.engine import run_spec
+    from specguard.engine import print_progress, run_spec
 
     key = fingerprint(spec, 0)
     if key not in state.memo:  # every goal item of a spec shares one training
         state.memo[key] = run_spec(
-            spec, workers=state.options.workers, cache_dir=state.options.cache_dir, progress=_progress
+            spec, workers=state.options.workers, cache_dir=state.options.cache_dir, progress=print_progress
         )
     return state.memo[key]
-
-
-def _progress(line: str) -> None:
-    import sys
-
-    print(line, file=sys.stderr, flush=True)
 
 
 @pytest.hookimpl(tryfirst=True)

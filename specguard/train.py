@@ -61,9 +61,6 @@ class RunResult:
     stopped_early: bool = False
     curve: list[dict[str, Any]] = field(default_factory=list)
 
-    def success_rate(self, path: str) -> float:
-        return self.successes[path] / self.episodes
-
     def verdicts(self, thresholds: Mapping[str, float], confidence: float = 0.95) -> dict[str, RunVerdict]:
         return {p: run_verdict(self.successes[p], self.episodes, t, confidence) for p, t in thresholds.items()}
 
