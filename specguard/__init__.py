@@ -40,6 +40,7 @@ _EXPORTS = {
     "Constraint": "specguard.nodes",
     "Distance": "specguard.nodes",
     "EvaluationError": "specguard.error",
+    "FingerprintError": "specguard.error",
     "Goal": "specguard.nodes",
     "GoalEnv": "specguard.env",
     "GoalInfo": "specguard.env",

@@ -1,118 +1,60 @@
-"""The run cache: unchanged specs are not retrained, changed ones are.
+"""The run cache: unchanged specs are not retrained, changed ones are, and stored results are never trusted blindly.
 
-A trained run is keyed by a fingerprint of everything that determines it: the
-tree's structure and numbers, the source (and captured values) of every user
-function (distances, constraints, ``state``, ``execute``, env factories), the
-env id and kwargs, algorithm and hyperparameters, budget, thresholds and
-confidence (they decide extra evaluation episodes), the seed, and the versions
-of specguard, gymnasium, stable-baselines3, torch, numpy and Python.
+A trained run is keyed by :meth:`specguard.fingerprint.SpecFingerprint.run_key`:
+an exact digest of everything that decides the run (see
+:mod:`specguard.fingerprint` for what it covers and what it cannot see).
 
 An entry is a folder ``<root>/<key[:2]>/<key>/`` holding ``result.json``,
 ``model.zip`` (loadable with SB3's ``load``) and, with ``normalize=True``,
 ``vecnormalize.pkl``. It is written in a temporary folder and renamed into
-place, which is atomic: two processes never corrupt an entry, and a run killed
-midway leaves only a temporary folder that is never read. ``result.json``
-records the fingerprint and a SHA-256 of the model file; an entry that does not
-parse or match is reported corrupt and retrained, never trusted.
+place, which is atomic: a run killed midway leaves only a temporary folder that
+is never read. ``result.json`` holds the result, the versions it was made
+with, a SHA-256 of every file, and a checksum over all of that; with a secret
+(:data:`SECRET_ENV`), also an HMAC-SHA256 signature. On load an entry must pass
+every check of :func:`validate_record`; one that does not is discarded with a
+warning and retrained, never trusted and never a traceback.
+
+Trust boundary: a cache folder is trusted input. The checksum catches damage,
+not intent (anyone who can write the folder can recompute it), and SB3's
+``load`` unpickles, so a model file from an untrusted source can run code.
+For a cache shared between machines or branches, set the same secret in
+:data:`SECRET_ENV` everywhere: entries are then signed, and an entry whose
+signature does not verify with the key is discarded.
+
+Two processes asking for the same run at once (two ``specguard run``, xdist
+workers) take a file lock per key (:meth:`Cache.lock`): one trains, the other
+waits and then reads its entry.
 """
 
 from __future__ import annotations
 
 import hashlib
-import inspect
+import hmac
 import json
 import os
-import platform
 import shutil
 import tempfile
-from collections.abc import Callable
-from importlib import metadata
+import warnings
+from collections.abc import Callable, Collection
 from pathlib import Path
 from typing import Any
 
-from specguard.nodes import Node
+from specguard.error import SpecError
+from specguard.fingerprint import fingerprint_spec, versions
 from specguard.spec import Spec
 from specguard.train import RunResult
 
-__all__ = ["Cache", "fingerprint"]
+__all__ = ["SECRET_ENV", "Cache", "CacheLockTimeout", "validate_record"]
 
-_VERSIONED = ("specguard", "gymnasium", "stable-baselines3", "torch", "numpy")
-
-
-def _fn_identity(fn: Callable[..., Any] | None) -> Any:
-    """Source, defaults and captured values of a user function (what decides its behaviour)."""
-    if fn is None:
-        return None
-    try:
-        source = inspect.getsource(fn)
-    except (OSError, TypeError):
-        code = getattr(fn, "__code__", None)
-        source = repr(fn) if code is None else code.co_code.hex() + repr(code.co_consts)
-    closure = getattr(fn, "__closure__", None) or ()
-    captured = []
-    for cell in closure:
-        try:
-            captured.append(repr(cell.cell_contents))
-        except ValueError:  # an empty cell
-            captured.append("<empty>")
-    return {
-        "name": getattr(fn, "__qualname__", repr(fn)),
-        "source": source,
-        "defaults": repr(getattr(fn, "__defaults__", None)),
-        "captured": captured,
-    }
+SECRET_ENV = "SPECGUARD_CACHE_KEY"
+FORMAT = 2
+MODEL = "model.zip"
+NORMALIZER = "vecnormalize.pkl"
+RESULT = "result.json"
 
 
-def _tree_identity(tree: Node) -> list[Any]:
-    out = []
-    for path, node in tree.walk():
-        entry: dict[str, Any] = {"path": path, "node": node.describe()}
-        entry["annotations"] = [{"repr": repr(a), "fn": _fn_identity(getattr(a, "fn", None))} for a in node.annotations]
-        out.append(entry)
-    return out
-
-
-def _versions() -> dict[str, str]:
-    found = {"python": platform.python_version()}
-    for name in _VERSIONED:
-        try:
-            found[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            found[name] = "absent"
-    return found
-
-
-def fingerprint(spec: Spec, seed: int) -> str:
-    """The SHA-256 key of one run of ``spec`` with ``seed``."""
-    env = spec.initial_env
-    identity = {
-        "tree": _tree_identity(spec.tree),
-        "env": env.env if isinstance(env.env, str) else _fn_identity(env.env),
-        "features": list(env.features),
-        "state": _fn_identity(env.state),
-        "execute": _fn_identity(env.execute),
-        "bounds": [list(b) for b in env.bounds],
-        "action_space": repr(env.action_space),
-        "make_kwargs": repr(sorted(env.make_kwargs.items())),
-        "algorithm": spec.algorithm,
-        "hyperparameters": repr(sorted(spec.hyperparameters.items())),
-        "n_envs": spec.n_envs,
-        "normalize": spec.normalize,
-        "deterministic": spec.deterministic,
-        "baseline": spec.baseline,
-        "budget": [
-            spec.budget.timesteps,
-            spec.budget.eval_episodes,
-            spec.budget.max_eval_episodes,
-            spec.budget.wall_clock_s,
-        ],
-        "thresholds": sorted(spec.thresholds.items()),
-        "confidence": spec.confidence,
-        "seed": seed,
-        "versions": _versions(),
-    }
-    text = json.dumps(identity, sort_keys=True, default=repr)
-    return hashlib.sha256(text.encode()).hexdigest()
+class CacheLockTimeout(SpecError):
+    """Another process held a run's lock for longer than the timeout."""
 
 
 def _sha256(path: Path) -> str:
@@ -123,58 +65,179 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
+def _checksum(record: dict[str, Any]) -> str:
+    body = {k: v for k, v in record.items() if k not in ("checksum", "signature")}
+    return hashlib.sha256(json.dumps(body, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+def _sign(secret: bytes, checksum: str) -> str:
+    return hmac.new(secret, checksum.encode(), hashlib.sha256).hexdigest()
+
+
+# -- the checks a stored record must pass, one invariant each ------------------------
+
+
+def _check_envelope(record: Any, key: str) -> None:
+    if not isinstance(record, dict):
+        raise ValueError(f"expected a JSON object, got {type(record).__name__}")
+    if record.get("format") != FORMAT:
+        raise ValueError(f"format {record.get('format')!r}, expected {FORMAT}")
+    if record.get("fingerprint") != key:
+        raise ValueError("the recorded fingerprint is not the entry's key")
+
+
+def _check_checksum(record: dict[str, Any]) -> None:
+    if record.get("checksum") != _checksum(record):
+        raise ValueError("checksum does not match the contents (edited or damaged)")
+
+
+def _check_signature(record: dict[str, Any], secret: bytes | None) -> None:
+    if secret is None:
+        return
+    signature = record.get("signature")
+    if not isinstance(signature, str) or not hmac.compare_digest(signature, _sign(secret, str(record["checksum"]))):
+        raise ValueError(f"no valid signature for the key in {SECRET_ENV}")
+
+
+def _check_files(record: dict[str, Any], folder: Path) -> None:
+    files = record.get("files")
+    if not isinstance(files, dict) or MODEL not in files:
+        raise ValueError("no file checksums recorded")
+    for name, expected in files.items():
+        if name not in (MODEL, NORMALIZER):
+            raise ValueError(f"unexpected file {name!r} recorded")
+        if not (folder / name).is_file() or _sha256(folder / name) != expected:
+            raise ValueError(f"{name} is missing or does not match its checksum")
+
+
+def _check_versions(record: dict[str, Any]) -> None:
+    if record.get("versions") != versions():
+        raise ValueError("made with other versions of specguard or its dependencies")
+
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _check_result(result: Any, seed: int, paths: Collection[str]) -> None:
+    if not isinstance(result, dict):
+        raise ValueError("result is not an object")
+    expected = {"spec", "seed", "timesteps", "episodes", "successes", "train_seconds", "stopped_early", "curve"}
+    if set(result) != expected:
+        raise ValueError(f"result fields {sorted(result)} are not {sorted(expected)}")
+    if result["seed"] != seed or not _is_int(result["seed"]):
+        raise ValueError(f"seed {result['seed']!r} is not {seed}")
+    if not isinstance(result["spec"], str):
+        raise ValueError("spec label is not a string")
+    if not _is_int(result["timesteps"]) or result["timesteps"] < 0:
+        raise ValueError(f"timesteps {result['timesteps']!r} is not an integer >= 0")
+    episodes = result["episodes"]
+    if not _is_int(episodes) or episodes < 1:
+        raise ValueError(f"episodes {episodes!r} is not an integer >= 1")
+    successes = result["successes"]
+    if not isinstance(successes, dict) or set(successes) != set(paths):
+        raise ValueError("successes do not list exactly the tree's goals")
+    for path, k in successes.items():
+        if not _is_int(k) or not 0 <= k <= episodes:
+            raise ValueError(f"successes[{path!r}] = {k!r} is not an integer in [0, episodes={episodes}]")
+    if not isinstance(result["train_seconds"], (int, float)) or isinstance(result["train_seconds"], bool):
+        raise ValueError("train_seconds is not a number")
+    if not isinstance(result["stopped_early"], bool):
+        raise ValueError("stopped_early is not a boolean")
+    if not isinstance(result["curve"], list) or not all(isinstance(p, dict) for p in result["curve"]):
+        raise ValueError("curve is not a list of points")
+
+
+def validate_record(
+    record: Any, folder: Path, *, key: str, seed: int, paths: Collection[str], secret: bytes | None
+) -> RunResult:
+    """The run stored in ``record`` (parsed ``result.json`` of ``folder``), after every check.
+
+    Raises:
+        ValueError: the first check that failed, in words.
+    """
+    _check_envelope(record, key)
+    _check_checksum(record)
+    _check_signature(record, secret)
+    _check_files(record, folder)
+    _check_versions(record)
+    _check_result(record.get("result"), seed, paths)
+    return RunResult(**record["result"])
+
+
+def _secret_from_env() -> bytes | None:
+    value = os.environ.get(SECRET_ENV)
+    return value.encode() if value else None
+
+
 class Cache:
-    """Trained runs on disk, keyed by :func:`fingerprint`.
+    """Trained runs on disk, keyed by the spec's fingerprint and the seed.
 
     Args:
         root: the cache folder (created on first store).
+        secret: the HMAC key for signed entries; default: the environment
+            variable :data:`SECRET_ENV`, if set.
     """
 
-    def __init__(self, root: Path | str) -> None:
+    def __init__(self, root: Path | str, *, secret: bytes | None = None) -> None:
         self.root = Path(root)
+        self.secret = secret if secret is not None else _secret_from_env()
+
+    def folder(self, key: str) -> Path:
+        """Where the entry of run key ``key`` lives."""
+        return self.root / key[:2] / key
 
     def entry(self, spec: Spec, seed: int) -> Path:
-        key = fingerprint(spec, seed)
-        return self.root / key[:2] / key
+        return self.folder(fingerprint_spec(spec).run_key(seed))
 
     def model_path(self, spec: Spec, seed: int) -> Path:
         """Where the run's model is (``PPO.load(cache.model_path(spec, seed))``)."""
-        return self.entry(spec, seed) / "model.zip"
+        return self.entry(spec, seed) / MODEL
 
     def load(self, spec: Spec, seed: int) -> RunResult | None:
         """The cached result of the run, or ``None`` when absent or not trustworthy."""
-        folder = self.entry(spec, seed)
+        return self.load_key(fingerprint_spec(spec).run_key(seed), seed=seed, paths=_paths(spec))
+
+    def load_key(self, key: str, *, seed: int, paths: Collection[str]) -> RunResult | None:
+        """The run stored under ``key`` if it passes :func:`validate_record`; a failing entry is discarded."""
+        folder = self.folder(key)
         if not folder.exists():
             return None
         try:
-            data = json.loads((folder / "result.json").read_text())
-            if data["fingerprint"] != folder.name or data["model_sha256"] != _sha256(folder / "model.zip"):
-                raise ValueError("fingerprint or model checksum does not match")
-            return RunResult(**data["result"])
+            record = json.loads((folder / RESULT).read_text())
+            return validate_record(record, folder, key=key, seed=seed, paths=paths, secret=self.secret)
         except (OSError, ValueError, KeyError, TypeError) as e:
-            # Corrupt or partial: move it aside so the retrained run can take its place.
+            # Damaged, edited, unsigned or stale: remove it so the retrained run can take its place.
             shutil.rmtree(folder, ignore_errors=True)
-            import warnings
-
-            warnings.warn(f"specguard cache: discarded a corrupt entry {folder} ({e}); retraining", stacklevel=2)
+            warnings.warn(f"specguard cache: discarded entry {folder} ({e}); retraining", stacklevel=2)
             return None
 
     def store(self, spec: Spec, seed: int, result: RunResult, model: Any) -> Path:
         """Write the run atomically; returns its folder."""
-        folder = self.entry(spec, seed)
+        return self.store_key(fingerprint_spec(spec).run_key(seed), result, model, normalize=spec.normalize)
+
+    def store_key(self, key: str, result: RunResult, model: Any, *, normalize: bool) -> Path:
+        """Write a run under ``key`` atomically (a temporary folder renamed into place)."""
+        folder = self.folder(key)
         folder.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=".tmp-", dir=folder.parent))
         try:
-            model.save(tmp / "model.zip")
+            model.save(tmp / MODEL)
             env = model.get_env()
-            if spec.normalize and hasattr(env, "save"):
-                env.save(str(tmp / "vecnormalize.pkl"))
-            record = {
-                "fingerprint": folder.name,
-                "model_sha256": _sha256(tmp / "model.zip"),
+            if normalize and hasattr(env, "save"):
+                env.save(str(tmp / NORMALIZER))
+            files = {p.name: _sha256(p) for p in sorted(tmp.iterdir())}
+            record: dict[str, Any] = {
+                "format": FORMAT,
+                "fingerprint": key,
+                "versions": versions(),
+                "files": files,
                 "result": result.to_dict(),
             }
-            (tmp / "result.json").write_text(json.dumps(record, indent=1))
+            record["checksum"] = _checksum(record)
+            if self.secret is not None:
+                record["signature"] = _sign(self.secret, record["checksum"])
+            (tmp / RESULT).write_text(json.dumps(record, indent=1))
             try:
                 os.rename(tmp, folder)  # atomic; fails if another process stored it first
             except OSError:
@@ -183,3 +246,36 @@ class Cache:
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
         return folder
+
+    def lock(self, key: str, timeout: float) -> Any:
+        """A file lock for run ``key`` (``filelock.FileLock``); the OS releases it if its holder dies."""
+        from filelock import FileLock
+
+        path = self.folder(key).parent / f"{key}.lock"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return FileLock(str(path), timeout=timeout, thread_local=False)
+
+
+def _paths(spec: Spec) -> list[str]:
+    return [p for p, _ in spec.tree.walk()]
+
+
+def wait_for(lock: Any, what: str, timeout: float, on_wait: Callable[[], None] | None = None) -> None:
+    """Acquire ``lock``, raising :class:`CacheLockTimeout` with a clear message after ``timeout`` seconds."""
+    from filelock import Timeout
+
+    try:
+        lock.acquire(timeout=0)
+        return
+    except Timeout:
+        pass
+    if on_wait is not None:
+        on_wait()
+    try:
+        lock.acquire(timeout=timeout)
+    except Timeout:
+        raise CacheLockTimeout(
+            f"{what}: another process has been training this run for over {timeout:g} s (lock {lock.lock_file}); "
+            "wait for it, or raise the lock timeout. A lock is released by the OS when its process ends, so a "
+            "stale lock means that process still runs"
+        ) from None

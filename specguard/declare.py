@@ -21,29 +21,27 @@ from numbers import Real
 from typing import Any, TypeVar
 
 from specguard.error import InvalidSpec
+from specguard.goals import ROOT, check_threshold
 
-__all__ = ["GOAL_FIXTURE", "ROOT", "goal_spec"]
+__all__ = ["GOAL_FIXTURE", "goal_spec"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
 GOAL_FIXTURE = "specguard_goal"  # the plugin's fixture the goal items are parametrised over
-ROOT = "root"  # the id of the root goal when ``expect`` is a single number
 
 
-def _check_expect(where: str, expect: object) -> dict[str, float] | None:
+def _check_expect(where: str, expect: object) -> dict[Any, float] | None:
     if expect is None:
         return None
     if isinstance(expect, Real) and not isinstance(expect, bool):
-        expect = {ROOT: float(expect)}
+        expect = {ROOT: expect}
     if not isinstance(expect, Mapping) or not expect:
         raise InvalidSpec(where, f"expected expect to be {{goal: min success}} or a number, got {expect!r}")
-    out = {}
+    out: dict[Any, float] = {}
     for goal, value in expect.items():
-        if not isinstance(goal, str):
+        if goal is not ROOT and not isinstance(goal, str):
             raise InvalidSpec(where, f"expected goal names or paths as keys of expect, got {goal!r}")
-        if isinstance(value, bool) or not isinstance(value, Real) or not 0.0 <= float(value) < 1.0:
-            raise InvalidSpec(where, f"expect[{goal!r}]: expected a success rate in [0, 1), got {value!r}")
-        out[goal] = float(value)
+        out[goal] = check_threshold(f"{where}, expect[{goal!r}]", value)
     return out
 
 
@@ -74,13 +72,16 @@ def goal_spec(
         where = f"goal_spec {getattr(fn, '__qualname__', fn)!r}"
         thresholds = _check_expect(where, expect)
         if xfail is None:
-            reasons: dict[str, str] = {}
+            reasons: dict[Any, str] = {}
         elif isinstance(xfail, Mapping):
             reasons = {str(k): str(v) for k, v in xfail.items()}
         elif isinstance(xfail, Sequence) and not isinstance(xfail, str):
             reasons = {str(k): "expected to miss its threshold" for k in xfail}
         else:
             raise InvalidSpec(where, f"expected xfail to be {{goal: reason}} or a list of goals, got {xfail!r}")
+        if thresholds is not None and ROOT in thresholds:
+            # One number asserts the root goal, which xfail calls "root".
+            reasons = {ROOT if k == "root" else k: v for k, v in reasons.items()}
         if thresholds is not None:
             unknown = [g for g in reasons if g not in thresholds]
             if unknown:

@@ -16,8 +16,6 @@ Example:
 
 from __future__ import annotations
 
-import concurrent.futures as cf
-import multiprocessing
 import os
 import sys
 import time
@@ -26,13 +24,13 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-import cloudpickle
-
-from specguard.cache import Cache
+from specguard.cache import Cache, wait_for
 from specguard.error import SpecError
+from specguard.fingerprint import fingerprint_spec
 from specguard.spec import Spec
 from specguard.stats import QuorumVerdict, RunVerdict, quorum_verdict, run_verdict, success_interval
 from specguard.train import RunResult, TrainingError
+from specguard.workers import Failure, Report, Task, run_tasks
 
 __all__ = ["GoalVerdict", "SpecResult", "resolve_workers", "run_spec"]
 
@@ -65,7 +63,7 @@ class GoalVerdict:
         threshold: the minimum success asked for.
         required: runs that must meet it.
         runs: each run's verdict, by seed order.
-        verdict: ``"passed"``, ``"failed"``.
+        verdict: passed, failed, or open (more runs could still decide it).
         successes, episodes: pooled over runs.
         interval: the pooled success rate's confidence interval.
     """
@@ -73,8 +71,8 @@ class GoalVerdict:
     path: str
     threshold: float
     required: int
-    runs: list[str]
-    verdict: str
+    runs: list[RunVerdict]
+    verdict: QuorumVerdict
     successes: int
     episodes: int
     interval: tuple[float, float]
@@ -98,7 +96,7 @@ class SpecResult:
 
     @property
     def passed(self) -> bool:
-        return not self.errors and all(g.verdict == QuorumVerdict.PASSED.value for g in self.goals.values())
+        return not self.errors and all(g.verdict is QuorumVerdict.PASSED for g in self.goals.values())
 
     def success(self, path: str) -> tuple[int, int]:
         """Pooled ``(successes, episodes)`` of a goal over all runs."""
@@ -125,9 +123,9 @@ class SpecResult:
             rate = f"{k / n:.0%} ({k}/{n})" if n else "-"
             iv = "-" if not n else "[{:.2f}, {:.2f}]".format(*success_interval(k, n, self.confidence))
             g = self.goals.get(p)
-            met = "-" if g is None else f"{g.runs.count(RunVerdict.MET.value)}/{len(g.runs)} (need {g.required})"
+            met = "-" if g is None else f"{g.runs.count(RunVerdict.MET)}/{len(g.runs)} (need {g.required})"
             threshold = "-" if g is None else f">= {g.threshold:g}"
-            rows.append((p, rate, iv, threshold, met, "-" if g is None else g.verdict))
+            rows.append((p, rate, iv, threshold, met, "-" if g is None else g.verdict.value))
         widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
         lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
         lines.insert(1, "  ".join("-" * w for w in widths))
@@ -136,18 +134,36 @@ class SpecResult:
         return "\n".join(lines)
 
 
-def _train_in_worker(payload: bytes, seed: int, cache_dir: str | None, report: bool) -> dict[str, Any]:
-    """Process entry point: unpickle the spec (cloudpickle carries lambdas), train, store.
+def _train_task(spec: Spec, seed: int, cache_dir: str | None, key: str | None, *, report: Report) -> dict[str, Any]:
+    """A worker process's task: train one seed, store it under ``key`` (computed by the parent), return the result.
 
-    Progress lines go straight to the inherited stderr, which CI logs capture.
+    The key comes from the parent because functions unpickled here are not the
+    parent's (cloudpickle rebuilds them), so only the parent computes keys.
     """
-    spec: Spec = cloudpickle.loads(payload)
     from specguard.train import train_run
 
-    result, model = train_run(spec, seed, progress=print_progress if report else None)
-    if cache_dir is not None:
-        Cache(Path(cache_dir)).store(spec, seed, result, model)
+    result, model = train_run(spec, seed, report=report)
+    if cache_dir is not None and key is not None:
+        report("store", None, None)
+        Cache(Path(cache_dir)).store_key(key, result, model, normalize=spec.normalize)
     return result.to_dict()
+
+
+_PHASES = {"start": "starting", "build": "building the env", "train": "training step", "evaluate": "evaluation episode"}
+
+
+def _describe_failure(seed: int, failure: Failure) -> str:
+    """One line: the seed, where the run was, and why it failed."""
+    if isinstance(failure.exception, TrainingError):
+        return str(failure.exception)  # already names the seed, the phase and the step
+    where = _PHASES.get(failure.phase, failure.phase)
+    step = "" if failure.step is None or failure.phase not in ("train", "evaluate") else f" {failure.step}"
+    return f"seed {seed}, {where}{step}: {failure.cause}"
+
+
+def _is_spec_error(failure: Failure) -> bool:
+    """A mistake in the spec itself (e.g. rejected hyperparameters): every seed would hit it, so stop all."""
+    return isinstance(failure.exception, SpecError) and not isinstance(failure.exception, TrainingError)
 
 
 def _judge(spec: Spec, runs: list[RunResult], failed_seeds: int) -> dict[str, GoalVerdict]:
@@ -164,8 +180,8 @@ def _judge(spec: Spec, runs: list[RunResult], failed_seeds: int) -> dict[str, Go
             path=path,
             threshold=threshold,
             required=spec.required_runs,
-            runs=[v.value for v in verdicts],
-            verdict=verdict.value,
+            runs=verdicts,
+            verdict=verdict,
             successes=k,
             episodes=n,
             interval=success_interval(k, n, spec.confidence) if n else (0.0, 1.0),
@@ -176,13 +192,126 @@ def _judge(spec: Spec, runs: list[RunResult], failed_seeds: int) -> dict[str, Go
 def _still_needed(spec: Spec, goals: dict[str, GoalVerdict], done: int) -> int:
     """How many more runs could still change an open verdict (0 when every goal is settled)."""
     assert spec.budget.max_seeds is not None
-    open_goals = [g for g in goals.values() if g.verdict == QuorumVerdict.OPEN.value]
+    open_goals = [g for g in goals.values() if g.verdict is QuorumVerdict.OPEN]
     if done < spec.budget.min_seeds:
         return spec.budget.min_seeds - done
     if not open_goals:
         return 0
-    missing = max(g.required - g.runs.count(RunVerdict.MET.value) for g in open_goals)
+    missing = max(g.required - g.runs.count(RunVerdict.MET) for g in open_goals)
     return min(missing, spec.budget.max_seeds - done)
+
+
+class _Runs:
+    """The seeds of one ``run_spec`` call: looked up in the cache, locked, trained in workers, recorded."""
+
+    def __init__(
+        self, spec: Spec, result: SpecResult, cache: Cache | None, workers: int, lock_timeout: float, say: Progress
+    ) -> None:
+        self.spec = spec
+        self.result = result
+        self.cache = cache
+        self.workers = workers
+        self.lock_timeout = lock_timeout
+        self.say = say
+        self.paths = [p for p, _ in spec.tree.walk()]
+        self.fingerprint = None if cache is None else fingerprint_spec(spec)
+        if self.fingerprint is not None and not self.fingerprint.reproducible:
+            self.cache = None
+
+    def _key(self, seed: int) -> str | None:
+        return None if self.fingerprint is None or self.cache is None else self.fingerprint.run_key(seed)
+
+    def _hit(self, seed: int) -> bool:
+        key = self._key(seed)
+        if key is None or self.cache is None:
+            return False
+        run = self.cache.load_key(key, seed=seed, paths=self.paths)
+        if run is None:
+            return False
+        run.spec = self.spec.label  # the label is not part of a run's key
+        self.result.runs.append(run)
+        self.result.cached[seed] = True
+        self.say(f"[specguard] {self.spec.label}: seed {seed} from cache")
+        return True
+
+    def run(self, seeds: list[int]) -> None:
+        """Get every seed's run: from the cache, from another process training it, or trained here."""
+        locks: dict[int, Any] = {}
+        busy: list[int] = []
+        try:
+            todo = []
+            for seed in seeds:
+                if self._hit(seed):
+                    continue
+                key = self._key(seed)
+                if key is not None and self.cache is not None:
+                    lock = self.cache.lock(key, self.lock_timeout)
+                    if not _try_acquire(lock):
+                        busy.append(seed)  # another process trains it: take it from the cache when it is done
+                        continue
+                    locks[seed] = lock
+                    if self._hit(seed):  # stored while we looked
+                        continue
+                todo.append(seed)
+            self._train(todo)
+            for seed in busy:
+                key = self._key(seed)
+                assert key is not None and self.cache is not None
+                lock = self.cache.lock(key, self.lock_timeout)
+                what = f"Spec {self.spec.label!r}, seed {seed}"
+                wait_for(
+                    lock,
+                    what,
+                    self.lock_timeout,
+                    lambda s=seed: self.say(  # type: ignore[misc]
+                        f"[specguard] {self.spec.label}: seed {s} is being trained by another process; waiting for it"
+                    ),
+                )
+                locks[seed] = lock
+                if not self._hit(seed):
+                    self._train([seed])  # the other process failed or did not store it
+        finally:
+            for lock in locks.values():
+                lock.release()
+
+    def _train(self, seeds: list[int]) -> None:
+        if not seeds:
+            return
+        cache_dir = None if self.cache is None else str(self.cache.root)
+        tasks = []
+        for seed in seeds:
+            self.say(f"[specguard] {self.spec.label}: training seed {seed} ({self.spec.budget.timesteps} steps)")
+            tasks.append(Task(seed, _train_task, (self.spec, seed, cache_dir, self._key(seed))))
+        outcomes = run_tasks(
+            tasks,
+            max_workers=self.workers,
+            on_line=lambda seed, line: self.say(f"[specguard] {self.spec.label} seed {seed}: {line}"),
+            stop_on=_is_spec_error,
+        )
+        for outcome in outcomes.values():
+            if isinstance(outcome, Failure) and _is_spec_error(outcome):
+                assert outcome.exception is not None
+                raise outcome.exception
+        for seed, outcome in outcomes.items():
+            if isinstance(outcome, Failure):  # other seeds' results are kept
+                self.result.errors[seed] = _describe_failure(seed, outcome)
+                self.say(f"[specguard] {self.spec.label}: seed {seed} failed: {self.result.errors[seed]}")
+                continue
+            run = RunResult(**outcome.value)
+            self.result.runs.append(run)
+            self.result.cached[seed] = False
+            rates = ", ".join(f"{p} {c}/{run.episodes}" for p, c in run.successes.items())
+            self.say(f"[specguard] {self.spec.label}: seed {seed} done in {run.train_seconds:.1f}s: {rates}")
+
+
+def _try_acquire(lock: Any) -> bool:
+    from filelock import Timeout
+
+    try:
+        lock.acquire(timeout=0)
+    except Timeout:
+        return False
+    return True
 
 
 def run_spec(
@@ -191,63 +320,44 @@ def run_spec(
     workers: int | str = "auto",
     cache_dir: str | Path | None = ".specguard/cache",
     progress: Progress | None = print_progress,
+    lock_timeout: float = 3600.0,
 ) -> SpecResult:
     """Train and judge ``spec`` within its budget.
+
+    Each seed trains in a worker process of its own: a seed whose worker
+    raises, is killed or dies is reported in ``errors`` with its phase and
+    step, and the other seeds' results are kept and cached. ``KeyboardInterrupt``
+    (SIGINT, or SIGTERM in the main thread) ends every worker and stores
+    nothing partial.
 
     Args:
         spec: the spec.
         workers: parallel training processes (``"auto"``: the usable cores).
         cache_dir: where trained runs are kept and looked up; ``None`` disables the cache.
         progress: called with one line per event (CI logs read it); ``None`` for silence.
+        lock_timeout: seconds to wait for another process training the same run.
 
     Returns:
         The runs, per-goal verdicts, errors by seed and which runs came from the cache.
+
+    Raises:
+        SpecError: the spec is invalid (also when a worker finds it so, e.g.
+            rejected hyperparameters), or cannot be fingerprinted for the cache.
     """
     say = progress or (lambda line: None)
     n_workers = resolve_workers(workers)
     cache = Cache(Path(cache_dir)) if cache_dir is not None else None
-    payload = cloudpickle.dumps(spec)
     start = time.perf_counter()
     result = SpecResult(spec=spec.label, runs=[], goals={}, confidence=spec.confidence)
+    runs = _Runs(spec, result, cache, n_workers, lock_timeout, say)
     next_seed = 0
-    context = multiprocessing.get_context("spawn")  # torch and forked state do not mix
-    pool: cf.ProcessPoolExecutor | None = None
-    try:
-        while True:
-            result.goals = _judge(spec, result.runs, len(result.errors))
-            needed = _still_needed(spec, result.goals, len(result.runs) + len(result.errors))
-            if needed == 0:
-                break
-            seeds = list(range(next_seed, next_seed + needed))
-            next_seed += needed
-            pending: dict[cf.Future[dict[str, Any]], int] = {}
-            for seed in seeds:
-                hit = cache.load(spec, seed) if cache is not None else None
-                if hit is not None:
-                    result.runs.append(hit)
-                    result.cached[seed] = True
-                    say(f"[specguard] {spec.label}: seed {seed} from cache")
-                    continue
-                if pool is None:
-                    pool = cf.ProcessPoolExecutor(max_workers=n_workers, mp_context=context)
-                say(f"[specguard] {spec.label}: training seed {seed} ({spec.budget.timesteps} steps)")
-                cache_arg = None if cache is None else str(cache.root)
-                pending[pool.submit(_train_in_worker, payload, seed, cache_arg, progress is not None)] = seed
-            for future in cf.as_completed(pending):
-                seed = pending[future]
-                try:
-                    run = RunResult(**future.result())
-                except TrainingError as e:  # other seeds' results are kept
-                    result.errors[seed] = str(e)
-                    say(f"[specguard] {spec.label}: seed {seed} failed: {e}")
-                    continue
-                result.runs.append(run)
-                result.cached[seed] = False
-                rates = ", ".join(f"{p} {c}/{run.episodes}" for p, c in run.successes.items())
-                say(f"[specguard] {spec.label}: seed {seed} done in {run.train_seconds:.1f}s: {rates}")
-            result.runs.sort(key=lambda r: r.seed)
-    finally:
-        if pool is not None:
-            pool.shutdown(cancel_futures=True)
+    while True:
+        result.goals = _judge(spec, result.runs, len(result.errors))
+        needed = _still_needed(spec, result.goals, len(result.runs) + len(result.errors))
+        if needed == 0:
+            break
+        runs.run(list(range(next_seed, next_seed + needed)))
+        next_seed += needed
+        result.runs.sort(key=lambda r: r.seed)
     result.seconds = time.perf_counter() - start
     return result

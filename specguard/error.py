@@ -9,6 +9,7 @@ from __future__ import annotations
 
 __all__ = [
     "EvaluationError",
+    "FingerprintError",
     "InitialEnvError",
     "InvalidSpec",
     "SpecError",
@@ -57,3 +58,7 @@ class StateMappingError(InitialEnvError):
 
 class EvaluationError(SpecError):
     """A user function (distance, constraint, ``state``) failed or returned a bad value during a step."""
+
+
+class FingerprintError(InvalidSpec):
+    """A value in a spec cannot be fingerprinted exactly, so its runs could not be cached safely."""

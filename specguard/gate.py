@@ -10,11 +10,12 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from specguard.engine import SpecResult
+from specguard.goals import resolve_goal
 from specguard.nodes import Distance, Node
 from specguard.spec import Spec
-from specguard.stats import QuorumVerdict, RunVerdict
+from specguard.stats import Outcome, QuorumVerdict, RunVerdict
 
-__all__ = ["GoalCheck", "check_goal", "check_item", "resolve_goal", "with_thresholds"]
+__all__ = ["GoalCheck", "check_goal", "check_item", "with_thresholds"]
 
 
 @dataclass
@@ -22,15 +23,15 @@ class GoalCheck:
     """One (spec, goal) item's figures and outcome; ``to_row()`` is plain data.
 
     Attributes:
-        outcome: ``"passed"``, ``"failed"``, or ``"inconclusive"`` (the goal
-            failed only because runs stayed undecided: none missed, none crashed).
+        outcome: passed, failed, or undecided (the goal failed only because
+            runs stayed undecided: none missed, none crashed).
     """
 
     group: str
     spec: str
     goal: str
     threshold: float
-    outcome: str
+    outcome: Outcome
     success: float
     interval: tuple[float, float]
     successes: int
@@ -61,7 +62,9 @@ class GoalCheck:
         return [(n, getattr(self, n)) for n in names] + [("interval", f"[{lo:.4f}, {hi:.4f}]")]
 
     def message(self) -> str:
-        verb = {"passed": "met", "failed": "missed", "inconclusive": "could not be decided for"}[self.outcome]
+        verb = {Outcome.PASSED: "met", Outcome.FAILED: "missed", Outcome.UNDECIDED: "could not be decided for"}[
+            self.outcome
+        ]
         lo, hi = self.interval
         seeds = ", ".join(str(s["seed"]) for s in self.per_seed) or "none"
         lines = [
@@ -88,28 +91,11 @@ class GoalCheck:
         return row
 
 
-def resolve_goal(spec: Spec, goal: str) -> str:
-    """The full path of ``goal`` (a path, a unique name, or ``"root"``) in the spec's tree."""
-    paths = [p for p, _ in spec.tree.walk()]
-    if goal in paths:
-        return goal
-    if goal == "root":
-        return paths[0]
-    named = [p for p in paths if p.rsplit("/", 1)[-1] == goal]
-    if len(named) == 1:
-        return named[0]
-    from specguard.error import InvalidSpec
-
-    if named:
-        raise InvalidSpec(f"Spec {spec.label!r}", f"goal {goal!r} is ambiguous; use one of the paths {named}")
-    raise InvalidSpec(f"Spec {spec.label!r}", f"no goal named {goal!r}; the tree's goals are {', '.join(paths)}")
-
-
 def _node(tree: Node, path: str) -> Node:
     return dict(tree.walk())[path]
 
 
-def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[str]) -> str | None:
+def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[RunVerdict]) -> str | None:
     runs = result.runs
     never = [r.seed for r in runs if r.successes[path] == 0]
     shaped = any(isinstance(a, Distance) for _, n in _node(spec.tree, path).walk() for a in n.annotations)
@@ -131,7 +117,7 @@ def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[str]) -> str
                 f"subgoals compete: {best!r} is reached in {rates[best]:.0%} of episodes, {worst!r} in "
                 f"{rates[worst]:.0%}; consider a Distance on {worst!r} or a larger weight for it"
             )
-    if RunVerdict.UNDECIDED.value in verdicts:
+    if RunVerdict.UNDECIDED in verdicts:
         return (
             f"runs stayed undecided after {spec.budget.max_eval_episodes} evaluation episodes: "
             "raise budget.max_eval_episodes, or ask for a threshold further from the measured rate"
@@ -145,15 +131,15 @@ def check_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalChe
     """The figures and outcome of goal ``path`` (which must have a threshold in ``spec``)."""
     verdict = result.goals[path]
     per_seed = [
-        {"seed": r.seed, "successes": r.successes[path], "episodes": r.episodes, "verdict": v}
+        {"seed": r.seed, "successes": r.successes[path], "episodes": r.episodes, "verdict": v.value}
         for r, v in zip(result.runs, verdict.runs)
     ]
-    if verdict.verdict == QuorumVerdict.PASSED.value:
-        outcome = "passed"
-    elif not result.errors and RunVerdict.MISSED.value not in verdict.runs and verdict.runs:
-        outcome = "inconclusive"
+    if verdict.verdict is QuorumVerdict.PASSED:
+        outcome = Outcome.PASSED
+    elif not result.errors and RunVerdict.MISSED not in verdict.runs and verdict.runs:
+        outcome = Outcome.UNDECIDED
     else:
-        outcome = "failed"
+        outcome = Outcome.FAILED
     return GoalCheck(
         group=group,
         spec=spec.label,
@@ -164,18 +150,18 @@ def check_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalChe
         interval=verdict.interval,
         successes=verdict.successes,
         episodes=verdict.episodes,
-        runs_met=verdict.runs.count(RunVerdict.MET.value),
+        runs_met=verdict.runs.count(RunVerdict.MET),
         runs=len(verdict.runs) + len(result.errors),
         required=verdict.required,
         per_seed=per_seed,
         train_seconds=sum(r.train_seconds for r in result.runs),
         cached=bool(result.cached) and all(result.cached.values()),
         errors=dict(result.errors),
-        hint=None if outcome == "passed" else _hint(spec, path, result, verdict.runs),
+        hint=None if outcome is Outcome.PASSED else _hint(spec, path, result, verdict.runs),
     )
 
 
-def with_thresholds(spec: Spec, expect: dict[str, float] | None, goal: str | None) -> tuple[Spec, list[str]]:
+def with_thresholds(spec: Spec, expect: dict[Any, float] | None, goal: object) -> tuple[Spec, list[str]]:
     """The spec with a decorator's thresholds (if any) and the goal paths one item asserts.
 
     Raises:
@@ -185,11 +171,12 @@ def with_thresholds(spec: Spec, expect: dict[str, float] | None, goal: str | Non
 
     from specguard.error import SpecError
 
+    where = f"Spec {spec.label!r}"
     if expect:
-        spec = dataclasses.replace(spec, expect={resolve_goal(spec, g): t for g, t in expect.items()})
+        spec = dataclasses.replace(spec, expect={resolve_goal(spec.tree, g, where): t for g, t in expect.items()})
     if not spec.thresholds:
-        raise SpecError(f"Spec {spec.label!r}: no thresholds to check; give expect= to the Spec or to @goal_spec")
-    return spec, [resolve_goal(spec, goal)] if goal is not None else list(spec.thresholds)
+        raise SpecError(f"{where}: no thresholds to check; give expect= to the Spec or to @goal_spec")
+    return spec, [resolve_goal(spec.tree, goal, where)] if goal is not None else list(spec.thresholds)
 
 
 def check_item(
@@ -212,8 +199,8 @@ def check_item(
 
             comparison = compare(baseline[0][check.key], check.runs_counts)
             check.comparison = comparison.describe()
-            if comparison.dropped and check.outcome == "passed":
-                check.outcome = "failed"
+            if comparison.dropped and check.outcome is Outcome.PASSED:
+                check.outcome = Outcome.FAILED
                 check.hint = f"success {check.comparison} against baseline {baseline[1]!r}"
         checks.append(check)
     return checks

@@ -22,7 +22,7 @@ from specguard.declare import GOAL_FIXTURE
 
 MARKER = "goal_spec"
 PROPERTY = "specguard"
-INCONCLUSIVE = ("fail", "xfail", "pass")
+UNDECIDED = ("fail", "xfail", "pass")
 SKIP_REASON = "goal spec: run `pytest --goal-specs` to train it and check its goals"
 
 
@@ -36,7 +36,7 @@ class _Options:
     budget_scale: float
     workers: int | str
     cache_dir: str | None
-    inconclusive: str
+    undecided: str
     report_dir: Path | None
     save: str | None
     compare: str | None
@@ -71,11 +71,11 @@ _SETTINGS: list[tuple[str, str, str, Any, str]] = [
     ),
     ("--goal-specs-cache-dir", "goal_specs_cache_dir", "string", ".specguard/cache", "where trained runs are cached"),
     (
-        "--goal-specs-inconclusive",
-        "goal_specs_inconclusive",
+        "--goal-specs-undecided",
+        "goal_specs_undecided",
         "string",
         "fail",
-        "what an undecided goal does: fail, xfail or pass (with a warning)",
+        "what a goal whose runs stayed undecided does: fail, xfail or pass (with a warning)",
     ),
     (
         "--goal-specs-report",
@@ -146,18 +146,16 @@ def _parse_options(config: pytest.Config) -> _Options:
         if not workers_text.isdigit() or int(workers_text) < 1:
             raise pytest.UsageError(f"--goal-specs-workers: expected an integer >= 1 or 'auto', got {workers_text!r}")
         workers = int(workers_text)
-    inconclusive = get("--goal-specs-inconclusive")
-    if inconclusive not in INCONCLUSIVE:
-        raise pytest.UsageError(
-            f"--goal-specs-inconclusive: expected one of {', '.join(INCONCLUSIVE)}, got {inconclusive!r}"
-        )
+    undecided = get("--goal-specs-undecided")
+    if undecided not in UNDECIDED:
+        raise pytest.UsageError(f"--goal-specs-undecided: expected one of {', '.join(UNDECIDED)}, got {undecided!r}")
     report = get("--goal-specs-report")
     return _Options(
         enabled=bool(config.getoption("goal_specs") or config.getini("goal_specs")),
         budget_scale=scale,
         workers=workers,
         cache_dir=None if config.getoption("goal_specs_no_cache") else get("--goal-specs-cache-dir"),
-        inconclusive=inconclusive,
+        undecided=undecided,
         report_dir=Path(report) if report else None,
         save=config.getoption("goal_specs_save"),
         compare=config.getoption("goal_specs_compare"),
@@ -223,7 +221,7 @@ def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
         return
     expect = marker.kwargs.get("expect")
     goals = list(expect) if expect else [None]
-    metafunc.parametrize(GOAL_FIXTURE, goals, ids=[g or "spec" for g in goals], indirect=True)
+    metafunc.parametrize(GOAL_FIXTURE, goals, ids=["spec" if g is None else str(g) for g in goals], indirect=True)
 
 
 def _group(item: pytest.Item) -> str:
@@ -264,11 +262,13 @@ def _scaled(state: _Session, spec: Any) -> Any:
 
 
 def _run(state: _Session, spec: Any) -> Any:
-    from specguard.cache import fingerprint
     from specguard.engine import print_progress, run_spec
+    from specguard.fingerprint import fingerprint_spec
 
-    key = fingerprint(spec, 0)
-    if key not in state.memo:  # every goal item of a spec shares one training
+    # Every goal item of a spec shares one result, under the spec's whole identity
+    # (seeds, quorum and `undecided` included), the one the cache and baselines use.
+    key = fingerprint_spec(spec).spec_key
+    if key not in state.memo:
         state.memo[key] = run_spec(
             spec, workers=state.options.workers, cache_dir=state.options.cache_dir, progress=print_progress
         )
@@ -283,6 +283,7 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     from specguard.error import SpecError
     from specguard.gate import check_item, with_thresholds
     from specguard.spec import Spec
+    from specguard.stats import Outcome
 
     state = pyfuncitem.config.stash[_SESSION]
     where = f"{pyfuncitem.path.name}::{pyfuncitem.name}"
@@ -292,30 +293,30 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
         pytest.fail(f"{where}: a goal spec must return a specguard.Spec, got {type(spec).__name__}", pytrace=False)
     goal = pyfuncitem.funcargs.get(GOAL_FIXTURE)
     try:
-        spec, paths = with_thresholds(spec, marker.kwargs.get("expect"), None if goal is None else str(goal))
+        spec, paths = with_thresholds(spec, marker.kwargs.get("expect"), goal)
         result = _run(state, _scaled(state, spec))
     except SpecError as e:
         pytest.fail(f"{where}: {e}", pytrace=False)
     baseline = (state.baseline, state.options.compare or "latest") if state.baseline is not None else None
     checks = check_item(result, spec, paths, _group(pyfuncitem), baseline=baseline)
-    failures, inconclusive = [], []
+    failures, undecided = [], []
     for check in checks:
         row = check.to_row()
         if state.options.report_dir is not None:
             row["curves"] = [r.curve for r in result.runs]
         pyfuncitem.user_properties.append((PROPERTY, json.dumps(row)))
         pyfuncitem.user_properties += [(f"{PROPERTY}.{check.goal}.{k}", v) for k, v in check.junit_properties()]
-        if check.outcome == "failed":
+        if check.outcome is Outcome.FAILED:
             failures.append(check.message())
-        elif check.outcome == "inconclusive":
-            inconclusive.append(check.message())
-    if failures or (inconclusive and state.options.inconclusive == "fail"):
-        raise GoalMissed("\n\n".join(failures + inconclusive))
-    if inconclusive and state.options.inconclusive == "xfail":
-        pytest.xfail("inconclusive: " + "\n\n".join(inconclusive))
-    if inconclusive:
+        elif check.outcome is Outcome.UNDECIDED:
+            undecided.append(check.message())
+    if failures or (undecided and state.options.undecided == "fail"):
+        raise GoalMissed("\n\n".join(failures + undecided))
+    if undecided and state.options.undecided == "xfail":
+        pytest.xfail("undecided: " + "\n\n".join(undecided))
+    if undecided:
         warnings.warn(
-            "inconclusive goal spec passed by --goal-specs-inconclusive=pass:\n" + "\n".join(inconclusive), stacklevel=1
+            "undecided goal spec passed by --goal-specs-undecided=pass:\n" + "\n".join(undecided), stacklevel=1
         )
     return True
 
@@ -352,7 +353,7 @@ class _Recorder:
                 continue
             row = json.loads(str(value))
             verdict = _verdict(report)
-            row["verdict"] = "inconclusive" if verdict == "passed" and row["outcome"] == "inconclusive" else verdict
+            row["verdict"] = "undecided" if verdict == "passed" and row["outcome"] == "undecided" else verdict
             self.state.rows.append(row)
 
     def pytest_terminal_summary(self, terminalreporter: Any) -> None:

@@ -2,7 +2,7 @@
 
 Every function takes *rows*: the plain dicts of :meth:`specguard.gate.GoalCheck.to_row`
 plus ``"verdict"`` (what pytest reported: passed, failed, xfailed, xpassed,
-inconclusive) and optionally ``"comparison"`` and ``"curves"``.
+undecided) and optionally ``"comparison"`` and ``"curves"``.
 """
 
 from __future__ import annotations
@@ -69,7 +69,7 @@ def markdown(rows: Sequence[Row]) -> str:
         cells = _cells(r) + ([""] if compared and not r.get("comparison") else [])
         cells[1] = f"`{cells[1]}`"
         lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
-    failing = [r for r in rows if r["verdict"] in ("failed", "inconclusive")]
+    failing = [r for r in rows if r["verdict"] in ("failed", "undecided")]
     if failing:
         lines += ["", "### Failing goals", ""]
         for r in failing:

@@ -15,7 +15,6 @@ Example:
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from numbers import Real
@@ -23,6 +22,7 @@ from typing import Any
 
 from specguard.budget import Budget
 from specguard.error import InvalidSpec
+from specguard.goals import ROOT, check_threshold, resolve_goal
 from specguard.initial_env import InitialEnv
 from specguard.nodes import Node
 
@@ -126,42 +126,15 @@ class Spec:
         return self.quorum if self.quorum is not None else self.budget.max_seeds
 
     def _resolve_thresholds(self, label: str) -> dict[str, float]:
-        expect = self.expect
+        expect: Any = self.expect
         if isinstance(expect, Real) and not isinstance(expect, bool):
-            expect = {self.tree.name: float(expect)}
+            expect = {ROOT: expect}
         if not isinstance(expect, Mapping):
             raise InvalidSpec(
                 f"{label}.expect", f"expected {{node path or name: min success}} or a number, got {expect!r}"
             )
-        paths = [p for p, _ in self.tree.walk()]
-        by_name: dict[str, list[str]] = {}
-        for p in paths:
-            by_name.setdefault(p.rsplit("/", 1)[-1], []).append(p)
         resolved: dict[str, float] = {}
         for key, value in expect.items():
-            if key in paths:
-                path = key
-            elif len(by_name.get(key, ())) == 1:
-                path = by_name[key][0]
-            elif key in by_name:
-                raise InvalidSpec(
-                    f"{label}.expect[{key!r}]",
-                    f"the name {key!r} is ambiguous; use one of the paths {', '.join(by_name[key])}",
-                )
-            else:
-                raise InvalidSpec(
-                    f"{label}.expect[{key!r}]",
-                    f"no node is named {key!r}; nodes: {', '.join(paths)}",
-                )
-            if isinstance(value, bool) or not isinstance(value, Real) or not 0.0 <= value <= 1.0:
-                raise InvalidSpec(f"{label}.expect[{key!r}]", f"expected a success rate in [0, 1], got {value!r}")
-            if value == 1.0:
-                raise InvalidSpec(
-                    f"{label}.expect[{key!r}]",
-                    "a threshold of 1.0 can never be confirmed from finitely many episodes",
-                    hint="ask for e.g. 0.95: a run meets it when its whole confidence interval lies above",
-                )
-            if not math.isfinite(value):
-                raise InvalidSpec(f"{label}.expect[{key!r}]", f"expected a finite number, got {value!r}")
-            resolved[path] = float(value)
+            where = f"{label}.expect[{key!r}]"
+            resolved[resolve_goal(self.tree, key, where)] = check_threshold(where, value)
         return resolved

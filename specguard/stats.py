@@ -32,7 +32,7 @@ from __future__ import annotations
 import enum
 from collections.abc import Sequence
 
-__all__ = ["QuorumVerdict", "RunVerdict", "quorum_verdict", "run_verdict", "success_interval"]
+__all__ = ["Outcome", "QuorumVerdict", "RunVerdict", "quorum_verdict", "run_verdict", "success_interval"]
 
 
 class RunVerdict(str, enum.Enum):
@@ -49,6 +49,14 @@ class QuorumVerdict(str, enum.Enum):
     PASSED = "passed"
     FAILED = "failed"
     OPEN = "open"  # neither is settled yet: more runs could decide it
+
+
+class Outcome(str, enum.Enum):
+    """A test item's goal at the end: passed, failed, or undecided (failed only through undecided runs)."""
+
+    PASSED = "passed"
+    FAILED = "failed"
+    UNDECIDED = "undecided"
 
 
 def _check_counts(successes: int, episodes: int) -> None:

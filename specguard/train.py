@@ -24,8 +24,17 @@ from specguard.env import make_baseline_env, make_env
 from specguard.error import InvalidSpec, SpecError
 from specguard.spec import ALGORITHMS, Spec
 from specguard.stats import RunVerdict, run_verdict
+from specguard.workers import Report
 
-__all__ = ["EVAL_SEED_BASE", "EVAL_SEED_STRIDE", "RunResult", "TrainingError", "evaluate", "train_run"]
+__all__ = [
+    "EVAL_SEED_BASE",
+    "EVAL_SEED_STRIDE",
+    "RunResult",
+    "TrainingError",
+    "evaluate",
+    "make_single_env",
+    "train_run",
+]
 
 EVAL_SEED_BASE = 1_000_000
 EVAL_SEED_STRIDE = 100_000
@@ -90,21 +99,25 @@ def evaluate(policy: Callable[[Any], Any], env: gym.Env, episodes: int, seeds: l
     return counts
 
 
-def _make_single_env(spec: Spec) -> gym.Env:
+def make_single_env(spec: Spec) -> gym.Env:
+    """The env one run trains on: the constructed env, or for a baseline spec the initial env with goal info."""
     if spec.baseline:
         return make_baseline_env(spec.initial_env, spec.tree)
     return make_env(spec.initial_env, spec.tree)
 
 
+TICKS = 100  # step reports per run (cheap; they tell where a run was when it died)
+
+
 class _GoalCurve:
     """An SB3 callback body: success per goal over finished training episodes, and the wall-clock cap."""
 
-    def __init__(
-        self, every: int, wall_clock_s: float | None, total: int, report: Callable[[str], None] | None
-    ) -> None:
+    def __init__(self, every: int, wall_clock_s: float | None, total: int, report: Report | None) -> None:
         self.every = max(1, every)
         self.total = total
         self.report = report
+        self._tick = max(1, total // TICKS)
+        self._next_tick = self._tick
         self.start = time.perf_counter()
         self.deadline = None if wall_clock_s is None else time.perf_counter() + wall_clock_s
         self.points: list[dict[str, Any]] = []
@@ -119,6 +132,9 @@ class _GoalCurve:
                 self._episodes += 1
                 for p, inside in info["goals"].items():
                     self._counts[p] = self._counts.get(p, 0) + int(inside)
+        if self.report is not None and num_timesteps >= self._next_tick:
+            self._next_tick = num_timesteps + self._tick
+            self.report("train", num_timesteps, None)
         if num_timesteps >= self._next:
             self._next += self.every
             if self._episodes:
@@ -129,7 +145,8 @@ class _GoalCurve:
                 if self._episodes:
                     root = f"reached in {next(iter(rates.values())):.0%} of {self._episodes} training episodes"
                 elapsed = time.perf_counter() - self.start
-                self.report(f"{num_timesteps}/{self.total} steps, {elapsed:.0f}s, root goal: {root}")
+                line = f"{num_timesteps}/{self.total} steps, {elapsed:.0f}s, root goal: {root}"
+                self.report("train", num_timesteps, line)
             self._counts, self._episodes = {}, 0
         if self.deadline is not None and time.perf_counter() > self.deadline:
             self.stopped_early = True
@@ -137,11 +154,19 @@ class _GoalCurve:
         return True
 
 
-def train_run(spec: Spec, seed: int, progress: Callable[[str], None] | None = None) -> tuple[RunResult, Any]:
+def train_run(
+    spec: Spec,
+    seed: int,
+    progress: Callable[[str], None] | None = None,
+    *,
+    report: Report | None = None,
+) -> tuple[RunResult, Any]:
     """Train and evaluate one run of ``spec`` with ``seed``.
 
     ``progress``, if given, receives a line at each of the learning curve's
-    points (every tenth of the budget), for CI logs.
+    points (every tenth of the budget), for CI logs. ``report``, if given,
+    receives ``(phase, step, line)`` as the run moves through building the
+    env, training and evaluation (worker processes pass it to the parent).
 
     Returns:
         The result and the trained model (an SB3 ``BaseAlgorithm``).
@@ -160,7 +185,20 @@ def train_run(spec: Spec, seed: int, progress: Callable[[str], None] | None = No
 
     torch.set_num_threads(1)
     label = f"Spec {spec.label!r}"
-    venv = make_vec_env(lambda: _make_single_env(spec), n_envs=spec.n_envs, seed=seed)
+
+    def emit(phase: str, step: int | None, line: str | None) -> None:
+        if report is not None:
+            report(phase, step, line)
+        if progress is not None and line is not None:
+            progress(f"[specguard] {spec.label} seed {seed}: {line}")
+
+    emit("build", None, None)
+    try:
+        venv = make_vec_env(lambda: make_single_env(spec), n_envs=spec.n_envs, seed=seed)
+    except SpecError:
+        raise
+    except Exception as e:
+        raise TrainingError(f"{label}, seed {seed}, building the env: {type(e).__name__}: {e}") from e
     space = type(venv.action_space).__name__
     if space not in ALGORITHMS[spec.algorithm]:
         venv.close()
@@ -179,13 +217,13 @@ def train_run(spec: Spec, seed: int, progress: Callable[[str], None] | None = No
         raise InvalidSpec(f"{label}.hyperparameters", f"{spec.algorithm} rejected them: {e}") from e
 
     budget = spec.budget
-    report = None if progress is None else (lambda line: progress(f"[specguard] {spec.label} seed {seed}: {line}"))
-    curve = _GoalCurve(budget.timesteps // CURVE_POINTS, budget.wall_clock_s, budget.timesteps, report)
+    curve = _GoalCurve(budget.timesteps // CURVE_POINTS, budget.wall_clock_s, budget.timesteps, emit)
 
     class Callback(BaseCallback):  # type: ignore[misc]
         def _on_step(self) -> bool:
             return curve.on_step(self.num_timesteps, self.locals["dones"], self.locals["infos"])
 
+    emit("train", 0, None)
     start = time.perf_counter()
     try:
         model.learn(total_timesteps=budget.timesteps, callback=Callback())
@@ -206,15 +244,17 @@ def train_run(spec: Spec, seed: int, progress: Callable[[str], None] | None = No
             obs = normalizer.normalize_obs(obs)
         return model.predict(obs, deterministic=spec.deterministic)[0]
 
-    eval_env = _make_single_env(spec)
+    eval_env = make_single_env(spec)
     seeds = range(EVAL_SEED_BASE + seed * EVAL_SEED_STRIDE, EVAL_SEED_BASE + (seed + 1) * EVAL_SEED_STRIDE)
     counts: dict[str, int] = {}
     episodes = 0
     chunk = budget.eval_episodes
     assert budget.max_eval_episodes is not None
+    emit("evaluate", 0, None)
     try:
         while True:
             more = evaluate(policy, eval_env, chunk, seeds[episodes : episodes + chunk])
+            emit("evaluate", episodes + chunk, None)
             counts = {p: counts.get(p, 0) + c for p, c in more.items()}
             episodes += chunk
             undecided = [
@@ -228,6 +268,10 @@ def train_run(spec: Spec, seed: int, progress: Callable[[str], None] | None = No
                 break
     except SpecError as e:
         raise TrainingError(f"{label}, seed {seed}, evaluation episode {episodes}: {e}") from e
+    except Exception as e:
+        raise TrainingError(
+            f"{label}, seed {seed}, evaluation episode {episodes}: the environment raised {type(e).__name__}: {e}"
+        ) from e
     finally:
         eval_env.close()
     result = RunResult(

@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 
 import specguard as sg
+from specguard.goals import ROOT
 
 
 def test_marks_and_uses_the_goal_fixture():
@@ -22,13 +23,13 @@ def test_a_number_means_the_root():
     def test_x():
         pass
 
-    assert test_x.pytestmark[-1].kwargs["expect"] == {"root": 0.7}
+    assert test_x.pytestmark[-1].kwargs["expect"] == {ROOT: 0.7}
 
 
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
-        ({"expect": {"a": 1.0}}, r"expect\['a'\]: expected a success rate in \[0, 1\), got 1.0"),
+        ({"expect": {"a": 1.0}}, r"expect\['a'\]: a threshold of 1 can never be met"),
         ({"expect": {}}, r"expected expect to be \{goal: min success\} or a number"),
         ({"expect": {"a": 0.5}, "xfail": {"b": "why"}}, r"xfail names goals \['b'\] that expect does not list"),
         ({"xfail": 3}, r"expected xfail to be \{goal: reason\} or a list of goals, got 3"),

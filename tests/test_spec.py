@@ -28,12 +28,12 @@ def test_quorum_defaults_to_every_run():
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
-        ({"expect": {"pendulum": 1.5}}, r"Spec 'pendulum'.expect\['pendulum'\]: expected a success rate in \[0, 1\]"),
-        ({"expect": {"pendulum": -0.1}}, r"expected a success rate in \[0, 1\], got -0.1"),
-        ({"expect": {"pendulum": 1.0}}, r"a threshold of 1.0 can never be confirmed"),
+        ({"expect": {"pendulum": 1.5}}, r"Spec 'pendulum'.expect\['pendulum'\]: expected a success rate in \[0, 1\)"),
+        ({"expect": {"pendulum": -0.1}}, r"expected a success rate in \[0, 1\), got -0.1"),
+        ({"expect": {"pendulum": 1.0}}, r"a threshold of 1 can never be met: a run meets a threshold when its whole confidence interval"),
         (
             {"expect": {"height": 0.5}},
-            r"expect\['height'\]: no node is named 'height'; nodes: pendulum, pendulum/position",
+            r"expect\['height'\]: no node is named 'height'; the tree's goals are pendulum, pendulum/position",
         ),
         ({"expect": "high"}, r"Spec 'pendulum'.expect: expected"),
         ({"algorithm": "PPO2"}, r"Spec 'pendulum'.algorithm: unknown algorithm 'PPO2'; expected one of PPO, A2C"),
