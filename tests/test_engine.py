@@ -3,6 +3,13 @@
 from __future__ import annotations
 
 import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import gymnasium as gym
 import pytest
@@ -83,3 +90,171 @@ def test_workers():
     assert resolve_workers("auto") >= 1
     with pytest.raises(sg.SpecError, match="workers: expected an integer >= 1 or 'auto', got 0"):
         resolve_workers(0)
+
+
+# -- workers that fail alone -------------------------------------------------------------
+
+PARENT = "SPECGUARD_TEST_PARENT_PID"
+
+
+class KilledOnSeed(gym.Wrapper):
+    """SIGKILLs its own (worker) process on the 50th step of the run with seed 1."""
+
+    def reset(self, *, seed=None, options=None):
+        if seed is not None:
+            self.first_seed = seed
+        self.steps = 0
+        return self.env.reset(seed=seed, options=options)
+
+    def step(self, action):
+        self.steps += 1
+        in_worker = str(os.getpid()) != os.environ.get(PARENT)
+        if in_worker and getattr(self, "first_seed", None) == 1 and self.steps == 50:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return self.env.step(action)
+
+
+def make_killed():
+    return KilledOnSeed(gym.make("Pendulum-v1"))
+
+
+def test_a_killed_worker_fails_its_seed_alone_and_the_other_seed_is_stored(tmp_path, monkeypatch):
+    monkeypatch.setenv(PARENT, str(os.getpid()))
+    initial = sg.InitialEnv(make_killed, features=("x", "y", "omega"))
+    s = sg.Spec(initial, pendulum.trees["b"], budget=sg.Budget(timesteps=128, eval_episodes=2), hyperparameters=TINY)
+    result = sg.run_spec(s, workers=2, cache_dir=tmp_path, progress=None)
+    assert [r.seed for r in result.runs] == [0]
+    assert result.errors[1].startswith("seed 1, training step ")
+    assert result.errors[1].endswith(": worker process died (killed by signal SIGKILL)")
+    assert sg.Cache(tmp_path).load(s, 0) == result.runs[0]
+    assert sg.Cache(tmp_path).load(s, 1) is None
+
+
+def raising_factory():
+    raise RuntimeError("no env today")
+
+
+class FailsInEvaluation(gym.Wrapper):
+    def reset(self, *, seed=None, options=None):
+        if seed is not None and seed >= 1_000_000:
+            raise RuntimeError("evaluation broke")
+        return self.env.reset(seed=seed, options=options)
+
+
+@pytest.mark.parametrize(
+    ("initial", "message"),
+    [
+        (
+            sg.InitialEnv(raising_factory, features=("x", "y", "omega")),
+            r"Spec 'pendulum', seed {seed}, building the env: RuntimeError: no env today",
+        ),
+        (
+            sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"), no_such_kwarg=1),
+            r"Spec 'pendulum', seed {seed}, building the env: TypeError: .*no_such_kwarg.*",
+        ),
+        (
+            sg.InitialEnv(lambda: FailsInEvaluation(gym.make("Pendulum-v1")), features=("x", "y", "omega")),
+            r"Spec 'pendulum', seed {seed}, evaluation episode 0: the environment raised RuntimeError: "
+            r"evaluation broke",
+        ),
+    ],
+    ids=["factory raises", "unknown make kwarg", "evaluation raises"],
+)
+@pytest.mark.parametrize("cached", [True, False], ids=["cache", "no cache"])
+def test_env_failures_are_one_clean_line_per_seed(tmp_path, initial, message, cached):
+    s = sg.Spec(initial, pendulum.trees["b"], budget=sg.Budget(timesteps=64, eval_episodes=2), hyperparameters=TINY)
+    result = sg.run_spec(s, workers=2, cache_dir=tmp_path if cached else None, progress=None)
+    assert not result.passed and result.runs == []
+    for seed in (0, 1):
+        assert re.fullmatch(message.format(seed=seed), result.errors[seed]), result.errors[seed]
+        assert "\n" not in result.errors[seed] and "Traceback" not in result.errors[seed]
+
+
+CLI_SPEC = """
+import specguard as sg
+
+pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
+tree = sg.All(sg.Goal("position", x=(0.966, 1.0)), sg.Goal("stabilization", omega=(-0.25, 0.25)), name="pendulum")
+spec = sg.Spec(
+    pendulum, tree, budget=sg.Budget(timesteps={steps}, min_seeds=1, eval_episodes=2),
+    hyperparameters={{"n_steps": 64, "batch_size": 64, "n_epochs": 1}},
+)
+"""
+
+
+def _children(pid: int) -> list[int]:
+    found = []
+    for status in Path("/proc").glob("[0-9]*/status"):
+        try:
+            fields = dict(line.split(":\t", 1) for line in status.read_text().splitlines() if ":\t" in line)
+        except OSError:
+            continue
+        if fields.get("PPid", "").strip() == str(pid):
+            found.append(int(status.parent.name))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return False
+    return "State:\tZ" not in state
+
+
+def _cli(spec_file: Path, cache: Path) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "specguard", "run", str(spec_file), "--workers", "1", "--cache-dir", str(cache)],
+        stderr=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+
+
+def _wait_for_line(process: subprocess.Popen[str], needle: str, timeout: float = 60) -> str:
+    deadline = time.monotonic() + timeout
+    seen = ""
+    assert process.stderr is not None
+    while time.monotonic() < deadline:
+        line = process.stderr.readline()
+        seen += line
+        if needle in line:
+            return seen
+        if not line and process.poll() is not None:
+            break
+    raise AssertionError(f"never saw {needle!r}; stderr so far:\n{seen}")
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads child processes from /proc")
+def test_sigterm_to_specguard_run_ends_every_worker_promptly_and_stores_nothing(tmp_path):
+    spec_file = tmp_path / "long.py"
+    spec_file.write_text(CLI_SPEC.format(steps=50_000))  # the first progress line comes at 5 000 steps
+    process = _cli(spec_file, tmp_path / "cache")
+    try:
+        _wait_for_line(process, "root goal:")  # a worker is training
+        workers = _children(process.pid)
+        assert workers
+        process.send_signal(signal.SIGTERM)
+        process.wait(timeout=15)
+    finally:
+        process.kill()
+    assert process.returncode == 130
+    deadline = time.monotonic() + 10
+    while any(_alive(w) for w in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(_alive(w) for w in workers)
+    entries = [p for p in (tmp_path / "cache").rglob("result.json")]
+    assert entries == []
+
+
+def test_two_processes_asking_for_the_same_run_train_it_once(tmp_path):
+    spec_file = tmp_path / "same.py"
+    spec_file.write_text(CLI_SPEC.format(steps=6_000))
+    first, second = _cli(spec_file, tmp_path / "cache"), _cli(spec_file, tmp_path / "cache")
+    outputs = [p.communicate(timeout=300) for p in (first, second)]
+    assert [p.returncode for p in (first, second)] == [0, 0]
+    stderr = [err for _, err in outputs]
+    assert sum("training seed 0" in err for err in stderr) == 1, stderr
+    assert sum("seed 0 from cache" in err for err in stderr) == 1, stderr
+    tables = [out.splitlines()[1:] for out, _ in outputs]  # the first line holds the wall time
+    assert tables[0] == tables[1]

@@ -146,8 +146,33 @@ def test_one_item_for_the_specs_own_thresholds_and_the_result_fixture(pytester):
     run(pytester).assert_outcomes(skipped=2)
 
 
+def test_specs_that_differ_only_in_how_runs_are_counted_do_not_share_a_result(pytester):
+    # They once shared one training result: the second reported 1/1 runs met where, run alone, it reports 2/2.
+    write(
+        pytester,
+        """
+        @sg.goal_spec(expect={"stabilization": 0.0})
+        def test_one_seed(pendulum, tree):
+            return tiny(pendulum, tree, seeds=1)
+
+
+        @sg.goal_spec(expect={"stabilization": 0.0})
+        def test_two_seeds(pendulum, tree):
+            return tiny(pendulum, tree, seeds=2)
+        """,
+    )
+    result = run(pytester, "--goal-specs")
+    result.assert_outcomes(passed=2)
+    result.stdout.fnmatch_lines(
+        [
+            "test_specs.py::test_one_seed*pendulum/stabilization*/4)*1/1*passed*",
+            "test_specs.py::test_two_seeds*pendulum/stabilization*/8)*2/2*passed*",
+        ]
+    )
+
+
 @pytest.mark.parametrize(("mode", "outcome"), [("fail", "failed"), ("xfail", "xfailed"), ("pass", "passed")])
-def test_inconclusive_modes(pytester, mode, outcome):
+def test_undecided_modes(pytester, mode, outcome):
     # Two evaluation episodes can never place a run's interval on one side of 0.5.
     write(
         pytester,
@@ -157,7 +182,7 @@ def test_inconclusive_modes(pytester, mode, outcome):
             return tiny(pendulum, tree, episodes=2, max_episodes=2)
         """,
     )
-    result = run(pytester, "--goal-specs", f"--goal-specs-inconclusive={mode}", "-rxs")
+    result = run(pytester, "--goal-specs", f"--goal-specs-undecided={mode}", "-rxs")
     result.assert_outcomes(**{outcome: 1}, **({"warnings": 1} if mode == "pass" else {}))
     if mode == "fail":
         result.stdout.fnmatch_lines(["*could not be decided for its threshold*", "*hint: runs stayed undecided*"])
@@ -287,8 +312,8 @@ def test_malformed_decorator_is_a_collection_error(pytester):
     ("option", "message"),
     [
         (
-            "--goal-specs-inconclusive=maybe",
-            "--goal-specs-inconclusive: expected one of fail, xfail, pass, got 'maybe'",
+            "--goal-specs-undecided=maybe",
+            "--goal-specs-undecided: expected one of fail, xfail, pass, got 'maybe'",
         ),
         ("--goal-specs-budget-scale=0", "--goal-specs-budget-scale: expected a number > 0, got '0'"),
         ("--goal-specs-workers=none", "--goal-specs-workers: expected an integer >= 1 or 'auto', got 'none'"),
