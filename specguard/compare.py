@@ -12,6 +12,11 @@ allows, by a one-sided two-sample test at level ``alpha`` (default 0.05):
   less cautious of the two.
 
 It *improved* when the same test finds a rise.
+
+Each stored goal also records its spec's identity
+(:attr:`specguard.fingerprint.SpecFingerprint.spec_key`, the key the cache and
+the plugin's shared results use), so a comparison says whether the spec
+itself changed since the baseline or only its result did.
 """
 
 from __future__ import annotations
@@ -27,9 +32,10 @@ from typing import Any
 
 from specguard.error import SpecError
 
-__all__ = ["BaselineError", "Comparison", "compare", "load_baseline", "save_baseline"]
+__all__ = ["Baseline", "BaselineError", "Comparison", "compare", "load_baseline", "save_baseline"]
 
-FORMAT = 1
+FORMAT = 2
+FORMATS = (1, 2)  # format 1 stored runs only
 
 
 class BaselineError(SpecError):
@@ -64,6 +70,19 @@ class Comparison:
 Runs = Sequence[tuple[int, int]]  # (successes, episodes) per seed
 
 
+@dataclass(frozen=True)
+class Baseline:
+    """A stored baseline: per goal key, every run's counts, and the spec identity they came from."""
+
+    runs: dict[str, list[tuple[int, int]]]
+    specs: dict[str, str]
+
+    def spec_changed(self, key: str, spec_key: str | None) -> bool:
+        """Whether the goal's spec differs from the one the baseline measured (False when unknown)."""
+        stored = self.specs.get(key)
+        return stored is not None and spec_key is not None and stored != spec_key
+
+
 def compare(before: Runs, after: Runs, alpha: float = 0.05) -> Comparison:
     """Compare per-seed ``(successes, episodes)`` of a baseline with a new run."""
     from scipy.stats import fisher_exact, ttest_ind
@@ -89,17 +108,19 @@ def compare(before: Runs, after: Runs, alpha: float = 0.05) -> Comparison:
     return Comparison(before=kb / nb, after=ka / na, p_drop=p_drop, p_rise=p_rise, method=method, alpha=alpha)
 
 
-def save_baseline(path: Path, rows: Mapping[str, Runs]) -> None:
-    """Write ``{key: [(successes, episodes), ...]}`` atomically to ``path``."""
+def save_baseline(path: Path, rows: Mapping[str, Runs], specs: Mapping[str, str] | None = None) -> None:
+    """Write ``{key: [(successes, episodes), ...]}`` (and each key's spec identity) atomically to ``path``."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    data = {"format": FORMAT, "goals": {k: [list(r) for r in runs] for k, runs in rows.items()}}
+    specs = specs or {}
+    goals = {k: {"runs": [list(r) for r in runs], "spec": specs.get(k)} for k, runs in rows.items()}
+    data = {"format": FORMAT, "goals": goals}
     fd, tmp = tempfile.mkstemp(prefix=".tmp-", dir=path.parent)
     with os.fdopen(fd, "w") as f:
         json.dump(data, f, indent=1, sort_keys=True)
     os.replace(tmp, path)
 
 
-def load_baseline(path: Path) -> dict[str, list[tuple[int, int]]]:
+def load_baseline(path: Path) -> Baseline:
     """Read a baseline written by :func:`save_baseline`.
 
     Raises:
@@ -109,14 +130,22 @@ def load_baseline(path: Path) -> dict[str, list[tuple[int, int]]]:
         raise BaselineError(f"baseline {str(path)!r} does not exist; store one first with --goal-specs-save")
     try:
         data: Any = json.loads(path.read_text())
-        if data.get("format") != FORMAT:
+        if data.get("format") not in FORMATS:
             raise ValueError(f"unknown format {data.get('format')!r}")
-        out = {}
-        for key, runs in data["goals"].items():
-            parsed = [(int(k), int(n)) for k, n in runs]
+        runs, specs = {}, {}
+        for key, entry in data["goals"].items():
+            if data["format"] == 1:
+                entry = {"runs": entry, "spec": None}
+            if not isinstance(entry, dict):
+                raise ValueError(f"bad entry for {key!r}: {entry!r}")
+            parsed = [(int(k), int(n)) for k, n in entry["runs"]]
             if not parsed or any(n < 1 or not 0 <= k <= n for k, n in parsed):
-                raise ValueError(f"bad counts for {key!r}: {runs!r}")
-            out[str(key)] = parsed
-        return out
+                raise ValueError(f"bad counts for {key!r}: {entry['runs']!r}")
+            runs[str(key)] = parsed
+            if entry.get("spec") is not None:
+                if not isinstance(entry["spec"], str):
+                    raise ValueError(f"bad spec identity for {key!r}: {entry['spec']!r}")
+                specs[str(key)] = entry["spec"]
+        return Baseline(runs, specs)
     except (ValueError, TypeError, KeyError, AttributeError) as e:
         raise BaselineError(f"baseline {str(path)!r} is corrupt ({e}); delete it and save a new one") from e

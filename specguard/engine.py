@@ -93,6 +93,7 @@ class SpecResult:
     cached: dict[int, bool] = field(default_factory=dict)
     seconds: float = 0.0
     confidence: float = 0.95
+    spec_key: str | None = None
 
     @property
     def passed(self) -> bool:
@@ -112,6 +113,7 @@ class SpecResult:
             "errors": {str(k): v for k, v in self.errors.items()},
             "cached": {str(k): v for k, v in self.cached.items()},
             "confidence": self.confidence,
+            "spec_key": self.spec_key,
         }
 
     def table(self) -> str:
@@ -350,6 +352,7 @@ def run_spec(
     start = time.perf_counter()
     result = SpecResult(spec=spec.label, runs=[], goals={}, confidence=spec.confidence)
     runs = _Runs(spec, result, cache, n_workers, lock_timeout, say)
+    result.spec_key = None if runs.fingerprint is None else runs.fingerprint.spec_key
     next_seed = 0
     while True:
         result.goals = _judge(spec, result.runs, len(result.errors))

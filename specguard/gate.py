@@ -7,13 +7,16 @@ plugin and unit-tested without pytest.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from specguard.engine import SpecResult
 from specguard.goals import resolve_goal
 from specguard.nodes import Distance, Node
 from specguard.spec import Spec
 from specguard.stats import Outcome, QuorumVerdict, RunVerdict
+
+if TYPE_CHECKING:
+    from specguard.compare import Baseline
 
 __all__ = ["GoalCheck", "check_goal", "check_item", "with_thresholds"]
 
@@ -45,6 +48,7 @@ class GoalCheck:
     errors: dict[int, str] = field(default_factory=dict)
     hint: str | None = None
     comparison: str | None = None
+    spec_key: str | None = None
 
     @property
     def key(self) -> str:
@@ -157,6 +161,7 @@ def check_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalChe
         train_seconds=sum(r.train_seconds for r in result.runs),
         cached=bool(result.cached) and all(result.cached.values()),
         errors=dict(result.errors),
+        spec_key=result.spec_key,
         hint=None if outcome is Outcome.PASSED else _hint(spec, path, result, verdict.runs),
     )
 
@@ -184,21 +189,23 @@ def check_item(
     spec: Spec,
     paths: list[str],
     group: str,
-    baseline: tuple[dict[str, list[tuple[int, int]]], str] | None = None,
+    baseline: tuple[Baseline, str] | None = None,
 ) -> list[GoalCheck]:
     """Check the goals of one test item, failing a passing goal whose success dropped against ``baseline``.
 
     Args:
-        baseline: the stored per-seed counts by :attr:`GoalCheck.key`, and the baseline's name.
+        baseline: the stored baseline and its name.
     """
     checks = []
     for path in paths:
         check = check_goal(result, spec, path, group)
-        if baseline is not None and check.key in baseline[0] and check.runs_counts:
+        if baseline is not None and check.key in baseline[0].runs and check.runs_counts:
             from specguard.compare import compare
 
-            comparison = compare(baseline[0][check.key], check.runs_counts)
+            comparison = compare(baseline[0].runs[check.key], check.runs_counts)
             check.comparison = comparison.describe()
+            if baseline[0].spec_changed(check.key, check.spec_key):
+                check.comparison += f" (the spec changed since baseline {baseline[1]!r})"
             if comparison.dropped and check.outcome is Outcome.PASSED:
                 check.outcome = Outcome.FAILED
                 check.hint = f"success {check.comparison} against baseline {baseline[1]!r}"

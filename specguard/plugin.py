@@ -46,7 +46,7 @@ class _Options:
 @dataclasses.dataclass
 class _Session:
     options: _Options
-    baseline: dict[str, list[tuple[int, int]]] | None = None
+    baseline: Any = None  # a specguard.compare.Baseline
     memo: dict[str, Any] = dataclasses.field(default_factory=dict)
     rows: list[dict[str, Any]] = dataclasses.field(default_factory=list)
 
@@ -272,6 +272,7 @@ def _run(state: _Session, spec: Any) -> Any:
         state.memo[key] = run_spec(
             spec, workers=state.options.workers, cache_dir=state.options.cache_dir, progress=print_progress
         )
+        state.memo[key].spec_key = key
     return state.memo[key]
 
 
@@ -380,6 +381,11 @@ def _write_outputs(config: pytest.Config, state: _Session) -> list[Path]:
         from specguard.compare import save_baseline
 
         path = state.options.baseline_dir / f"{state.options.save}.json"
-        save_baseline(path, {f"{r['group']}::{r['goal']}": r["runs_counts"] for r in state.rows if r["runs_counts"]})
+        rows = [r for r in state.rows if r["runs_counts"]]
+        save_baseline(
+            path,
+            {f"{r['group']}::{r['goal']}": r["runs_counts"] for r in rows},
+            {f"{r['group']}::{r['goal']}": r["spec_key"] for r in rows if r.get("spec_key")},
+        )
         written.append(path)
     return written

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from specguard.compare import BaselineError, compare, load_baseline, save_baseline
+from specguard.compare import Baseline, BaselineError, compare, load_baseline, save_baseline
 
 
 def test_clear_drop_across_seeds():
@@ -33,15 +33,25 @@ def test_needs_runs():
 
 def test_save_and_load_round_trip(tmp_path):
     path = tmp_path / "b" / "main.json"
-    save_baseline(path, {"f.py::test::goal": [(3, 4), (4, 4)]})
-    assert load_baseline(path) == {"f.py::test::goal": [(3, 4), (4, 4)]}
+    save_baseline(path, {"f.py::test::goal": [(3, 4), (4, 4)]}, {"f.py::test::goal": "abc"})
+    baseline = load_baseline(path)
+    assert baseline.runs == {"f.py::test::goal": [(3, 4), (4, 4)]}
+    assert baseline.spec_changed("f.py::test::goal", "abd") and not baseline.spec_changed("f.py::test::goal", "abc")
+    assert not baseline.spec_changed("other", "abc")
+
+
+def test_format_1_baselines_still_load(tmp_path):
+    path = tmp_path / "old.json"
+    path.write_text('{"format": 1, "goals": {"k": [[3, 4]]}}')
+    assert load_baseline(path) == Baseline({"k": [(3, 4)]}, {})
 
 
 @pytest.mark.parametrize(
     "content",
     [
         "{oops",
-        '{"format": 2, "goals": {}}',
+        '{"format": 3, "goals": {}}',
+        '{"format": 2, "goals": {"k": {"runs": [[1, 2]], "spec": 5}}}',
         '{"format": 1, "goals": {"k": [[5, 4]]}}',
         '{"format": 1, "goals": {"k": "x"}}',
     ],

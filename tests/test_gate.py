@@ -6,6 +6,7 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
+from specguard.compare import Baseline
 from specguard.engine import SpecResult, _judge
 from specguard.gate import check_goal
 from specguard.goals import ROOT
@@ -114,10 +115,15 @@ def test_check_item_fails_a_passing_goal_that_dropped_against_the_baseline():
     s = spec(expect={"pendulum": 0.3})
     result = result_of(s, [(20, 30), (21, 30)])
     key = "g::pendulum"
-    dropped = check_item(result, s, ["pendulum"], "g", baseline=({key: [(30, 30), (30, 30)]}, "main"))[0]
+    dropped = check_item(result, s, ["pendulum"], "g", baseline=(Baseline({key: [(30, 30), (30, 30)]}, {}), "main"))[0]
     assert dropped.outcome == "failed"
     assert dropped.hint.startswith("success dropped: 100% -> 68% (Welch t-test over 2 vs 2 seeds")
     assert dropped.hint.endswith("against baseline 'main'")
-    same = check_item(result, s, ["pendulum"], "g", baseline=({key: [(20, 30), (21, 30)]}, "main"))[0]
+    same = check_item(result, s, ["pendulum"], "g", baseline=(Baseline({key: [(20, 30), (21, 30)]}, {}), "main"))[0]
     assert same.outcome == "passed" and same.comparison.startswith("unchanged within chance")
+    assert "spec changed" not in same.comparison
+    result.spec_key = "new"
+    changed = Baseline({key: [(20, 30), (21, 30)]}, {key: "old"})
+    moved = check_item(result, s, ["pendulum"], "g", baseline=(changed, "main"))[0]
+    assert moved.comparison.endswith("(the spec changed since baseline 'main')")
     assert dict(same.junit_properties())["interval"].startswith("[0.")

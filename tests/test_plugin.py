@@ -203,16 +203,21 @@ def test_save_then_compare_gates_regressions(pytester):
     saved.assert_outcomes(passed=1)
     stored = json.loads((baselines / "main.json").read_text())
     key = "test_specs.py::test_gate::pendulum/stabilization"
-    assert len(stored["goals"][key]) == 2
+    assert len(stored["goals"][key]["runs"]) == 2 and len(stored["goals"][key]["spec"]) == 64
     same = run(pytester, "--goal-specs", "--goal-specs-compare", *opts)
     same.assert_outcomes(passed=1)
     same.stdout.fnmatch_lines(["*unchanged within chance*"])
+    assert "spec changed" not in same.stdout.str()
     # A baseline where every episode succeeded: the tiny policy's success is a drop.
-    stored["goals"][key] = [[40, 40], [40, 40]]
+    stored["goals"][key]["runs"] = [[40, 40], [40, 40]]
     (baselines / "perfect.json").write_text(json.dumps(stored))
     dropped = run(pytester, "--goal-specs", "--goal-specs-compare", "perfect", *opts)
     dropped.assert_outcomes(failed=1)
     dropped.stdout.fnmatch_lines(["*hint: success dropped: 100% -> *against baseline 'perfect'*"])
+    # The same goal of a changed spec (another threshold) is compared, and said to come from a changed spec.
+    pytester.makepyfile(test_specs=(pytester.path / "test_specs.py").read_text().replace("0.0}", "0.01}"))
+    changed = run(pytester, "--goal-specs", "--goal-specs-compare", "main", *opts)
+    assert "the spec changed since baseline 'main'" in changed.stdout.str()
 
 
 def test_report_dir_has_json_markdown_and_plot(pytester):
