@@ -16,6 +16,7 @@ import argparse
 import dataclasses
 import importlib.util
 import json
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -93,10 +94,25 @@ def _show(target: str) -> int:
     return 0
 
 
+def _prepare_json(text: str) -> Path:
+    """The ``--json`` file, its directory created now: a bad path must not cost a training run."""
+    path = Path(text)
+    if path.is_dir():
+        raise SpecError(f"--json {path}: is a directory; expected a file name, e.g. {path / 'results.json'}")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise SpecError(f"--json {path}: cannot create the directory {path.parent} ({e.strerror or e})") from e
+    if not os.access(path.parent, os.W_OK | os.X_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        raise SpecError(f"--json {path}: not writable; expected a file in a directory you can write to")
+    return path
+
+
 def _run(args: argparse.Namespace) -> int:
     from specguard.engine import print_progress, run_spec
 
     specs = load_objects(args.target)
+    json_path = _prepare_json(args.json) if args.json else None  # before training, which may take hours
     results = {}
     failed = False
     for name, spec in specs.items():
@@ -113,8 +129,8 @@ def _run(args: argparse.Namespace) -> int:
         print(result.table())
         print()
         failed = failed or not result.passed
-    if args.json:
-        Path(args.json).write_text(json.dumps(results, indent=1))
+    if json_path is not None:
+        json_path.write_text(json.dumps(results, indent=1))
     return 1 if failed else 0
 
 
@@ -151,7 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--cache-dir", default=".specguard/cache", help="run cache (default: .specguard/cache)")
     run.add_argument("--no-cache", action="store_true", help="neither read nor write the cache")
     run.add_argument("--budget-scale", type=_scale, default=1.0, help="multiply training timesteps, e.g. 0.25")
-    run.add_argument("--json", metavar="FILE", help="also write the results as JSON")
+    run.add_argument("--json", metavar="FILE", help="also write the results as JSON (missing directories are created)")
     run.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     return parser
 

@@ -17,7 +17,9 @@ For the single state of an env step, numpy's per-call overhead (about 3.5 us
 for that comparison) would exceed the whole budget of a Pendulum step, so the
 same tables are also turned into a small generated Python function with the
 bounds as constants (:attr:`CompiledTree.source`), as dataclasses generate
-``__init__``.
+``__init__``. Only two kinds of values reach that source: finite floats as
+their exact ``repr`` (:func:`_number`) and names as ``str`` literals
+(:func:`_text`); user text never becomes code.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ import numpy as np
 from specguard.error import EvaluationError, InvalidSpec, UnknownFeature
 from specguard.initial_env import state_type
 from specguard.nodes import ANNOTATION_SEPARATOR, All, Constraint, Distance, Goal, Node, component_weights
+from specguard.reference import FLOAT_MAX, check_distance, distance_value
 
 __all__ = ["CompiledTree", "Evaluator", "compile_tree"]
 
@@ -125,13 +128,19 @@ class CompiledTree:
         args: tuple[Any, ...] = (cls(*s.T),) if t.kind == "distance" else (cls(*s.T), actions)
         try:
             out = np.asarray(t.fn(*args), dtype=np.float64)
-            if out.shape == (len(s),):
-                return out
         except Exception:
             pass
+        else:
+            if out.shape == (len(s),):
+                if t.kind == "distance":
+                    valid = (out >= 0.0) & (out <= FLOAT_MAX)
+                    if not valid.all():
+                        i = int(np.argmin(valid))  # the first bad row
+                        check_distance(t.key, float(out[i]), cls._make(s[i].tolist()))
+                return out
         rows = [cls._make(row) for row in s.tolist()]
         if t.kind == "distance":
-            return np.array([float(t.fn(r)) for r in rows], dtype=np.float64)
+            return np.array([distance_value(t.key, t.fn, r) for r in rows], dtype=np.float64)
         return np.array([1.0 if t.fn(r, a) else 0.0 for r, a in zip(rows, actions)], dtype=np.float64)
 
     # -- the per-step kernel -------------------------------------------------
@@ -144,6 +153,19 @@ class CompiledTree:
     def evaluator(self) -> Evaluator:
         """A fresh per-episode evaluator (one per env)."""
         return Evaluator(self)
+
+
+def _number(x: float) -> str:
+    """A finite float as exact Python source (``repr`` round-trips); never the names ``inf`` or ``nan``."""
+    x = float(x)
+    if not math.isfinite(x):
+        raise ValueError(f"cannot emit the non-finite number {x!r} into generated code")
+    return repr(x)
+
+
+def _text(text: str) -> str:
+    """A name as a Python ``str`` literal (``str.__repr__``: no subclass may change it)."""
+    return str.__repr__(text)
 
 
 def _unpack(tree: CompiledTree) -> str:
@@ -162,15 +184,15 @@ def _members_lines(tree: CompiledTree) -> list[str]:
             for j in range(len(tree.features)):
                 lo, hi = float(tree.lo[i, j]), float(tree.hi[i, j])
                 if lo == hi:
-                    tests.append(f"f{j} == {lo!r}")
+                    tests.append(f"f{j} == {_number(lo)}")
                 elif lo > -math.inf and hi < math.inf:
-                    tests.append(f"{lo!r} <= f{j} <= {hi!r}")
+                    tests.append(f"{_number(lo)} <= f{j} <= {_number(hi)}")
                 elif lo > -math.inf:
-                    tests.append(f"{lo!r} <= f{j}")
+                    tests.append(f"{_number(lo)} <= f{j}")
                 elif hi < math.inf:
-                    tests.append(f"f{j} <= {hi!r}")
+                    tests.append(f"f{j} <= {_number(hi)}")
             expr = " and ".join(tests) or "True"
-        lines.append(f"    m{i} = {expr}  # {tree.paths[i]}")
+        lines.append(f"    m{i} = {expr}  # {_text(tree.paths[i])}")
     return lines
 
 
@@ -195,25 +217,27 @@ def _step_source(tree: CompiledTree) -> str:
     slot = 0
     for k, t in enumerate(tree.terms):
         if t.kind == "leaf":
-            term = f"{t.coef!r} * (m{t.node} - m[{t.node}])"
+            term = f"{_number(t.coef)} * (m{t.node} - m[{t.node}])"
         elif t.kind == "distance":
             d = f"d{len(distances)}"
-            lines.append(f"    {d} = _float(_fn{k}(s2))  # {t.key}")
-            term = f"{t.coef!r} * (q[{len(distances)}] - {d})"
+            lines.append(f"    {d} = _float(_fn{k}(s2))  # {_text(t.key)}")
+            term = f"{_number(t.coef)} * (q[{len(distances)}] - {d})"
             distances.append(d)
         else:
-            lines.append(f"    v{slot} = _fn{k}(s, a)  # {t.key}")
+            lines.append(f"    v{slot} = _fn{k}(s, a)  # {_text(t.key)}")
             lines.append(f"    if v{slot}:")
             lines.append(f"        c[{slot}] -= 1")
-            term = f"-{t.coef!r} if v{slot} else 0.0"
+            term = f"{_number(-t.coef)} if v{slot} else 0.0"
             slot += 1
         names.append(f"t{k}")
         lines.append(f"    t{k} = {term}")
     if distances:
-        lines.append(f"    if not ({' and '.join(f'{d} >= 0.0' for d in distances)}):")
-        lines.append("        raise ValueError('negative distance')")
+        # One comparison chain per distance: finite and >= 0 (NaN fails it too).
+        checks = " and ".join(f"0.0 <= {d} <= {_number(FLOAT_MAX)}" for d in distances)
+        lines.append(f"    if not ({checks}):")
+        lines.append("        raise ValueError('invalid distance')")
     lines.append(f"    r = {' + '.join(names)}")
-    pairs = ", ".join(f"{t.key!r}: t{k}" for k, t in enumerate(tree.terms))
+    pairs = ", ".join(f"{_text(t.key)}: t{k}" for k, t in enumerate(tree.terms))
     ended = " or ".join(["m0", *(f"c[{i}] == 0" for i in range(slot))])
     distance_tuple = f"({', '.join(distances)},)" if distances else "()"
     lines.append(f"    return r, {ended}, {_members_tuple(tree)}, s2, {distance_tuple}, {{{pairs}}}")
@@ -272,6 +296,14 @@ def compile_tree(tree: Node, features: Sequence[str]) -> CompiledTree:
         return me
 
     visit(tree, tree.name, 1.0)
+    for t in terms:
+        if not math.isfinite(t.coef):
+            raise InvalidSpec(
+                t.key,
+                f"the component's coefficient (the weights on its path times its own weight"
+                f"{', divided by scale' if t.kind == 'distance' else ''}) is {t.coef!r}",
+                hint="use weights and scales of moderate size; only their ratios matter",
+            )
     lo = np.stack([b[0] for b in boxes])
     hi = np.stack([b[1] for b in boxes])
     lo.setflags(write=False)
@@ -294,7 +326,7 @@ class Evaluator:
         self._state_cls = state_type(tree.features)
         namespace: dict[str, Any] = {"_make": self._state_cls._make, "_float": float}
         namespace.update({f"_fn{k}": t.fn for k, t in enumerate(tree.terms) if t.fn is not None})
-        exec(compile(tree.source, f"<specguard evaluator of {tree.paths[0]!r}>", "exec"), namespace)
+        exec(compile(tree.source, f"<specguard evaluator of {_text(tree.paths[0])}>", "exec"), namespace)
         self.members: Callable[[Sequence[float]], tuple[bool, ...]] = namespace["members"]
         """Every node's membership of one feature vector (no episode state)."""
         self._step: Callable[..., Any] = namespace["step"]
@@ -351,10 +383,4 @@ class Evaluator:
     @staticmethod
     def _distance(t: _Term, s: Any) -> float:
         assert t.fn is not None
-        try:
-            d = float(t.fn(s))
-        except Exception as e:
-            raise EvaluationError(f"{t.key}: the distance function raised {type(e).__name__}: {e} (state {s})") from e
-        if not d >= 0.0:  # also catches NaN
-            raise EvaluationError(f"{t.key}: expected a distance >= 0, got {d!r} (state {s})")
-        return d
+        return distance_value(t.key, t.fn, s)

@@ -41,7 +41,7 @@ def _check_expect(where: str, expect: object) -> dict[Any, float] | None:
     for goal, value in expect.items():
         if goal is not ROOT and not isinstance(goal, str):
             raise InvalidSpec(where, f"expected goal names or paths as keys of expect, got {goal!r}")
-        out[goal] = check_threshold(f"{where}, expect[{goal!r}]", value)
+        out[goal] = check_threshold(f"{where}.expect[{goal!r}]", value)
     return out
 
 

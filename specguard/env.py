@@ -32,7 +32,7 @@ from gymnasium.utils import RecordConstructorArgs
 
 from specguard.compiled import compile_tree
 from specguard.error import EvaluationError, InitialEnvError, InvalidSpec, SpecError, StateMappingError
-from specguard.initial_env import InitialEnv
+from specguard.initial_env import InitialEnv, check_identity_observation
 from specguard.nodes import Node
 from specguard.reference import ReferenceEvaluator
 
@@ -123,12 +123,8 @@ class GoalEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         self._execute = execute
         self._n = len(self.features)
         base_space = env.observation_space
-        if state is None and (not isinstance(base_space, gym.spaces.Box) or base_space.shape != (self._n,)):
-            raise StateMappingError(
-                f"{tree.name}: the identity state() needs a flat Box observation of {self._n} features "
-                f"{self.features}, but the base observation space is {base_space}; "
-                "pass state=... to InitialEnv to map observations to features"
-            )
+        if state is None:
+            check_identity_observation(tree.name, self.features, base_space)
         n_counters = len(self.evaluator.counter_keys)
         low = np.full(self._n, -np.inf) if feature_low is None else np.asarray(feature_low, dtype=np.float64)
         high = np.full(self._n, np.inf) if feature_high is None else np.asarray(feature_high, dtype=np.float64)
@@ -194,6 +190,8 @@ class GoalInfo(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         self.features = tuple(features)
         self.evaluator = compile_tree(tree, self.features).evaluator()
         self._state = state
+        if state is None:
+            check_identity_observation(tree.name, self.features, env.observation_space)
 
     def _goals(self, obs: Any) -> dict[str, bool]:
         f = _features(obs, self._state, self.features, self.tree.name)
@@ -217,7 +215,13 @@ def make_baseline_env(initial_env: InitialEnv, tree: Node, **make_kwargs: Any) -
     if not isinstance(initial_env, InitialEnv):
         raise InitialEnvError(f"make_baseline_env: expected an InitialEnv as first argument, got {initial_env!r}")
     compile_tree(tree, initial_env.features)
-    return GoalInfo(initial_env.make(**make_kwargs), tree=tree, features=initial_env.features, state=initial_env.state)
+    base = initial_env.make(**make_kwargs)
+    try:
+        initial_env.check_observation_space(base.observation_space)
+        return GoalInfo(base, tree=tree, features=initial_env.features, state=initial_env.state)
+    except SpecError:
+        base.close()
+        raise
 
 
 def make_env(initial_env: InitialEnv, tree: Node, *, evaluator: EvaluatorName = "flat", **make_kwargs: Any) -> GoalEnv:
@@ -242,8 +246,8 @@ def make_env(initial_env: InitialEnv, tree: Node, *, evaluator: EvaluatorName = 
         raise InvalidSpec("make_env", f"expected a Goal or All node as tree, got {tree!r}")
     compile_tree(tree, initial_env.features)  # fail before building the base env
     base = initial_env.make(**make_kwargs)
-    low, high = initial_env.feature_bounds(base.observation_space)
     try:
+        low, high = initial_env.feature_bounds(base.observation_space)  # checks the features fit the observation
         return GoalEnv(
             base,
             tree=tree,

@@ -25,9 +25,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from specguard.error import InitialEnvError
+from specguard.error import InitialEnvError, StateMappingError
 
-__all__ = ["InitialEnv", "state_type"]
+__all__ = ["InitialEnv", "check_identity_observation", "state_type"]
 
 
 @cache
@@ -53,6 +53,31 @@ def _check_features(features: object) -> tuple[str, ...]:
     if dup:
         raise InitialEnvError(f"InitialEnv features: names must be unique, {dup} appear more than once")
     return tuple(features)
+
+
+def check_identity_observation(where: str, features: tuple[str, ...], space: gym.Space[Any]) -> None:
+    """With the identity ``state()``, the features label the observation's components one to one.
+
+    Raises:
+        StateMappingError: ``space`` is not a flat ``Box`` with one component per feature.
+    """
+    n = len(features)
+    if isinstance(space, gym.spaces.Box) and space.shape == (n,):
+        return
+    if isinstance(space, gym.spaces.Box) and len(space.shape) == 1:
+        size = space.shape[0]
+        seen = f"the observation has {size} components"
+        hint = f"name exactly {size} features, or compute the features in state=... (InitialEnv's third argument)"
+    elif isinstance(space, gym.spaces.Box) and int(np.prod(space.shape)) == n:
+        seen = f"the observation space is {space} of shape {space.shape}"
+        hint = "flatten the observation in state=lambda o: o.ravel()"
+    else:
+        seen = f"the observation space is {space}"
+        hint = "compute the features in state=... (InitialEnv's third argument), e.g. from the observation's parts"
+    raise StateMappingError(
+        f"{where}: the identity state() needs a flat Box observation of {n} features {features}, "
+        f"one per component, but {seen}\nHint: {hint}"
+    )
 
 
 @dataclass(frozen=True, init=False)
@@ -171,14 +196,29 @@ class InitialEnv:
             )
         return built
 
+    def check_observation_space(self, observation_space: gym.Space[Any]) -> None:
+        """Check that the features fit the base env's observations (only the identity ``state`` can be checked).
+
+        Raises:
+            StateMappingError: with the identity ``state``, the observation
+                space is not a flat ``Box`` with one component per feature.
+        """
+        if self.state is None:
+            check_identity_observation(f"InitialEnv {self.label}", self.features, observation_space)
+
     def feature_bounds(self, observation_space: gym.Space[Any]) -> tuple[np.ndarray, np.ndarray]:
-        """Lower and upper bounds of every feature, finite wherever they are known."""
+        """Lower and upper bounds of every feature, finite wherever they are known.
+
+        Raises:
+            StateMappingError: see :meth:`check_observation_space`.
+        """
+        self.check_observation_space(observation_space)
         n = len(self.features)
         lo = np.full(n, -np.inf)
         hi = np.full(n, np.inf)
         if self.state is None and isinstance(observation_space, gym.spaces.Box):
-            lo[:] = observation_space.low.reshape(-1)[:n]
-            hi[:] = observation_space.high.reshape(-1)[:n]
+            lo[:] = observation_space.low
+            hi[:] = observation_space.high
         index = {f: i for i, f in enumerate(self.features)}
         for f, b_lo, b_hi in self.bounds:
             lo[index[f]], hi[index[f]] = b_lo, b_hi

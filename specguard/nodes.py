@@ -34,8 +34,10 @@ ANNOTATION_SEPARATOR = ":"
 
 
 def _check_name(kind: str, name: object) -> str:
+    """The name as a plain ``str`` (a ``str`` subclass could override ``__repr__`` or ``__format__``)."""
     if not isinstance(name, str) or not name.strip():
         raise InvalidSpec(f"{kind} {name!r}", f"expected a non-empty string as name, got {name!r}")
+    name = str.__str__(name)
     for sep in (PATH_SEPARATOR, ANNOTATION_SEPARATOR):
         if sep in name:
             raise InvalidSpec(
@@ -109,8 +111,8 @@ class Distance(Annotation):
     name: str = "distance"
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "name", _check_name("Distance", self.name))
         where = f"Distance {self.name!r}"
-        _check_name("Distance", self.name)
         if not callable(self.fn):
             raise InvalidSpec(where, f"expected fn to be callable as fn(s), got {self.fn!r}")
         scale = self.scale
@@ -155,8 +157,8 @@ class Constraint(Annotation):
     def __post_init__(self) -> None:
         if self.name is None:
             object.__setattr__(self, "name", "constraint")
+        object.__setattr__(self, "name", _check_name("Constraint", self.name))
         where = f"Constraint {self.name!r}"
-        _check_name("Constraint", self.name)
         if not callable(self.fn):
             raise InvalidSpec(where, f"expected fn to be callable as fn(s, a), got {self.fn!r}")
         budget = self.budget
@@ -258,6 +260,13 @@ Bound = tuple[float, float]
 def _parse_bound(goal: str, feature: str, value: object) -> Bound:
     where = f"Goal {goal!r}, feature {feature!r}"
     if isinstance(value, Real) and not isinstance(value, bool):
+        if math.isinf(value):  # features are finite: no state has an infinite value
+            raise InvalidSpec(
+                where,
+                f"expected a finite exact value, got {float(value):g}; "
+                "features are finite, so the goal could never hold",
+                hint=f"give a box (lo, hi) with None for an open side, e.g. {feature}=(0, None)",
+            )
         lo = hi = value  # a scalar states an exact value, e.g. leg1=1
     elif isinstance(value, Sequence) and not isinstance(value, str) and len(value) == 2:
         lo, hi = value
@@ -273,6 +282,13 @@ def _parse_bound(goal: str, feature: str, value: object) -> Bound:
         f = float(v)
         if math.isnan(f):
             raise InvalidSpec(where, f"{side} is NaN; expected a number, or None for an open side")
+        if math.isinf(f) and f != open_value:  # lo=+inf or hi=-inf: no finite feature value fits
+            raise InvalidSpec(
+                where,
+                f"expected {side} to be finite (or {open_value:g} or None for an open side), "
+                f"got {side}={f:g}; features are finite, so the goal could never hold",
+                hint=f"use {side}=None for an open side",
+            )
         out.append(f)
     if out[0] > out[1]:
         raise InvalidSpec(
@@ -304,13 +320,20 @@ class Goal(Node):
     annotations: tuple[Annotation, ...]
 
     def __init__(self, name: str, /, **bounds: object) -> None:
-        _check_name("Goal", name)
+        name = _check_name("Goal", name)
         if not bounds:
             raise InvalidSpec(
                 f"Goal {name!r}",
                 "expected at least one feature=(lo, hi); a goal on no feature holds in every state",
             )
         parsed = tuple((f, *_parse_bound(name, f, v)) for f, v in bounds.items())
+        if all(math.isinf(lo) and math.isinf(hi) for _, lo, hi in parsed):
+            given = ", ".join(f"{f}=(None, None)" for f, _, _ in parsed)
+            raise InvalidSpec(
+                f"Goal {name!r}",
+                f"a goal must bound at least one side of one feature, got {given}; every state would satisfy it",
+                hint=f"give lo or hi a number, e.g. {parsed[0][0]}=(0, None)",
+            )
         object.__setattr__(self, "name", name)
         object.__setattr__(self, "bounds", parsed)
         object.__setattr__(self, "annotations", ())
@@ -357,7 +380,7 @@ class All(Node):
     annotations: tuple[Annotation, ...]
 
     def __init__(self, *children: Node, name: str, weights: Sequence[float] | None = None) -> None:
-        _check_name("All", name)
+        name = _check_name("All", name)
         where = f"All {name!r}"
         if not children:
             raise InvalidSpec(where, "expected at least one child node, got none")
@@ -386,6 +409,13 @@ class All(Node):
             parsed = tuple(w for w in checked if w is not None)
             if len(parsed) != len(children):
                 raise InvalidSpec(where, f"expected a number for every weight, got {tuple(weights)!r}")
+            if not any(w > 0 for w in parsed):
+                raise InvalidSpec(
+                    where,
+                    f"expected at least one weight > 0, got weights=({', '.join(_fmt(w) for w in parsed)}); "
+                    "all-zero weights make the node's reward identically 0",
+                    hint="weights need not sum to 1; omit weights= for 1/N each",
+                )
         object.__setattr__(self, "name", name)
         object.__setattr__(self, "nodes", tuple(children))
         object.__setattr__(self, "weights", parsed)

@@ -293,11 +293,14 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     if not isinstance(spec, Spec):
         pytest.fail(f"{where}: a goal spec must return a specguard.Spec, got {type(spec).__name__}", pytrace=False)
     goal = pyfuncitem.funcargs.get(GOAL_FIXTURE)
+    error: str | None = None
     try:
         spec, paths = with_thresholds(spec, marker.kwargs.get("expect"), goal)
         result = _run(state, _scaled(state, spec))
     except SpecError as e:
-        pytest.fail(f"{where}: {e}", pytrace=False)
+        error = f"{where}: {e}"
+    if error is not None:  # outside the handler: one message, not a chain of two
+        pytest.fail(error, pytrace=False)
     baseline = (state.baseline, state.options.compare or "latest") if state.baseline is not None else None
     checks = check_item(result, spec, paths, _group(pyfuncitem), baseline=baseline)
     failures, undecided = [], []

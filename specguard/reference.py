@@ -11,14 +11,19 @@ counters that constraint annotations add to ``S_G``.
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
+from specguard.error import EvaluationError
 from specguard.initial_env import state_type
 from specguard.nodes import ANNOTATION_SEPARATOR, All, Constraint, Distance, Goal, Node, component_weights
 
-__all__ = ["ExtendedState", "ReferenceEvaluator", "Requirements", "process"]
+__all__ = ["ExtendedState", "ReferenceEvaluator", "Requirements", "check_distance", "distance_value", "process"]
+
+FLOAT_MAX = sys.float_info.max
+"""``0.0 <= d <= FLOAT_MAX`` holds exactly for the finite ``d >= 0`` (NaN fails every comparison)."""
 
 
 class ExtendedState(NamedTuple):
@@ -82,10 +87,31 @@ def _and(path: str, node: All, children: Sequence[Requirements]) -> Requirements
     return Requirements(g, reward, terminal, tuple(x for c in children for x in c.counters), goals)
 
 
+def distance_value(key: str, fn: Callable[[Any], Any], s: Any) -> float:
+    """``fn(s)`` as a float, which must be finite and ``>= 0``; errors name the annotation ``key``.
+
+    Raises:
+        EvaluationError: ``fn`` raised, or returned a negative, infinite or NaN distance.
+    """
+    try:
+        d = float(fn(s))
+    except Exception as e:
+        raise EvaluationError(f"{key}: the distance function raised {type(e).__name__}: {e} (state {s})") from e
+    return check_distance(key, d, s)
+
+
+def check_distance(key: str, d: float, s: Any) -> float:
+    """``d`` if it is a finite float ``>= 0``; else an :class:`EvaluationError` naming ``key``, ``d`` and ``s``."""
+    if not 0.0 <= d <= FLOAT_MAX:  # NaN fails it too
+        raise EvaluationError(f"{key}: expected a finite distance >= 0, got {d!r} (state {s})")
+    return d
+
+
 def _distance(key: str, w: float, d: Distance, req: Requirements) -> Requirements:
     def reward(s: ExtendedState, a: Any, s2: ExtendedState) -> Terms:
         out = req.reward(s, a, s2)
-        out[key] = w * (float(d.fn(s.s)) - float(d.fn(s2.s))) / d.scale  # (fn(s) - fn(s')) / d
+        # (fn(s) - fn(s')) / d
+        out[key] = w * (distance_value(key, d.fn, s.s) - distance_value(key, d.fn, s2.s)) / d.scale
         return out
 
     return Requirements(req.goal, reward, req.terminal, req.counters, req.goals)

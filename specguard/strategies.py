@@ -73,7 +73,15 @@ def bounds(draw: st.DrawFn, values: st.SearchStrategy[float] = _values) -> tuple
 def goals(draw: st.DrawFn, features: Sequence[str], name: str | None = None) -> Goal:
     """A leaf with a box on a non-empty subset of ``features``."""
     chosen = draw(st.lists(st.sampled_from(list(features)), min_size=1, max_size=len(features), unique=True))
-    return Goal(name or draw(node_names()), **{f: draw(bounds()) for f in chosen})
+    box = {f: draw(bounds()) for f in chosen}
+    if all(lo is None and hi is None for lo, hi in box.values()):  # a goal must bound something
+        box[chosen[0]] = (draw(_values), None)
+    return Goal(name or draw(node_names()), **box)
+
+
+def _weights(n: int) -> st.SearchStrategy[list[float] | None]:
+    """``None`` (the default ``1/N``) or ``n`` weights >= 0, at least one of them > 0."""
+    return st.none() | st.lists(st.floats(0.0, 10.0), min_size=n, max_size=n).filter(lambda w: any(x > 0 for x in w))
 
 
 def _distance_fn(feature: str, target: float) -> Any:
@@ -138,7 +146,7 @@ def trees(
         n = draw(st.integers(1, max_children))
         names = draw(st.lists(node_names(), min_size=n, max_size=n, unique=True))
         kids = [draw(trees(features, max_depth - 1, max_children, annotations, name=k)) for k in names]
-        weights = draw(st.none() | st.lists(st.floats(0.0, 10.0), min_size=n, max_size=n))
+        weights = draw(_weights(n))
         node = All(*kids, name=name, weights=weights)
     extra = draw(_annotations(features, annotations))
     return node.annotate(*extra) if extra else node
@@ -165,11 +173,12 @@ def refinements(draw: st.DrawFn, leaf: Goal, max_children: int = 3, loosen: bool
                 wider_lo = None if math.isinf(lo) or draw(st.booleans()) else lo - draw(st.floats(0.0, 1.0))
                 wider_hi = None if math.isinf(hi) or draw(st.booleans()) else hi + draw(st.floats(0.0, 1.0))
                 box[f] = (wider_lo, wider_hi)
-        if not box:  # a child must bound something: repeat an exact bound
-            f, lo, hi = items[k % len(items)]
+        if all(lo is None and hi is None for lo, hi in box.values()):  # a child must bound something
+            bounded = [(f, lo, hi) for f, lo, hi in items if not (math.isinf(lo) and math.isinf(hi))]
+            f, lo, hi = bounded[k % len(bounded)]  # repeating one of the leaf's bounds leaves the intersection
             box[f] = (None if math.isinf(lo) else lo, None if math.isinf(hi) else hi)
         children.append(Goal(f"part{k}", **box))
-    weights = draw(st.none() | st.lists(st.floats(0.0, 10.0), min_size=n, max_size=n))
+    weights = draw(_weights(n))
     return All(*children, name=leaf.name, weights=weights)
 
 

@@ -8,6 +8,7 @@ import textwrap
 import pytest
 
 from specguard.cli import main
+from specguard.error import SpecError
 
 SPEC_FILE = textwrap.dedent(
     """
@@ -92,3 +93,38 @@ def test_bad_option_values_are_usage_errors(spec_file, option, capsys):
         main(["run", str(spec_file), *option])
     assert exit_info.value.code == 2
     assert "expected" in capsys.readouterr().err
+
+
+@pytest.fixture
+def no_training(monkeypatch):
+    """Replace training by a stub that records what it was asked, and stops the run."""
+    import specguard.engine
+
+    calls = []
+
+    def run_spec(spec, **kwargs):
+        calls.append(spec)
+        raise SpecError("stub: no training in this test")
+
+    monkeypatch.setattr(specguard.engine, "run_spec", run_spec)
+    return calls
+
+
+def test_json_parent_directories_are_created_before_training(spec_file, tmp_path, no_training, capsys):
+    report = tmp_path / "out" / "missing" / "dir" / "r.json"
+    assert main(["run", f"{spec_file}::easy", "--no-cache", "--quiet", "--json", str(report)]) == 2
+    assert report.parent.is_dir() and not report.exists()
+    assert len(no_training) == 1  # the directory was there before training was asked for
+
+
+def test_json_path_that_cannot_be_written_fails_before_training(spec_file, tmp_path, no_training, capsys):
+    blocker = tmp_path / "out"
+    blocker.write_text("a file, not a directory")
+    report = blocker / "dir" / "r.json"
+    assert main(["run", f"{spec_file}::easy", "--no-cache", "--json", str(report)]) == 2
+    err = capsys.readouterr().err
+    assert f"specguard: error: --json {report}: cannot create the directory {report.parent}" in err
+    assert no_training == []
+    assert main(["run", f"{spec_file}::easy", "--no-cache", "--json", str(tmp_path)]) == 2
+    assert f"--json {tmp_path}: is a directory; expected a file name" in capsys.readouterr().err
+    assert no_training == []

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import ast
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given
@@ -97,9 +100,9 @@ def test_weights_are_folded_into_one_coefficient_per_leaf():
 def test_generated_source_is_readable():
     tree = sg.All(sg.Goal("p", a=(0, 1)), sg.Goal("q", b=(None, 2.0)), name="r")
     source = compile_tree(tree, FEATURES).source
-    assert "0.0 <= f0 <= 1.0  # r/p" in source
-    assert "f1 <= 2.0  # r/q" in source
-    assert "m0 = m1 and m2  # r" in source
+    assert "0.0 <= f0 <= 1.0  # 'r/p'" in source
+    assert "f1 <= 2.0  # 'r/q'" in source
+    assert "m0 = m1 and m2  # 'r'" in source
 
 
 def test_unknown_feature_names_the_path_and_lists_known_features():
@@ -119,7 +122,7 @@ def test_negative_distance_is_rejected_mid_episode():
     tree = sg.Goal("g", a=(0, 1)).annotate(sg.Distance(lambda s: s.b, scale=1.0))
     ev = compile_tree(tree, FEATURES).evaluator()
     ev.reset([5.0, 1.0, 0.0])
-    with pytest.raises(sg.EvaluationError, match=r"g:distance: expected a distance >= 0, got -1.0"):
+    with pytest.raises(sg.EvaluationError, match=r"g:distance: expected a finite distance >= 0, got -1.0"):
         ev.step(0, [5.0, -1.0, 0.0])
 
 
@@ -132,3 +135,115 @@ def test_failing_constraint_is_named():
     ev.reset([5.0, 1.0, 0.0])
     with pytest.raises(sg.EvaluationError, match=r"g:crash: the constraint function raised RuntimeError: no"):
         ev.step(0, [5.0, -1.0, 0.0])
+
+
+# -- non-finite distances ----------------------------------------------------------
+
+
+def _distance_of_b(s):
+    return s.b
+
+
+@pytest.mark.parametrize("bad", [math.inf, math.nan])
+def test_non_finite_distance_is_rejected_at_reset(bad):
+    tree = sg.Goal("g", a=(0, 1)).annotate(sg.Distance(_distance_of_b, scale=1.0))
+    ev = compile_tree(tree, FEATURES).evaluator()
+    with pytest.raises(
+        sg.EvaluationError,
+        match=rf"g:distance: expected a finite distance >= 0, got {bad!r} \(state State\(a=5.0, b={bad!r}, c=0.0\)\)",
+    ):
+        ev.reset([5.0, bad, 0.0])
+
+
+@pytest.mark.parametrize("bad", [math.inf, math.nan])
+def test_non_finite_distance_is_rejected_mid_episode_by_both_evaluators(bad):
+    tree = sg.Goal("g", a=(0, 1)).annotate(sg.Distance(_distance_of_b, scale=1.0))
+    message = rf"g:distance: expected a finite distance >= 0, got {bad!r} \(state State\(a=5.0, b={bad!r}, c=0.0\)\)"
+    for ev in (compile_tree(tree, FEATURES).evaluator(), ReferenceEvaluator(tree, FEATURES)):
+        ev.reset([5.0, 1.0, 0.0])
+        with pytest.raises(sg.EvaluationError, match=message):
+            ev.step(0, [5.0, bad, 0.0])
+
+
+@pytest.mark.parametrize("bad", [math.inf, math.nan, -1.0])
+def test_batch_rewards_reject_bad_distances(bad):
+    tree = sg.Goal("g", a=(0, 1)).annotate(sg.Distance(_distance_of_b, scale=1.0))
+    s = np.array([[0.0, 1.0, 0.0], [0.0, 2.0, 0.0]])
+    s2 = np.array([[0.0, 1.0, 0.0], [0.0, bad, 0.0]])
+    with pytest.raises(sg.EvaluationError, match=rf"g:distance: expected a finite distance >= 0, got {bad!r} \(state"):
+        compile_tree(tree, FEATURES).reward_terms(s, np.zeros(2), s2)
+
+
+# -- generated code: exact numbers, names only as string literals ------------------
+
+
+def test_an_overflowing_coefficient_is_rejected_when_compiling():
+    tree = sg.Goal("g", a=(0, 1)).annotate(sg.Distance(_distance_of_b, scale=1e-320))
+    with pytest.raises(sg.InvalidSpec, match=r"g:distance: the component's coefficient .* is inf"):
+        compile_tree(tree, FEATURES)
+
+
+_finite = st.floats(allow_nan=False, allow_infinity=False)
+
+
+@given(_finite, _finite)
+def test_generated_bounds_are_exact(x, y):
+    lo, hi = min(x, y), max(x, y)
+    compiled = compile_tree(sg.Goal("g", a=(lo, hi)), FEATURES)
+    members = compiled.evaluator().members
+    edges = [lo, hi, math.nextafter(lo, -math.inf), math.nextafter(hi, math.inf)]
+    for v in edges:
+        f = [v, 0.0, 0.0]
+        assert members(f) == tuple(compiled.members(np.asarray([f]))[0].tolist()) == ((lo <= v <= hi),)
+
+
+def test_a_name_holding_code_stays_a_name(capsys):
+    name = 'g\n    print("X")'
+    tree = sg.All(
+        sg.Goal(name, a=(0, 1)).annotate(sg.Distance(_distance_of_b, scale=1.0, name="x\n    raise SystemExit")),
+        name="r",
+    )
+    ev = compile_tree(tree, FEATURES).evaluator()
+    ev.reset([0.5, 1.0, 0.0])
+    _, _, _, terms = ev.step(0, [0.5, 0.5, 0.0])
+    assert list(terms) == [f"r/{name}", f"r/{name}:x\n    raise SystemExit"]
+    assert capsys.readouterr().out == ""
+
+
+class _BlankStrings(ast.NodeTransformer):
+    def visit_Constant(self, node: ast.Constant) -> ast.AST:
+        return ast.copy_location(ast.Constant(""), node) if isinstance(node.value, str) else node
+
+
+def _shape(source: str) -> str:
+    """The AST of ``source`` with every string constant blanked."""
+    return ast.dump(_BlankStrings().visit(ast.parse(source)))
+
+
+def _named_tree(root: str, p: str, q: str, d: str, c: str) -> sg.Node:
+    return sg.All(
+        sg.Goal(p, a=(0, 1)).annotate(
+            sg.Distance(_distance_of_b, scale=2.0, name=d), sg.Constraint(lambda s, a: s.c > 1, name=c)
+        ),
+        sg.Goal(q, b=(None, 2.0)),
+        name=root,
+    )
+
+
+_any_name = st.text(min_size=1).filter(lambda s: bool(s.strip()) and "/" not in s and ":" not in s)
+
+
+@given(st.lists(_any_name, min_size=5, max_size=5, unique=True))
+def test_names_reach_generated_code_only_as_string_literals(names):
+    compiled = compile_tree(_named_tree(*names), FEATURES)
+    placeholder = compile_tree(_named_tree("n0", "n1", "n2", "n3", "n4"), FEATURES)
+    assert _shape(compiled.source) == _shape(placeholder.source)
+    ev = compiled.evaluator()
+    ev.reset([0.5, 1.0, 2.0])  # violates the constraint s.c > 1: its counter drops to 0
+    r, ended, goals, terms = ev.step(0, [0.5, 0.5, 0.0])
+    assert goals == (True, True, True)
+    root, p, q, d, c = names
+    assert list(terms) == [f"{root}/{p}", f"{root}/{p}:{d}", f"{root}/{p}:{c}", f"{root}/{q}"]
+    assert ev.paths == (root, f"{root}/{p}", f"{root}/{q}")
+    assert ev.counters == [0] and ended
+    assert r == pytest.approx(0.5 * (0.5 * (1.0 - 0.5) / 2.0 - 1.0))  # root weight 1/2: distance, penalty

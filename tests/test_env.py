@@ -200,6 +200,32 @@ def test_identity_state_needs_one_feature_per_observation():
         sg.make_env(initial, sg.Goal("g", x=(0, 1)))
 
 
+@pytest.mark.parametrize("make", [sg.make_env, sg.make_baseline_env])
+@pytest.mark.parametrize(
+    ("features", "given"),
+    [
+        (("a", "b", "c", "d", "e"), "5 features ('a', 'b', 'c', 'd', 'e')"),
+        (("a", "b", "c"), "3 features ('a', 'b', 'c')"),
+    ],
+)
+def test_identity_state_features_must_label_the_observation_one_to_one(make, features, given):
+    initial = sg.InitialEnv("CartPole-v1", features=features)
+    with pytest.raises(sg.StateMappingError) as info:
+        make(initial, sg.Goal("g", a=(0, 1)))
+    message = str(info.value)
+    assert message.startswith(f"InitialEnv 'CartPole-v1': the identity state() needs a flat Box observation of {given}")
+    assert "but the observation has 4 components" in message
+    assert "Hint: name exactly 4 features, or compute the features in state=..." in message
+
+
+def test_identity_state_rejects_a_non_box_observation_early():
+    initial = sg.InitialEnv("FrozenLake-v1", features=("cell",))
+    with pytest.raises(
+        sg.StateMappingError, match=r"InitialEnv 'FrozenLake-v1': .* the observation space is Discrete\(16\)"
+    ):
+        sg.make_baseline_env(initial, sg.Goal("g", cell=(0, 1)))
+
+
 def test_unknown_feature_fails_before_the_env_is_built():
     with pytest.raises(
         sg.UnknownFeature, match=r"pendulum/speed: goal names unknown feature 'v'; known features: x, y, omega"

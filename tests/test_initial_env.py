@@ -63,6 +63,17 @@ def test_identity_state_takes_bounds_from_the_observation_space():
     assert lo.tolist() == [-1.0, -1.0, -8.0] and hi.tolist() == [1.0, 1.0, 8.0]
 
 
+def test_identity_state_bounds_need_one_feature_per_component():
+    env = sg.InitialEnv("CartPole-v1", features=("a", "b", "c", "d", "e"))
+    with pytest.raises(sg.StateMappingError, match=r"InitialEnv 'CartPole-v1': .* 5 features .* 4 components"):
+        env.feature_bounds(gym.spaces.Box(-1, 1, (4,)))
+    with pytest.raises(sg.StateMappingError, match=r"Hint: name exactly 4 features"):
+        env.check_observation_space(gym.spaces.Box(-1, 1, (4,)))
+    env.check_observation_space(gym.spaces.Box(-1, 1, (5,)))
+    mapped = sg.InitialEnv("CartPole-v1", features=("a",), state=lambda o: o[:1])
+    mapped.check_observation_space(gym.spaces.Discrete(3))  # state() maps any observation
+
+
 def test_action_space_must_be_a_space():
     with pytest.raises(sg.InitialEnvError, match=r"expected action_space to be a gymnasium Space"):
         sg.InitialEnv("Pendulum-v1", features=("x",), action_space=(0, 1))

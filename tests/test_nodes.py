@@ -178,3 +178,69 @@ def test_errors_are_spec_errors_and_value_errors():
         sg.Goal("g", x=(2, 1))
     with pytest.raises(ValueError):
         sg.Goal("g", x=(2, 1))
+
+
+@pytest.mark.parametrize(
+    ("bound", "expected"),
+    [((0, math.inf), (0.0, math.inf)), ((-math.inf, 1), (-math.inf, 1.0)), ((-math.inf, None), (-math.inf, math.inf))],
+)
+def test_infinite_bounds_are_open_sides(bound, expected):
+    g = sg.Goal("g", x=bound, y=(0, 1))
+    assert g.bounds[0] == ("x", *expected)
+    assert repr(sg.Goal("g", x=(0, math.inf))) == "Goal('g', x=(0, None))"
+
+
+@pytest.mark.parametrize(
+    ("bound", "message"),
+    [
+        (math.inf, r"expected a finite exact value, got inf"),
+        (-math.inf, r"expected a finite exact value, got -inf"),
+        ((math.inf, None), r"expected lo to be finite \(or -inf or None for an open side\), got lo=inf"),
+        ((None, -math.inf), r"expected hi to be finite \(or inf or None for an open side\), got hi=-inf"),
+        ((math.inf, math.inf), r"expected lo to be finite .*, got lo=inf"),
+    ],
+)
+def test_impossible_infinite_bounds(bound, message):
+    with pytest.raises(sg.InvalidSpec, match=r"Goal 'g', feature 'x': " + message) as info:
+        sg.Goal("g", x=bound)
+    assert "could never hold" in str(info.value)
+
+
+@pytest.mark.parametrize("bound", [(None, None), (-math.inf, math.inf), (None, math.inf)])
+def test_goal_must_bound_at_least_one_side(bound):
+    with pytest.raises(sg.InvalidSpec, match=r"Goal 'g': a goal must bound at least one side of one feature") as info:
+        sg.Goal("g", x=bound, y=(None, None))
+    assert "every state would satisfy it" in str(info.value)
+    assert "x=(None, None), y=(None, None)" in str(info.value)
+
+
+def test_goal_may_leave_some_features_open():
+    g = sg.Goal("g", x=(0, None), y=(None, None))
+    assert g.describe() == "Goal 'g': x >= 0, y unconstrained"
+
+
+@pytest.mark.parametrize("weights", [(0, 0), (0.0, np.float64(0.0))])
+def test_all_zero_weights(weights):
+    with pytest.raises(sg.InvalidSpec, match=r"All 'r': expected at least one weight > 0, got weights=\(0, 0\)"):
+        sg.All(sg.Goal("a", x=0), sg.Goal("b", x=0), name="r", weights=weights)
+
+
+def test_some_zero_weights_and_zero_annotation_weights_are_allowed():
+    assert sg.All(sg.Goal("a", x=0), sg.Goal("b", x=0), name="r", weights=(0, 1)).weights == (0.0, 1.0)
+    assert sg.Distance(dist, scale=1.0, weight=0).weight == 0.0
+    assert sg.Constraint(lambda s, a: False, weight=0).weight == 0.0
+
+
+class _SneakyName(str):
+    def __repr__(self):
+        return "__import__('os')"
+
+    def __format__(self, spec):
+        return "sneaky"
+
+
+def test_str_subclass_names_are_stored_as_plain_str():
+    g = sg.Goal(_SneakyName("g"), x=0).annotate(sg.Distance(dist, scale=1.0, name=_SneakyName("d")))
+    assert type(g.name) is str and type(g.annotations[0].name) is str
+    assert type(sg.All(g, name=_SneakyName("r")).name) is str
+    assert [p for p, _ in sg.All(g, name="r").walk()] == ["r", "r/g"]

@@ -291,7 +291,7 @@ def test_bad_input_gives_one_clear_error_and_other_specs_still_run(pytester):
     result.stdout.fnmatch_lines(
         [
             "*test_specs.py::test_wrong_type[[]stabilization[]]: a goal spec must return a specguard.Spec, got int",
-            "*test_specs.py::test_missing_goal[[]altitude[]]: Spec 'pendulum': no goal named 'altitude'; "
+            "*test_specs.py::test_missing_goal[[]altitude[]]: Spec 'pendulum': no node is named 'altitude'; "
             "the tree's goals are pendulum, pendulum/position, pendulum/stabilization",
         ]
     )
@@ -309,7 +309,7 @@ def test_malformed_decorator_is_a_collection_error(pytester):
     result = pytester.runpytest("-p", "no:cacheprovider")
     result.assert_outcomes(errors=1)
     result.stdout.fnmatch_lines(
-        ["*goal_spec 'test_bad': expect[[]'stabilization']: expected a success rate in [[]0, 1), got 1.5"]
+        ["*goal_spec 'test_bad'.expect[[]'stabilization']: expected a success rate in [[]0, 1), got 1.5"]
     )
 
 

@@ -114,7 +114,8 @@ def test_refinement_changes_the_root_reward(data):
 @given(st.data())
 def test_and_reward_is_the_weighted_sum_of_the_childrens(data):
     kids = data.draw(st.lists(sgst.trees(FEATURES, max_depth=2), min_size=1, max_size=3, unique_by=lambda n: n.name))
-    weights = data.draw(st.none() | st.lists(st.floats(0.0, 10.0), min_size=len(kids), max_size=len(kids)))
+    some_weights = st.lists(st.floats(0.0, 10.0), min_size=len(kids), max_size=len(kids))
+    weights = data.draw(st.none() | some_weights.filter(lambda w: any(x > 0 for x in w)))
     node = sg.All(*kids, name="root", weights=weights)
     f, f2 = data.draw(sgst.states(FEATURES)), data.draw(sgst.states(FEATURES))
     a = data.draw(st.integers(0, 2))
@@ -182,3 +183,21 @@ def test_pendulum_refinements_share_the_root_goal_but_not_the_reward():
         ev.reset((-1.0, 0.0, 1.0))
         rewards[tree_key] = ev.step(0, up_fast)[0]
     assert rewards == {"a": 0.0, "b": 0.5}  # (b) pays for reaching the position alone
+
+
+@pytest.mark.parametrize("bad", [math.inf, math.nan, -1.0])
+def test_distances_must_be_finite_and_non_negative(bad):
+    tree = sg.Goal("g", a=(0, 1)).annotate(sg.Distance(lambda s: s.b, scale=1.0))
+    ev = ReferenceEvaluator(tree, FEATURES)
+    ev.reset([5.0, 1.0, 0.0])
+    message = rf"g:distance: expected a finite distance >= 0, got {bad!r} \(state State\(a=5.0, b={bad!r}, c=0.0\)\)"
+    with pytest.raises(sg.EvaluationError, match=message):
+        ev.step(0, [5.0, bad, 0.0])
+
+
+def test_a_raising_distance_is_named():
+    tree = sg.Goal("g", a=(0, 1)).annotate(sg.Distance(lambda s: s.zz, scale=1.0))
+    ev = ReferenceEvaluator(tree, FEATURES)
+    ev.reset([5.0, 1.0, 0.0])
+    with pytest.raises(sg.EvaluationError, match=r"g:distance: the distance function raised AttributeError"):
+        ev.step(0, [5.0, 1.0, 0.0])

@@ -35,7 +35,7 @@ def test_run_result_is_plain_data_and_deterministic_per_seed():
 
 def test_evaluate_counts_the_last_state_of_each_episode():
     initial = sg.InitialEnv(lambda: ReplayEnv([[0.0], [1.0], [0.0], [1.0]]), features=("x",))
-    tree = sg.All(sg.Goal("up", x=(0.5, None)), sg.Goal("any", x=(None, None)), name="root")
+    tree = sg.All(sg.Goal("up", x=(0.5, None)), sg.Goal("any", x=(-1.0, None)), name="root")
     env = sg.make_baseline_env(initial, tree)  # the replay truncates after 3 steps, in "up"
     counts = evaluate(lambda obs: 0, env, episodes=3, seeds=[EVAL_SEED_BASE, EVAL_SEED_BASE + 1, EVAL_SEED_BASE + 2])
     assert counts == {"root": 3, "root/up": 3, "root/any": 3}
