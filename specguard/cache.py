@@ -35,7 +35,7 @@ import os
 import shutil
 import tempfile
 import warnings
-from collections.abc import Callable, Collection
+from collections.abc import Collection
 from pathlib import Path
 from typing import Any
 
@@ -44,7 +44,7 @@ from specguard.fingerprint import fingerprint_spec, versions
 from specguard.spec import Spec
 from specguard.train import RunResult
 
-__all__ = ["SECRET_ENV", "Cache", "CacheLockTimeout", "validate_record"]
+__all__ = ["SECRET_ENV", "Cache", "CacheLockTimeout", "try_acquire", "validate_record", "wait_for"]
 
 SECRET_ENV = "SPECGUARD_CACHE_KEY"
 FORMAT = 2
@@ -260,17 +260,21 @@ def _paths(spec: Spec) -> list[str]:
     return [p for p, _ in spec.tree.walk()]
 
 
-def wait_for(lock: Any, what: str, timeout: float, on_wait: Callable[[], None] | None = None) -> None:
-    """Acquire ``lock``, raising :class:`CacheLockTimeout` with a clear message after ``timeout`` seconds."""
+def try_acquire(lock: Any) -> bool:
+    """Take ``lock`` if it is free right now."""
     from filelock import Timeout
 
     try:
         lock.acquire(timeout=0)
-        return
     except Timeout:
-        pass
-    if on_wait is not None:
-        on_wait()
+        return False
+    return True
+
+
+def wait_for(lock: Any, what: str, timeout: float) -> None:
+    """Acquire ``lock``, raising :class:`CacheLockTimeout` with a clear message after ``timeout`` seconds."""
+    from filelock import Timeout
+
     try:
         lock.acquire(timeout=timeout)
     except Timeout:

@@ -24,7 +24,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from specguard.cache import Cache, wait_for
+from specguard.cache import Cache, try_acquire, wait_for
 from specguard.error import SpecError
 from specguard.fingerprint import fingerprint_spec
 from specguard.spec import Spec
@@ -248,7 +248,7 @@ class _Runs:
                 key = self._key(seed)
                 if key is not None and self.cache is not None:
                     lock = self.cache.lock(key, self.lock_timeout)
-                    if not _try_acquire(lock):
+                    if not try_acquire(lock):
                         busy.append(seed)  # another process trains it: take it from the cache when it is done
                         continue
                     locks[seed] = lock
@@ -260,15 +260,9 @@ class _Runs:
                 key = self._key(seed)
                 assert key is not None and self.cache is not None
                 lock = self.cache.lock(key, self.lock_timeout)
-                what = f"Spec {self.spec.label!r}, seed {seed}"
-                wait_for(
-                    lock,
-                    what,
-                    self.lock_timeout,
-                    lambda s=seed: self.say(  # type: ignore[misc]
-                        f"[specguard] {self.spec.label}: seed {s} is being trained by another process; waiting for it"
-                    ),
-                )
+                if not try_acquire(lock):
+                    self.say(f"[specguard] {self.spec.label}: seed {seed} is being trained by another process; waiting")
+                    wait_for(lock, f"Spec {self.spec.label!r}, seed {seed}", self.lock_timeout)
                 locks[seed] = lock
                 if not self._hit(seed):
                     self._train([seed])  # the other process failed or did not store it
@@ -304,16 +298,6 @@ class _Runs:
             self.result.cached[seed] = False
             rates = ", ".join(f"{p} {c}/{run.episodes}" for p, c in run.successes.items())
             self.say(f"[specguard] {self.spec.label}: seed {seed} done in {run.train_seconds:.1f}s: {rates}")
-
-
-def _try_acquire(lock: Any) -> bool:
-    from filelock import Timeout
-
-    try:
-        lock.acquire(timeout=0)
-    except Timeout:
-        return False
-    return True
 
 
 def run_spec(

@@ -227,3 +227,19 @@ def test_lock_is_released_by_the_os_when_its_holder_dies(tmp_path):
     lock = cache.lock("ef" * 32, 1)
     lock.acquire(timeout=0)
     lock.release()
+
+
+def test_waiting_for_a_lock_held_too_long_is_a_clear_error(tmp_path):
+    from specguard.cache import CacheLockTimeout, try_acquire, wait_for
+
+    holder = Cache(tmp_path).lock("12" * 32, 1)
+    assert try_acquire(holder)
+    try:
+        waiter = Cache(tmp_path).lock("12" * 32, 1)
+        assert not try_acquire(waiter)
+        with pytest.raises(CacheLockTimeout, match=r"Spec 'x', seed 0: another process has been training this run"):
+            wait_for(waiter, "Spec 'x', seed 0", 0.2)
+    finally:
+        holder.release()
+    wait_for(waiter, "Spec 'x', seed 0", 0.2)
+    waiter.release()
