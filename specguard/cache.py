@@ -44,7 +44,15 @@ from specguard.fingerprint import fingerprint_spec, versions
 from specguard.spec import Spec
 from specguard.train import RunResult
 
-__all__ = ["SECRET_ENV", "Cache", "CacheLockTimeout", "try_acquire", "validate_record", "wait_for"]
+__all__ = [
+    "SECRET_ENV",
+    "Cache",
+    "CacheLockTimeout",
+    "model_files",
+    "try_acquire",
+    "validate_record",
+    "wait_for",
+]
 
 SECRET_ENV = "SPECGUARD_CACHE_KEY"
 FORMAT = 2
@@ -217,21 +225,28 @@ class Cache:
         return self.store_key(fingerprint_spec(spec).run_key(seed), result, model, normalize=spec.normalize)
 
     def store_key(self, key: str, result: RunResult, model: Any, *, normalize: bool) -> Path:
-        """Write a run under ``key`` atomically (a temporary folder renamed into place)."""
+        """Write a run under ``key`` atomically (see :meth:`store_files`)."""
+        return self.store_files(key, result, model_files(model, normalize=normalize))
+
+    def store_files(self, key: str, result: RunResult, files: dict[str, bytes]) -> Path:
+        """Write a run's result and files (:func:`model_files`) under ``key``: a temporary folder renamed into place.
+
+        The driver stores what a worker sent back, so workers need no shared filesystem.
+        """
+        unknown = sorted(set(files) - {MODEL, NORMALIZER})
+        if MODEL not in files or unknown:
+            raise ValueError(f"expected {MODEL} (and optionally {NORMALIZER}), got files {sorted(files)}")
         folder = self.folder(key)
         folder.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=".tmp-", dir=folder.parent))
         try:
-            model.save(tmp / MODEL)
-            env = model.get_env()
-            if normalize and hasattr(env, "save"):
-                env.save(str(tmp / NORMALIZER))
-            files = {p.name: _sha256(p) for p in sorted(tmp.iterdir())}
+            for name, data in sorted(files.items()):
+                (tmp / name).write_bytes(data)
             record: dict[str, Any] = {
                 "format": FORMAT,
                 "fingerprint": key,
                 "versions": versions(),
-                "files": files,
+                "files": {name: hashlib.sha256(data).hexdigest() for name, data in sorted(files.items())},
                 "result": result.to_dict(),
             }
             record["checksum"] = _checksum(record)
@@ -254,6 +269,16 @@ class Cache:
         path = self.folder(key).parent / f"{key}.lock"
         path.parent.mkdir(parents=True, exist_ok=True)
         return FileLock(str(path), timeout=timeout, thread_local=False)
+
+
+def model_files(model: Any, *, normalize: bool) -> dict[str, bytes]:
+    """A trained SB3 model (and its ``VecNormalize`` statistics) as the bytes of the entry's files."""
+    with tempfile.TemporaryDirectory(prefix="specguard-model-") as tmp:
+        model.save(Path(tmp) / MODEL)
+        env = model.get_env()
+        if normalize and hasattr(env, "save"):
+            env.save(str(Path(tmp) / NORMALIZER))
+        return {p.name: p.read_bytes() for p in sorted(Path(tmp).iterdir())}
 
 
 def _paths(spec: Spec) -> list[str]:

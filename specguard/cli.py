@@ -109,10 +109,25 @@ def _prepare_json(text: str) -> Path:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from specguard.engine import print_progress, run_spec
+    from specguard.engine import resolve_workers
+    from specguard.executors import make_executor
 
     specs = load_objects(args.target)
     json_path = _prepare_json(args.json) if args.json else None  # before training, which may take hours
+    executor = make_executor(args.executor, workers=resolve_workers(args.workers))  # a cluster answers, or exit 2
+    try:
+        results, failed = _run_all(args, specs, executor)
+    finally:
+        executor.close()
+    if json_path is not None:
+        json_path.write_text(json.dumps(results, indent=1))
+    return 1 if failed else 0
+
+
+def _run_all(args: argparse.Namespace, specs: dict[str, Any], executor: Any) -> tuple[dict[str, Any], bool]:
+    """Train and print every spec; returns the results as JSON data and whether one failed."""
+    from specguard.engine import print_progress, run_spec
+
     results = {}
     failed = False
     for name, spec in specs.items():
@@ -120,6 +135,7 @@ def _run(args: argparse.Namespace) -> int:
             spec = dataclasses.replace(spec, budget=spec.budget.scaled(args.budget_scale))
         result = run_spec(
             spec,
+            executor=executor,
             workers=args.workers,
             cache_dir=None if args.no_cache else args.cache_dir,
             progress=None if args.quiet else print_progress,
@@ -129,9 +145,7 @@ def _run(args: argparse.Namespace) -> int:
         print(result.table())
         print()
         failed = failed or not result.passed
-    if json_path is not None:
-        json_path.write_text(json.dumps(results, indent=1))
-    return 1 if failed else 0
+    return results, failed
 
 
 def _workers(text: str) -> int | str:
@@ -144,6 +158,15 @@ def _workers(text: str) -> int | str:
     if value < 1:
         raise argparse.ArgumentTypeError(f"expected an integer >= 1 or 'auto', got {text!r}")
     return value
+
+
+def _executor(text: str) -> str:
+    from specguard.executors import ExecutorError, check_address
+
+    try:
+        return check_address(text)
+    except ExecutorError as e:
+        raise argparse.ArgumentTypeError(str(e).removeprefix("executor: ")) from None
 
 
 def _scale(text: str) -> float:
@@ -169,6 +192,13 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--budget-scale", type=_scale, default=1.0, help="multiply training timesteps, e.g. 0.25")
     run.add_argument("--json", metavar="FILE", help="also write the results as JSON (missing directories are created)")
     run.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    run.add_argument(
+        "--executor",
+        type=_executor,
+        default="local",
+        metavar="ADDRESS",
+        help="where runs train: local (default; --workers processes here) or a Dask scheduler, tcp://host:8786",
+    )
     return parser
 
 

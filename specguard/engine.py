@@ -26,11 +26,12 @@ from typing import Any
 
 from specguard.cache import Cache, try_acquire, wait_for
 from specguard.error import SpecError
+from specguard.executors import LOCAL, Executor, make_executor
 from specguard.fingerprint import fingerprint_spec
 from specguard.spec import Spec
 from specguard.stats import QuorumVerdict, RunVerdict, quorum_verdict, run_verdict, success_interval
 from specguard.train import RunResult, TrainingError
-from specguard.workers import Failure, Report, Task, run_tasks
+from specguard.workers import Failure, Report, Task
 
 __all__ = ["GoalVerdict", "SpecResult", "resolve_workers", "run_spec"]
 
@@ -136,19 +137,19 @@ class SpecResult:
         return "\n".join(lines)
 
 
-def _train_task(spec: Spec, seed: int, cache_dir: str | None, key: str | None, *, report: Report) -> dict[str, Any]:
-    """A worker process's task: train one seed, store it under ``key`` (computed by the parent), return the result.
+def _train_task(spec: Spec, seed: int, with_model: bool, *, report: Report) -> dict[str, Any]:
+    """A worker's task (a local process or a cluster worker): train one seed, return its result and model bytes.
 
-    The key comes from the parent because functions unpickled here are not the
-    parent's (cloudpickle rebuilds them), so only the parent computes keys.
+    The driver stores them in its cache: keys are computed only by the driver
+    (functions unpickled in a worker are not the driver's), and cluster
+    workers need no shared filesystem.
     """
+    from specguard.cache import model_files
     from specguard.train import train_run
 
     result, model = train_run(spec, seed, report=report)
-    if cache_dir is not None and key is not None:
-        report("store", None, None)
-        Cache(Path(cache_dir)).store_key(key, result, model, normalize=spec.normalize)
-    return result.to_dict()
+    files = model_files(model, normalize=spec.normalize) if with_model else {}
+    return {"result": result.to_dict(), "files": files}
 
 
 _PHASES = {"start": "starting", "build": "building the env", "train": "training step", "evaluate": "evaluation episode"}
@@ -207,12 +208,18 @@ class _Runs:
     """The seeds of one ``run_spec`` call: looked up in the cache, locked, trained in workers, recorded."""
 
     def __init__(
-        self, spec: Spec, result: SpecResult, cache: Cache | None, workers: int, lock_timeout: float, say: Progress
+        self,
+        spec: Spec,
+        result: SpecResult,
+        cache: Cache | None,
+        executor: Executor,
+        lock_timeout: float,
+        say: Progress,
     ) -> None:
         self.spec = spec
         self.result = result
         self.cache = cache
-        self.workers = workers
+        self.executor = executor
         self.lock_timeout = lock_timeout
         self.say = say
         self.paths = [p for p, _ in spec.tree.walk()]
@@ -273,14 +280,12 @@ class _Runs:
     def _train(self, seeds: list[int]) -> None:
         if not seeds:
             return
-        cache_dir = None if self.cache is None else str(self.cache.root)
         tasks = []
         for seed in seeds:
             self.say(f"[specguard] {self.spec.label}: training seed {seed} ({self.spec.budget.timesteps} steps)")
-            tasks.append(Task(seed, _train_task, (self.spec, seed, cache_dir, self._key(seed))))
-        outcomes = run_tasks(
+            tasks.append(Task(seed, _train_task, (self.spec, seed, self._key(seed) is not None)))
+        outcomes = self.executor.run(
             tasks,
-            max_workers=self.workers,
             on_line=lambda seed, line: self.say(f"[specguard] {self.spec.label} seed {seed}: {line}"),
             stop_on=_is_spec_error,
         )
@@ -293,7 +298,10 @@ class _Runs:
                 self.result.errors[seed] = _describe_failure(seed, outcome)
                 self.say(f"[specguard] {self.spec.label}: seed {seed} failed: {self.result.errors[seed]}")
                 continue
-            run = RunResult(**outcome.value)
+            run = RunResult(**outcome.value["result"])
+            key = self._key(seed)
+            if key is not None and self.cache is not None:
+                self.cache.store_files(key, run, outcome.value["files"])
             self.result.runs.append(run)
             self.result.cached[seed] = False
             rates = ", ".join(f"{p} {c}/{run.episodes}" for p, c in run.successes.items())
@@ -307,6 +315,7 @@ def run_spec(
     cache_dir: str | Path | None = ".specguard/cache",
     progress: Progress | None = print_progress,
     lock_timeout: float = 3600.0,
+    executor: str | Executor = LOCAL,
 ) -> SpecResult:
     """Train and judge ``spec`` within its budget.
 
@@ -322,6 +331,10 @@ def run_spec(
         cache_dir: where trained runs are kept and looked up; ``None`` disables the cache.
         progress: called with one line per event (CI logs read it); ``None`` for silence.
         lock_timeout: seconds to wait for another process training the same run.
+        executor: ``"local"`` (a process per seed on this machine, ``workers``
+            at once), a Dask scheduler address (``"tcp://host:8786"``), or an
+            :class:`~specguard.executors.Executor`. The cache stays on this
+            machine either way: only missing seeds are submitted.
 
     Returns:
         The runs, per-goal verdicts, errors by seed and which runs came from the cache.
@@ -335,16 +348,22 @@ def run_spec(
     cache = Cache(Path(cache_dir)) if cache_dir is not None else None
     start = time.perf_counter()
     result = SpecResult(spec=spec.label, runs=[], goals={}, confidence=spec.confidence)
-    runs = _Runs(spec, result, cache, n_workers, lock_timeout, say)
-    result.spec_key = None if runs.fingerprint is None else runs.fingerprint.spec_key
-    next_seed = 0
-    while True:
-        result.goals = _judge(spec, result.runs, len(result.errors))
-        needed = _still_needed(spec, result.goals, len(result.runs) + len(result.errors))
-        if needed == 0:
-            break
-        runs.run(list(range(next_seed, next_seed + needed)))
-        next_seed += needed
-        result.runs.sort(key=lambda r: r.seed)
+    owned = isinstance(executor, str)
+    runner = make_executor(executor, workers=n_workers) if isinstance(executor, str) else executor
+    try:
+        runs = _Runs(spec, result, cache, runner, lock_timeout, say)
+        result.spec_key = None if runs.fingerprint is None else runs.fingerprint.spec_key
+        next_seed = 0
+        while True:
+            result.goals = _judge(spec, result.runs, len(result.errors))
+            needed = _still_needed(spec, result.goals, len(result.runs) + len(result.errors))
+            if needed == 0:
+                break
+            runs.run(list(range(next_seed, next_seed + needed)))
+            next_seed += needed
+            result.runs.sort(key=lambda r: r.seed)
+    finally:
+        if owned:
+            runner.close()
     result.seconds = time.perf_counter() - start
     return result

@@ -41,12 +41,14 @@ class _Options:
     save: str | None
     compare: str | None
     baseline_dir: Path
+    executor: str
 
 
 @dataclasses.dataclass
 class _Session:
     options: _Options
     baseline: Any = None  # a specguard.compare.Baseline
+    executor: Any = None  # a specguard.executors.Executor, made once per session
     memo: dict[str, Any] = dataclasses.field(default_factory=dict)
     rows: list[dict[str, Any]] = dataclasses.field(default_factory=list)
 
@@ -83,6 +85,13 @@ _SETTINGS: list[tuple[str, str, str, Any, str]] = [
         "string",
         "",
         "write JSON, Markdown and PNG reports to this directory",
+    ),
+    (
+        "--goal-specs-executor",
+        "goal_specs_executor",
+        "string",
+        "local",
+        "where runs train: local (this machine) or a Dask scheduler address, tcp://host:8786",
     ),
     (
         "--goal-specs-baseline-dir",
@@ -160,7 +169,17 @@ def _parse_options(config: pytest.Config) -> _Options:
         save=config.getoption("goal_specs_save"),
         compare=config.getoption("goal_specs_compare"),
         baseline_dir=Path(get("--goal-specs-baseline-dir")),
+        executor=_checked_executor(get("--goal-specs-executor")),
     )
+
+
+def _checked_executor(text: str) -> str:
+    from specguard.executors import ExecutorError, check_address
+
+    try:
+        return check_address(text)
+    except ExecutorError as e:
+        raise pytest.UsageError(f"--goal-specs-executor: {str(e).removeprefix('executor: ')}") from None
 
 
 def _baseline_path(options: _Options, name: str) -> Path:
@@ -190,8 +209,21 @@ def pytest_configure(config: pytest.Config) -> None:
             state.baseline = load_baseline(_baseline_path(options, options.compare))
         except BaselineError as e:
             raise pytest.UsageError(f"--goal-specs-compare: {e}") from None
+    if options.enabled and options.executor != "local":
+        from specguard.executors import ExecutorError, make_executor
+
+        try:  # connect now: a cluster that does not answer is a usage error before anything trains
+            state.executor = make_executor(options.executor, workers=1)
+        except ExecutorError as e:
+            raise pytest.UsageError(f"--goal-specs-executor: {e}") from None
     config.stash[_SESSION] = state
     config.pluginmanager.register(_Recorder(config, state), "specguard-recorder")
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    state = config.stash.get(_SESSION, None)
+    if state is not None and state.executor is not None:
+        state.executor.close()
 
 
 # -- declaring and collecting -----------------------------------------------------
@@ -270,7 +302,11 @@ def _run(state: _Session, spec: Any) -> Any:
     key = fingerprint_spec(spec).spec_key
     if key not in state.memo:
         state.memo[key] = run_spec(
-            spec, workers=state.options.workers, cache_dir=state.options.cache_dir, progress=print_progress
+            spec,
+            workers=state.options.workers,
+            cache_dir=state.options.cache_dir,
+            progress=print_progress,
+            executor=state.executor or "local",
         )
         state.memo[key].spec_key = key
     return state.memo[key]

@@ -53,7 +53,7 @@ from typing import Any
 
 import cloudpickle
 
-__all__ = ["Done", "Failure", "Outcome", "Report", "Task", "run_tasks"]
+__all__ = ["Done", "Failure", "Outcome", "Report", "Task", "TaskRunner", "outcome_of", "run_tasks"]
 
 Report = Callable[[str, int | None, str | None], None]
 """``report(phase, step, line)``: tells the parent where the task is; ``line`` is a progress line or None."""
@@ -164,32 +164,62 @@ def _pickled_exception(error: BaseException) -> bytes | None:
     return data
 
 
-def _child_main(conn: Connection, payload: bytes) -> None:
-    """Process entry point: unpickle ``(fn, args)``, run ``fn`` and send its outcome to the parent.
+class TaskRunner:
+    """Runs one task where it was sent (a child process here, a cluster worker elsewhere).
 
-    Messages (tuples) sent on ``conn``:
-    ``("report", phase, step, line)``, then exactly one of ``("done", value)`` or
-    ``("error", phase, step, cause, traceback_text, pickled_exception_or_None)``.
+    Tracks the phase and step the task last reported, passes each report to
+    ``send`` (``("report", phase, step, line)``), and turns the task's end into
+    one message: ``("done", value)`` or ``("error", phase, step, cause,
+    traceback_text, pickled_exception_or_None)``, as :func:`outcome_of` reads it.
     """
+
+    def __init__(self, send: Callable[[tuple[Any, ...]], None]) -> None:
+        self.send = send
+        self.phase = "start"
+        self.step: int | None = None
+        self._lock = threading.Lock()  # report may be called from several threads of the task
+
+    def report(self, phase: str, step: int | None = None, line: str | None = None) -> None:
+        with self._lock:
+            self.phase, self.step = phase, step
+            self.send(("report", phase, step, line))
+
+    def __call__(self, fn: Callable[..., Any], args: tuple[Any, ...]) -> tuple[Any, ...]:
+        try:
+            return ("done", fn(*args, report=self.report))
+        except BaseException as e:  # SystemExit and KeyboardInterrupt are a task's failure too
+            return ("error", self.phase, self.step, _one_line(e), traceback.format_exc(), _pickled_exception(e))
+
+
+def outcome_of(key: int, message: tuple[Any, ...]) -> Outcome:
+    """The outcome a :class:`TaskRunner` message stands for."""
+    if message[0] == "done":
+        return Done(key=key, value=message[1])
+    _, phase, step, cause, text, pickled = message
+    exception: BaseException | None = None
+    if pickled is not None:
+        with contextlib.suppress(Exception):  # e.g. an exception class whose __init__ takes other arguments
+            loaded = pickle.loads(pickled)
+            if isinstance(loaded, BaseException):
+                exception = loaded
+    return Failure(key=key, phase=phase, step=step, cause=cause, traceback=text, exception=exception)
+
+
+def _child_main(conn: Connection, payload: bytes) -> None:
+    """Process entry point: unpickle ``(fn, args)``, run it and send its reports and outcome to the parent."""
     _exit_when_parent_dies()
-    lock = threading.Lock()  # report may be called from several threads of the task
-    phase, step = "start", None
-
-    def report(new_phase: str, new_step: int | None = None, line: str | None = None) -> None:
-        nonlocal phase, step
-        with lock:
-            phase, step = new_phase, new_step
-            conn.send(("report", new_phase, new_step, line))
-
+    runner = TaskRunner(conn.send)
     try:
-        fn, args = cloudpickle.loads(payload)
-        value = fn(*args, report=report)
-        with lock:
-            conn.send(("done", value))  # pickles first: an unpicklable value sends nothing, then an error
-    except BaseException as e:  # SystemExit and KeyboardInterrupt are a task's failure too
-        message = ("error", phase, step, _one_line(e), traceback.format_exc(), _pickled_exception(e))
-        with lock:
-            conn.send(message)
+        try:
+            fn, args = cloudpickle.loads(payload)
+        except BaseException as e:
+            message: tuple[Any, ...] = ("error", "start", None, _one_line(e), traceback.format_exc(), None)
+        else:
+            message = runner(fn, args)
+        try:
+            conn.send(message)  # pickles first: an unpicklable value sends nothing, then an error
+        except Exception as e:
+            conn.send(("error", runner.phase, runner.step, _one_line(e), traceback.format_exc(), None))
     finally:
         conn.close()
 
@@ -211,7 +241,7 @@ class _Child:
     deadline: float | None = None  # set once its outcome or EOF arrived: when it is terminated if still alive
 
 
-class _SigtermGuard:
+class SigtermGuard:
     """Turns SIGTERM into ``KeyboardInterrupt`` while installed (main thread only, else it does nothing).
 
     While ``deferring``, a SIGTERM is only noted (``pending``): a child being started is
@@ -266,17 +296,6 @@ def _died(child: _Child) -> Failure:
     return Failure(key=child.task.key, phase=child.phase, step=child.step, cause=f"worker process died ({how})")
 
 
-def _failure_from(child: _Child, message: tuple[Any, ...]) -> Failure:
-    _, phase, step, cause, text, pickled = message
-    exception: BaseException | None = None
-    if pickled is not None:
-        with contextlib.suppress(Exception):  # e.g. an exception class whose __init__ takes other arguments
-            loaded = pickle.loads(pickled)
-            if isinstance(loaded, BaseException):
-                exception = loaded
-    return Failure(key=child.task.key, phase=phase, step=step, cause=cause, traceback=text, exception=exception)
-
-
 def _read(child: _Child, on_line: Callable[[int, str], None] | None, limit: int | None) -> Outcome | None:
     """Read up to ``limit`` (None: all) messages that are already there; return the outcome if it came."""
     count = 0
@@ -300,10 +319,8 @@ def _read(child: _Child, on_line: Callable[[int, str], None] | None, limit: int 
             _, child.phase, child.step, line = message
             if line is not None and on_line is not None:
                 on_line(child.task.key, line)
-        elif kind == "done":
-            return Done(key=child.task.key, value=message[1])
-        elif kind == "error":
-            return _failure_from(child, message)
+        elif kind in ("done", "error"):
+            return outcome_of(child.task.key, message)
     return None
 
 
@@ -382,7 +399,7 @@ def run_tasks(
     pending = deque(tasks)
     children: list[_Child] = []
     outcomes: dict[int, Outcome] = {}
-    guard = _SigtermGuard()
+    guard = SigtermGuard()
     guard.install()
     try:
         while pending or children:

@@ -161,7 +161,7 @@ RESULT = RunResult(spec="s", seed=0, timesteps=1, episodes=1, successes={"pendul
 
 
 def test_a_store_killed_midway_leaves_no_entry_only_a_temporary_folder(tmp_path):
-    # A separate process dies (os._exit, no cleanup) while writing the model.
+    # A separate process dies (os._exit, no cleanup) while writing the entry's model file.
     script = textwrap.dedent(
         f"""
         import os
@@ -169,15 +169,14 @@ def test_a_store_killed_midway_leaves_no_entry_only_a_temporary_folder(tmp_path)
         from specguard.cache import Cache
         from specguard.train import RunResult
 
-        class Dies:
-            def save(self, path):
-                Path(path).write_bytes(b"part")
-                os._exit(9)
-            def get_env(self):
-                return None
+        def dies(path, data):
+            with open(path, "wb") as f:
+                f.write(data[:3])
+            os._exit(9)
 
+        Path.write_bytes = dies
         result = RunResult(spec="s", seed=0, timesteps=1, episodes=1, successes={{"pendulum": 1}}, train_seconds=0.0)
-        Cache({str(tmp_path)!r}).store_key("ab" * 32, result, Dies(), normalize=False)
+        Cache({str(tmp_path)!r}).store_files("ab" * 32, result, {{"model.zip": b"model bytes"}})
         """
     )
     done = subprocess.run([sys.executable, "-c", script], check=False)
