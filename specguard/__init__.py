@@ -42,7 +42,8 @@ _EXPORTS = {
     "EvaluationError": "specguard.error",
     "FingerprintError": "specguard.error",
     "Goal": "specguard.nodes",
-    "GoalEnv": "specguard.env",
+    "GoalEnv": "specguard.env",  # deprecated name of SpecEnv (warns)
+    "SpecEnv": "specguard.env",
     "GoalInfo": "specguard.env",
     "GoalVerdict": "specguard.engine",
     "InitialEnv": "specguard.initial_env",
@@ -54,6 +55,7 @@ _EXPORTS = {
     "SpecResult": "specguard.engine",
     "StateMappingError": "specguard.error",
     "UnknownFeature": "specguard.error",
+    "UnreachableGoal": "specguard.error",
     "compile_tree": "specguard.compiled",
     "formula": "specguard.reward_formula",
     "goal_spec": "specguard.declare",
@@ -71,8 +73,8 @@ __all__ = [
     "Constraint",
     "Distance",
     "EvaluationError",
+    "FingerprintError",
     "Goal",
-    "GoalEnv",
     "GoalInfo",
     "GoalVerdict",
     "InitialEnv",
@@ -80,10 +82,12 @@ __all__ = [
     "InvalidSpec",
     "Node",
     "Spec",
+    "SpecEnv",
     "SpecError",
     "SpecResult",
     "StateMappingError",
     "UnknownFeature",
+    "UnreachableGoal",
     "__version__",
     "compile_tree",
     "formula",
@@ -99,7 +103,8 @@ def __getattr__(name: str) -> Any:
     if module is None:
         raise AttributeError(f"module 'specguard' has no attribute {name!r}")
     value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
+    if name != "GoalEnv":  # the deprecated name warns on every use
+        globals()[name] = value
     return value
 
 
@@ -113,14 +118,16 @@ if TYPE_CHECKING:
     from specguard.compiled import CompiledTree, compile_tree
     from specguard.declare import goal_spec
     from specguard.engine import GoalVerdict, SpecResult, run_spec
-    from specguard.env import GoalEnv, GoalInfo, make_baseline_env, make_env
+    from specguard.env import GoalInfo, SpecEnv, make_baseline_env, make_env
     from specguard.error import (
         EvaluationError,
+        FingerprintError,
         InitialEnvError,
         InvalidSpec,
         SpecError,
         StateMappingError,
         UnknownFeature,
+        UnreachableGoal,
     )
     from specguard.initial_env import InitialEnv
     from specguard.nodes import All, Annotation, Constraint, Distance, Goal, Node

@@ -15,12 +15,15 @@ Example:
 from __future__ import annotations
 
 import math
+import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass
 from numbers import Integral, Real
+from typing import Any
 
 from specguard.error import InvalidSpec
 
-__all__ = ["Budget"]
+__all__ = ["Budget", "trained_timesteps"]
 
 
 def _positive_int(field: str, value: object) -> int:
@@ -91,3 +94,54 @@ class Budget:
             max_eval_episodes=self.max_eval_episodes,
             wall_clock_s=self.wall_clock_s,
         )
+
+
+# stable-baselines3's defaults: on-policy algorithms train whole rollouts of
+# n_steps per env; off-policy ones collect train_freq steps per env between updates.
+_ROLLOUT_STEPS = {"PPO": ("n_steps", 2048), "A2C": ("n_steps", 5)}
+_TRAIN_FREQ = {"DQN": 4, "SAC": 1, "TD3": 1, "DDPG": 1}
+ROUNDING_WARNING = 0.10  # warn when training rounds the budget up by more than this fraction
+
+
+def _collect_steps(algorithm: str, hyperparameters: Mapping[str, Any]) -> int:
+    """Steps per env that one collection takes (1 where stable-baselines3 counts episodes instead)."""
+    if algorithm in _ROLLOUT_STEPS:
+        key, default = _ROLLOUT_STEPS[algorithm]
+        value = hyperparameters.get(key, default)
+    else:
+        freq = hyperparameters.get("train_freq", _TRAIN_FREQ.get(algorithm, 1))
+        if isinstance(freq, (tuple, list)):
+            freq = freq[0] if len(freq) == 2 and str(freq[1]) == "step" else 1
+        value = freq
+    if isinstance(value, bool) or not isinstance(value, Integral) or value < 1:
+        return 1  # the algorithm rejects it when training, with its own message
+    return int(value)
+
+
+def trained_timesteps(
+    budget: Budget | int, algorithm: str, hyperparameters: Mapping[str, Any] | None = None, n_envs: int = 1
+) -> int:
+    """The timesteps a run actually trains: the budget rounded up to whole collections.
+
+    stable-baselines3 stops only between collections: PPO and A2C collect
+    ``n_steps`` per env (defaults 2048 and 5), so they train
+    ``ceil(timesteps / (n_steps * n_envs)) * n_steps * n_envs``; off-policy
+    algorithms collect ``train_freq`` steps per env (DQN 4, SAC/TD3/DDPG 1).
+    Warns once when that is more than 10% above the budget.
+
+    Example:
+        >>> trained_timesteps(100_000, "PPO", {"n_steps": 1024}, n_envs=4)
+        102400
+    """
+    timesteps = budget.timesteps if isinstance(budget, Budget) else _positive_int("timesteps", budget)
+    chunk = _collect_steps(algorithm, hyperparameters or {}) * n_envs
+    trained = math.ceil(timesteps / chunk) * chunk
+    if trained > timesteps * (1 + ROUNDING_WARNING):
+        warnings.warn(
+            f"budget of {timesteps} timesteps trains {trained}: {algorithm} collects {chunk} steps at a time "
+            f"({chunk // n_envs} per env x {n_envs} env{'s' if n_envs != 1 else ''}); "
+            f"set timesteps to a multiple of {chunk} or lower "
+            + ("n_steps" if algorithm in _ROLLOUT_STEPS else "train_freq"),
+            stacklevel=2,
+        )
+    return trained

@@ -13,7 +13,6 @@ usage or spec error.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import importlib.util
 import json
 import os
@@ -27,7 +26,6 @@ import cloudpickle
 
 from specguard.error import SpecError
 from specguard.nodes import Node
-from specguard.reward_formula import formula
 from specguard.spec import Spec
 
 __all__ = ["load_objects", "main"]
@@ -79,17 +77,15 @@ def load_objects(target: str, kinds: tuple[type, ...] = (Spec,)) -> dict[str, An
 
 
 def _show(target: str) -> int:
+    from specguard.show import has_goal_specs, render_spec, render_tree, show_goal_spec_file
+
+    if has_goal_specs(Path(target.partition("::")[0])):  # a pytest file: only pytest resolves its fixtures
+        return show_goal_spec_file(target)
     for name, obj in load_objects(target, (Spec, Node)).items():
-        tree = obj.tree if isinstance(obj, Spec) else obj
-        print(f"== {name}")
         if isinstance(obj, Spec):
-            kind = "baseline: the initial env's own reward" if obj.baseline else "constructed env"
-            print(f"{obj.initial_env!r}, {obj.algorithm}, {kind}")
-            print(f"budget: {obj.budget}")
-            if obj.thresholds:
-                print("expect: " + ", ".join(f"{p} >= {t:g}" for p, t in obj.thresholds.items()))
-        print(tree.pretty())
-        print(formula(tree))
+            print(render_spec(obj, name))
+        else:
+            print("\n".join([f"== {name}", *render_tree(obj)]))
         print()
     return 0
 
@@ -126,19 +122,19 @@ def _run(args: argparse.Namespace) -> int:
 
 def _run_all(args: argparse.Namespace, specs: dict[str, Any], executor: Any) -> tuple[dict[str, Any], bool]:
     """Train and print every spec; returns the results as JSON data and whether one failed."""
-    from specguard.engine import print_progress, run_spec
+    from specguard.engine import run_spec
+    from specguard.progress import print_event
 
     results = {}
     failed = False
     for name, spec in specs.items():
-        if args.budget_scale != 1.0:
-            spec = dataclasses.replace(spec, budget=spec.budget.scaled(args.budget_scale))
+        spec = spec.scaled(args.budget_scale)
         result = run_spec(
             spec,
             executor=executor,
             workers=args.workers,
             cache_dir=None if args.no_cache else args.cache_dir,
-            progress=None if args.quiet else print_progress,
+            progress=None if args.quiet else print_event,
         )
         results[name] = result.to_dict()
         print(f"== {name}: {'passed' if result.passed else 'FAILED'} ({result.seconds:.1f}s)")
@@ -149,15 +145,12 @@ def _run_all(args: argparse.Namespace, specs: dict[str, Any], executor: Any) -> 
 
 
 def _workers(text: str) -> int | str:
-    if text == "auto":
-        return text
+    from specguard.workers import parse_workers
+
     try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1 or 'auto', got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1 or 'auto', got {text!r}")
-    return value
+        return parse_workers(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
 
 
 def _executor(text: str) -> str:
@@ -182,11 +175,20 @@ def _scale(text: str) -> float:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="specguard", description="Goal-tree specifications for RL: show and run.")
     sub = parser.add_subparsers(dest="command", required=True)
-    show = sub.add_parser("show", help="print the tree and reward formula of specs in a file")
+    show = sub.add_parser(
+        "show",
+        help="print the tree, reward formula, observation layout and budget of specs in a file "
+        "(a pytest goal-spec file too), training nothing",
+    )
     show.add_argument("target", metavar="PATH[::NAME]")
     run = sub.add_parser("run", help="train specs within their budgets and print per-goal verdicts")
     run.add_argument("target", metavar="PATH[::NAME]")
-    run.add_argument("--workers", type=_workers, default="auto", help="parallel training processes (default: auto)")
+    run.add_argument(
+        "--workers",
+        type=_workers,
+        default="auto",
+        help="parallel training processes (default: auto, one per usable core)",
+    )
     run.add_argument("--cache-dir", default=".specguard/cache", help="run cache (default: .specguard/cache)")
     run.add_argument("--no-cache", action="store_true", help="neither read nor write the cache")
     run.add_argument("--budget-scale", type=_scale, default=1.0, help="multiply training timesteps, e.g. 0.25")

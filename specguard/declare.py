@@ -61,32 +61,46 @@ def goal_spec(
             (``{goal: reason}`` or a list of goals): they report XFAIL, and
             XPASS once they start passing.
 
-    Raises:
-        InvalidSpec: malformed ``expect`` or ``xfail`` (at import, so pytest
-            reports a collection error naming the file).
+    A malformed ``expect`` or ``xfail`` does not stop collection: the test
+    becomes one item that fails with the error (naming the test and the
+    option), and the session's other goal specs still run.
     """
 
     def apply(fn: F) -> F:
         import pytest
 
         where = f"goal_spec {getattr(fn, '__qualname__', fn)!r}"
-        thresholds = _check_expect(where, expect)
-        if xfail is None:
-            reasons: dict[Any, str] = {}
-        elif isinstance(xfail, Mapping):
-            reasons = {str(k): str(v) for k, v in xfail.items()}
-        elif isinstance(xfail, Sequence) and not isinstance(xfail, str):
-            reasons = {str(k): "expected to miss its threshold" for k in xfail}
-        else:
-            raise InvalidSpec(where, f"expected xfail to be {{goal: reason}} or a list of goals, got {xfail!r}")
-        if thresholds is not None and ROOT in thresholds:
-            # One number asserts the root goal, which xfail calls "root".
-            reasons = {ROOT if k == "root" else k: v for k, v in reasons.items()}
-        if thresholds is not None:
-            unknown = [g for g in reasons if g not in thresholds]
-            if unknown:
-                raise InvalidSpec(where, f"xfail names goals {unknown} that expect does not list: {list(thresholds)}")
+        try:
+            thresholds, reasons = _check_declaration(where, expect, xfail)
+        except InvalidSpec as e:
+            marked = pytest.mark.usefixtures(GOAL_FIXTURE)(fn)
+            return pytest.mark.goal_spec(expect=None, xfail={}, error=str(e))(marked)  # type: ignore[no-any-return]
         marked = pytest.mark.usefixtures(GOAL_FIXTURE)(fn)
         return pytest.mark.goal_spec(expect=thresholds, xfail=reasons)(marked)  # type: ignore[no-any-return]
 
     return apply
+
+
+def _check_declaration(where: str, expect: object, xfail: object) -> tuple[dict[Any, float] | None, dict[Any, str]]:
+    """The decorator's thresholds and xfail reasons, checked.
+
+    Raises:
+        InvalidSpec: naming the test and what is wrong.
+    """
+    thresholds = _check_expect(where, expect)
+    if xfail is None:
+        reasons: dict[Any, str] = {}
+    elif isinstance(xfail, Mapping):
+        reasons = {str(k): str(v) for k, v in xfail.items()}
+    elif isinstance(xfail, Sequence) and not isinstance(xfail, str):
+        reasons = {str(k): "expected to miss its threshold" for k in xfail}
+    else:
+        raise InvalidSpec(where, f"expected xfail to be {{goal: reason}} or a list of goals, got {xfail!r}")
+    if thresholds is not None and ROOT in thresholds:
+        # One number asserts the root goal, which xfail calls "root".
+        reasons = {ROOT if k == "root" else k: v for k, v in reasons.items()}
+    if thresholds is not None:
+        unknown = [g for g in reasons if g not in thresholds]
+        if unknown:
+            raise InvalidSpec(where, f"xfail names goals {unknown} that expect does not list: {list(thresholds)}")
+    return thresholds, reasons

@@ -16,43 +16,48 @@ Example:
 
 from __future__ import annotations
 
-import os
 import sys
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from specguard.cache import Cache, try_acquire, wait_for
 from specguard.error import SpecError
 from specguard.executors import LOCAL, Executor, make_executor
 from specguard.fingerprint import fingerprint_spec
+from specguard.progress import ProgressEvent, decode_update, print_event
 from specguard.spec import Spec
 from specguard.stats import QuorumVerdict, RunVerdict, quorum_verdict, run_verdict, success_interval
+from specguard.text import render_table
 from specguard.train import RunResult, TrainingError
 from specguard.workers import Failure, Report, Task
+from specguard.workers import resolve_workers as workers_for
 
 __all__ = ["GoalVerdict", "SpecResult", "resolve_workers", "run_spec"]
 
-Progress = Callable[[str], None]
+Progress = Callable[[ProgressEvent], None]
 
 
-def print_progress(line: str) -> None:
-    """The default progress sink: one flushed line on stderr, which CI logs capture."""
-    print(line, file=sys.stderr, flush=True)
+def print_progress(event: ProgressEvent | str) -> None:
+    """The default progress sink: the event as one flushed line on stderr, which CI logs capture."""
+    if isinstance(event, ProgressEvent):
+        print_event(event)
+    else:
+        print(event, file=sys.stderr, flush=True)
 
 
 def resolve_workers(workers: int | str) -> int:
-    """``"auto"`` is the number of usable cores; otherwise an integer >= 1."""
-    if workers == "auto":
-        try:
-            return max(1, len(os.sched_getaffinity(0)))
-        except AttributeError:  # not on Linux
-            return max(1, os.cpu_count() or 1)
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise SpecError(f"workers: expected an integer >= 1 or 'auto', got {workers!r}")
-    return workers
+    """``"auto"`` is the number of usable cores; otherwise an integer >= 1 (:func:`specguard.workers.resolve_workers`).
+
+    Raises:
+        SpecError: anything else.
+    """
+    try:
+        return workers_for(workers)
+    except ValueError as e:
+        raise SpecError(f"workers: {e}") from None
 
 
 @dataclass
@@ -91,14 +96,56 @@ class SpecResult:
     runs: list[RunResult]
     goals: dict[str, GoalVerdict]
     errors: dict[int, str] = field(default_factory=dict)
+    tracebacks: dict[int, str] = field(default_factory=dict)  # the worker's, per failed seed (shown under -v)
     cached: dict[int, bool] = field(default_factory=dict)
     seconds: float = 0.0
     confidence: float = 0.95
     spec_key: str | None = None
+    trained: Spec | None = field(default=None, repr=False, compare=False)  # the spec as run, for model()/rollout()
+    cache_dir: Path | None = field(default=None, repr=False, compare=False)
 
     @property
     def passed(self) -> bool:
         return not self.errors and all(g.verdict is QuorumVerdict.PASSED for g in self.goals.values())
+
+    def model(self, seed: int) -> Any:
+        """The trained SB3 model of run ``seed`` (loaded from the cache, after its checksums are verified).
+
+        Raises:
+            SpecError: the run was not cached (``cache_dir=None``) or is gone.
+        """
+        return self._load(seed)[0]
+
+    def rollout(self, seed: int, episodes: int = 1, *, deterministic: bool = True) -> list[list[dict[str, Any]]]:
+        """Episodes of run ``seed``'s policy on its env, seeded as evaluation episodes are.
+
+        Returns:
+            One list of steps per episode: ``{"obs", "action", "reward",
+            "terminated", "truncated", "info"}`` with ``info["goals"]``.
+
+        Example:
+            >>> result = goal_spec_result(spec)  # doctest: +SKIP
+            >>> last = result.rollout(0, episodes=1)[0][-1]  # doctest: +SKIP
+            >>> assert last["info"]["goals"]["pendulum/stabilization"]  # doctest: +SKIP
+        """
+        from specguard.rollout import rollout
+
+        model, normalizer = self._load(seed)
+        assert self.trained is not None
+        return rollout(model, self.trained, episodes=episodes, deterministic=deterministic, normalizer=normalizer)
+
+    def _load(self, seed: int) -> tuple[Any, Any]:
+        from specguard.rollout import load_model
+
+        if self.trained is None or self.cache_dir is None:
+            raise SpecError(
+                f"Spec {self.spec!r}: no model kept for seed {seed}: the runs were not cached",
+                hint="run with a cache (the default) to reach trained models",
+            )
+        try:
+            return load_model(self.trained, seed, self.cache_dir)
+        except FileNotFoundError as e:
+            raise SpecError(f"Spec {self.spec!r}: {e}", hint="train it again: its cache entry is gone") from None
 
     def success(self, path: str) -> tuple[int, int]:
         """Pooled ``(successes, episodes)`` of a goal over all runs."""
@@ -120,7 +167,8 @@ class SpecResult:
     def table(self) -> str:
         """A per-goal table: pooled success with interval, threshold, runs, verdict."""
         paths = [p for r in self.runs[:1] for p in r.successes] or list(self.goals)
-        rows = [("goal", "success", f"{self.confidence:.0%} interval", "threshold", "runs met", "verdict")]
+        header = ("goal", "success", f"{self.confidence:.0%} interval", "threshold", "runs met", "verdict")
+        rows = []
         for p in paths:
             k, n = self.success(p)
             rate = f"{k / n:.0%} ({k}/{n})" if n else "-"
@@ -129,9 +177,7 @@ class SpecResult:
             met = "-" if g is None else f"{g.runs.count(RunVerdict.MET)}/{len(g.runs)} (need {g.required})"
             threshold = "-" if g is None else f">= {g.threshold:g}"
             rows.append((p, rate, iv, threshold, met, "-" if g is None else g.verdict.value))
-        widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-        lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
-        lines.insert(1, "  ".join("-" * w for w in widths))
+        lines = render_table(header, rows)
         for seed, message in self.errors.items():
             lines.append(f"seed {seed} failed: {message}")
         return "\n".join(lines)
@@ -158,7 +204,7 @@ _PHASES = {"start": "starting", "build": "building the env", "train": "training 
 def _describe_failure(seed: int, failure: Failure) -> str:
     """One line: the seed, where the run was, and why it failed."""
     if isinstance(failure.exception, TrainingError):
-        return str(failure.exception)  # already names the seed, the phase and the step
+        return failure.exception.message  # already names the seed, the phase and the step (the hint is generic)
     where = _PHASES.get(failure.phase, failure.phase)
     step = "" if failure.step is None or failure.phase not in ("train", "evaluate") else f" {failure.step}"
     return f"seed {seed}, {where}{step}: {failure.cause}"
@@ -240,7 +286,7 @@ class _Runs:
         run.spec = self.spec.label  # the label is not part of a run's key
         self.result.runs.append(run)
         self.result.cached[seed] = True
-        self.say(f"[specguard] {self.spec.label}: seed {seed} from cache")
+        self._event(seed, "cached", run, message=self._rates(run))
         return True
 
     def run(self, seeds: list[int]) -> None:
@@ -268,7 +314,7 @@ class _Runs:
                 assert key is not None and self.cache is not None
                 lock = self.cache.lock(key, self.lock_timeout)
                 if not try_acquire(lock):
-                    self.say(f"[specguard] {self.spec.label}: seed {seed} is being trained by another process; waiting")
+                    self.say(ProgressEvent(self.spec.label, seed, "waiting"))
                     wait_for(lock, f"Spec {self.spec.label!r}, seed {seed}", self.lock_timeout)
                 locks[seed] = lock
                 if not self._hit(seed):
@@ -282,21 +328,25 @@ class _Runs:
             return
         tasks = []
         for seed in seeds:
-            self.say(f"[specguard] {self.spec.label}: training seed {seed} ({self.spec.budget.timesteps} steps)")
+            self.say(ProgressEvent(self.spec.label, seed, "start", budget=self.spec.budget.timesteps))
             tasks.append(Task(seed, _train_task, (self.spec, seed, self._key(seed) is not None)))
         outcomes = self.executor.run(
             tasks,
-            on_line=lambda seed, line: self.say(f"[specguard] {self.spec.label} seed {seed}: {line}"),
+            on_line=lambda seed, line: self.say(decode_update(self.spec.label, seed, line)),
             stop_on=_is_spec_error,
         )
         for outcome in outcomes.values():
             if isinstance(outcome, Failure) and _is_spec_error(outcome):
                 assert outcome.exception is not None
+                if outcome.traceback:
+                    outcome.exception.add_note(f"worker traceback (seed {outcome.key}):\n{outcome.traceback}")
                 raise outcome.exception
         for seed, outcome in outcomes.items():
             if isinstance(outcome, Failure):  # other seeds' results are kept
                 self.result.errors[seed] = _describe_failure(seed, outcome)
-                self.say(f"[specguard] {self.spec.label}: seed {seed} failed: {self.result.errors[seed]}")
+                if outcome.traceback:
+                    self.result.tracebacks[seed] = outcome.traceback
+                self.say(ProgressEvent(self.spec.label, seed, "failed", message=self.result.errors[seed]))
                 continue
             run = RunResult(**outcome.value["result"])
             key = self._key(seed)
@@ -304,8 +354,28 @@ class _Runs:
                 self.cache.store_files(key, run, outcome.value["files"])
             self.result.runs.append(run)
             self.result.cached[seed] = False
-            rates = ", ".join(f"{p} {c}/{run.episodes}" for p, c in run.successes.items())
-            self.say(f"[specguard] {self.spec.label}: seed {seed} done in {run.train_seconds:.1f}s: {rates}")
+            self._event(seed, "done", run, message=self._rates(run))
+
+    @staticmethod
+    def _rates(run: RunResult) -> str:
+        return ", ".join(f"{p} {c}/{run.episodes}" for p, c in run.successes.items())
+
+    def _event(self, seed: int, kind: Literal["done", "cached"], run: RunResult, message: str) -> None:
+        """A finished run's event: its steps, training time and the root goal's evaluation success."""
+        root = next(iter(run.successes.values()), None)
+        self.say(
+            ProgressEvent(
+                self.spec.label,
+                seed,
+                kind,
+                steps=run.timesteps,
+                budget=self.spec.budget.timesteps,
+                elapsed_s=run.train_seconds,
+                success=None if root is None or not run.episodes else root / run.episodes,
+                episodes=run.episodes,
+                message=message,
+            )
+        )
 
 
 def run_spec(
@@ -329,7 +399,9 @@ def run_spec(
         spec: the spec.
         workers: parallel training processes (``"auto"``: the usable cores).
         cache_dir: where trained runs are kept and looked up; ``None`` disables the cache.
-        progress: called with one line per event (CI logs read it); ``None`` for silence.
+        progress: called with a :class:`~specguard.progress.ProgressEvent` per
+            seed's start, tenth of training, end, cache hit, failure or wait
+            (``format_event`` or ``str(event)`` makes it a line); ``None`` for silence.
         lock_timeout: seconds to wait for another process training the same run.
         executor: ``"local"`` (a process per seed on this machine, ``workers``
             at once), a Dask scheduler address (``"tcp://host:8786"``), or an
@@ -343,16 +415,17 @@ def run_spec(
         SpecError: the spec is invalid (also when a worker finds it so, e.g.
             rejected hyperparameters), or cannot be fingerprinted for the cache.
     """
-    say = progress or (lambda line: None)
+    say = progress or (lambda event: None)
     n_workers = resolve_workers(workers)
     cache = Cache(Path(cache_dir)) if cache_dir is not None else None
     start = time.perf_counter()
-    result = SpecResult(spec=spec.label, runs=[], goals={}, confidence=spec.confidence)
+    result = SpecResult(spec=spec.label, runs=[], goals={}, confidence=spec.confidence, trained=spec)
     owned = isinstance(executor, str)
     runner = make_executor(executor, workers=n_workers) if isinstance(executor, str) else executor
     try:
         runs = _Runs(spec, result, cache, runner, lock_timeout, say)
         result.spec_key = None if runs.fingerprint is None else runs.fingerprint.spec_key
+        result.cache_dir = None if runs.cache is None else runs.cache.root
         next_seed = 0
         while True:
             result.goals = _judge(spec, result.runs, len(result.errors))

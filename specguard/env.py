@@ -1,6 +1,6 @@
 """The constructed environment: a Gymnasium wrapper built from a goal tree (SPEC.md section 2).
 
-:class:`GoalEnv` takes the base env as its first argument and records its
+:class:`SpecEnv` takes the base env as its first argument and records its
 other constructor arguments, so ``env.spec`` re-creates it the Gymnasium way
 (``gym.make(env.spec)``, ``check_env``, ``make_vec_env``, ``SubprocVecEnv``).
 
@@ -30,13 +30,14 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.utils import RecordConstructorArgs
 
+from specguard.checks import check_goals
 from specguard.compiled import compile_tree
 from specguard.error import EvaluationError, InitialEnvError, InvalidSpec, SpecError, StateMappingError
 from specguard.initial_env import InitialEnv, check_identity_observation
 from specguard.nodes import Node
 from specguard.reference import ReferenceEvaluator
 
-__all__ = ["GoalEnv", "GoalInfo", "make_baseline_env", "make_env"]
+__all__ = ["GoalInfo", "SpecEnv", "make_baseline_env", "make_env"]
 
 EvaluatorName = Literal["flat", "reference"]
 
@@ -59,7 +60,7 @@ def _features(obs: Any, state: Callable[[Any], Any] | None, features: tuple[str,
     return f
 
 
-class GoalEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
+class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
     """Wraps an initial env into the environment Algorithm 1 constructs from ``tree``.
 
     * observation: ``state(obs*)`` followed by one counter per constraint
@@ -217,14 +218,15 @@ def make_baseline_env(initial_env: InitialEnv, tree: Node, **make_kwargs: Any) -
     compile_tree(tree, initial_env.features)
     base = initial_env.make(**make_kwargs)
     try:
-        initial_env.check_observation_space(base.observation_space)
+        low, high = initial_env.feature_bounds(base.observation_space)  # checks the features fit the observation
+        check_goals(tree, initial_env.features, low, high)  # refuse a goal no state can be in, before training
         return GoalInfo(base, tree=tree, features=initial_env.features, state=initial_env.state)
     except SpecError:
         base.close()
         raise
 
 
-def make_env(initial_env: InitialEnv, tree: Node, *, evaluator: EvaluatorName = "flat", **make_kwargs: Any) -> GoalEnv:
+def make_env(initial_env: InitialEnv, tree: Node, *, evaluator: EvaluatorName = "flat", **make_kwargs: Any) -> SpecEnv:
     """Construct the trainable env of ``tree`` over ``initial_env`` (Algorithm 1).
 
     Args:
@@ -235,7 +237,7 @@ def make_env(initial_env: InitialEnv, tree: Node, *, evaluator: EvaluatorName = 
             (e.g. ``render_mode="human"``).
 
     Returns:
-        A :class:`GoalEnv`, a ``gymnasium.Env``.
+        A :class:`SpecEnv`, a ``gymnasium.Env``.
 
     Raises:
         SpecError: the tree or the initial env is invalid; the message names the node path.
@@ -248,7 +250,8 @@ def make_env(initial_env: InitialEnv, tree: Node, *, evaluator: EvaluatorName = 
     base = initial_env.make(**make_kwargs)
     try:
         low, high = initial_env.feature_bounds(base.observation_space)  # checks the features fit the observation
-        return GoalEnv(
+        check_goals(tree, initial_env.features, low, high)  # refuse a goal no state can be in, before training
+        return SpecEnv(
             base,
             tree=tree,
             features=initial_env.features,
@@ -262,3 +265,18 @@ def make_env(initial_env: InitialEnv, tree: Node, *, evaluator: EvaluatorName = 
     except SpecError:
         base.close()
         raise
+
+
+def __getattr__(name: str) -> Any:
+    # GoalEnv was this class's name until 0.1; it clashed with gymnasium-robotics' goal-conditioned GoalEnv.
+    if name == "GoalEnv":
+        import warnings
+
+        warnings.warn(
+            "specguard.GoalEnv is renamed SpecEnv (GoalEnv is gymnasium-robotics' goal-conditioned env); "
+            "the old name goes in the next release",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return SpecEnv
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -15,11 +15,33 @@ __all__ = [
     "SpecError",
     "StateMappingError",
     "UnknownFeature",
+    "UnreachableGoal",
 ]
 
 
 class SpecError(Exception):
-    """Base class of every error specguard raises on purpose."""
+    """Base class of every error specguard raises on purpose.
+
+    The message ends with a ``Hint:`` line: the one given, else the class's
+    :attr:`default_hint` (every error about a user's mistake says what to try).
+
+    Attributes:
+        message: the message without its hint.
+        hint: the hint shown, or None.
+    """
+
+    default_hint: str | None = None
+
+    def __init__(self, message: str = "", hint: str | None = None) -> None:
+        self.message = message
+        if hint is None and "\nHint: " not in message:
+            hint = self.default_hint
+        self.hint = hint
+        super().__init__(f"{message}\nHint: {hint}" if hint else message)
+
+    def __reduce__(self) -> tuple[type, tuple[str | None, ...]]:
+        # Raised in worker processes: must survive pickling with its hint.
+        return type(self), (self.message, self.hint)
 
 
 class InvalidSpec(SpecError, ValueError):
@@ -30,16 +52,14 @@ class InvalidSpec(SpecError, ValueError):
             (``"pendulum/position:distance"``) at fault.
     """
 
+    default_hint = "the message names the node or option at fault; README's tables list what each one accepts"
+
     def __init__(self, where: str, message: str, hint: str | None = None) -> None:
         self.where = where
+        super().__init__(f"{where}: {message}", hint)
         self.message = message
-        self.hint = hint
-        text = f"{where}: {message}"
-        if hint:
-            text += f"\nHint: {hint}"
-        super().__init__(text)
 
-    def __reduce__(self) -> tuple[type, tuple[str, str, str | None]]:
+    def __reduce__(self) -> tuple[type, tuple[str | None, ...]]:
         # Raised in training worker processes: must survive pickling.
         return type(self), (self.where, self.message, self.hint)
 
@@ -48,16 +68,33 @@ class UnknownFeature(InvalidSpec):
     """A goal or annotation names a feature the initial environment does not have."""
 
 
+class UnreachableGoal(InvalidSpec):
+    """A goal's box lies outside the known bounds of its features: no state can ever be in it.
+
+    Raised before training (by ``make_env`` and ``make_baseline_env``), so a
+    spec that could only train for nothing costs nothing. The message names
+    the node path, the feature, the box and the bounds.
+    """
+
+
 class InitialEnvError(SpecError):
     """The initial environment cannot be built or does not fit its declaration."""
+
+    default_hint = "build it alone with gymnasium.make(id, **kwargs) (or call your factory) to see the problem directly"
 
 
 class StateMappingError(InitialEnvError):
     """``state()`` returned something that is not a feature vector of the declared length."""
 
+    default_hint = "state(obs) must return one finite number per declared feature, in the order of features="
+
 
 class EvaluationError(SpecError):
     """A user function (distance, constraint, ``state``) failed or returned a bad value during a step."""
+
+    default_hint = (
+        "a distance must return a finite number >= 0 and a constraint a truth value for every state the env can reach"
+    )
 
 
 class FingerprintError(InvalidSpec):

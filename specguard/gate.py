@@ -103,6 +103,14 @@ def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[RunVerdict])
     runs = result.runs
     never = [r.seed for r in runs if r.successes[path] == 0]
     shaped = any(isinstance(a, Distance) for _, n in _node(spec.tree, path).walk() for a in n.annotations)
+    if never:
+        from specguard.checks import unreachable_reason
+
+        # "Impossible" is refused before training; should a result from elsewhere (an old cache) get here,
+        # no Distance can help: say why, instead of "never reached".
+        impossible = unreachable_reason(spec.initial_env, spec.tree, path)
+        if impossible is not None:
+            return f"goal impossible, not just never reached: {impossible}"
     if never and not shaped:
         return (
             f"sparse goal never reached in {len(never)}/{len(runs)} seeds: consider a Distance annotation on {path!r}"

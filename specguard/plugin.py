@@ -8,9 +8,9 @@ plain ``pytest`` in a project with specguard installed stays fast.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
-import os
 import warnings
 from collections.abc import Callable, Generator
 from pathlib import Path
@@ -51,6 +51,8 @@ class _Session:
     executor: Any = None  # a specguard.executors.Executor, made once per session
     memo: dict[str, Any] = dataclasses.field(default_factory=dict)
     rows: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+    specs: dict[str, Any] = dataclasses.field(default_factory=dict)  # group -> its trained Spec, for report GIFs
+    progress: Callable[[Any], None] | None = None  # the run_spec sink: events to the terminal reporter
 
 
 _SESSION = pytest.StashKey[_Session]()
@@ -69,7 +71,7 @@ _SETTINGS: list[tuple[str, str, str, Any, str]] = [
         "goal_specs_workers",
         "string",
         "auto",
-        "parallel training processes per pytest process: N or auto",
+        "parallel training processes per pytest process: N, or auto = the usable cores (shared among xdist workers)",
     ),
     ("--goal-specs-cache-dir", "goal_specs_cache_dir", "string", ".specguard/cache", "where trained runs are cached"),
     (
@@ -97,8 +99,8 @@ _SETTINGS: list[tuple[str, str, str, Any, str]] = [
         "--goal-specs-baseline-dir",
         "goal_specs_baseline_dir",
         "string",
-        ".specguard/baselines",
-        "where saved baselines live",
+        "",
+        "where saved baselines live (default: 'baselines' beside the cache dir, .specguard/baselines)",
     ),
 ]
 
@@ -106,6 +108,13 @@ _SETTINGS: list[tuple[str, str, str, Any, str]] = [
 def pytest_addoption(parser: pytest.Parser) -> None:
     group = parser.getgroup("specguard", "goal specs (specguard)")
     group.addoption("--goal-specs", action="store_true", default=None, help="train goal specs and check their goals")
+    group.addoption(
+        "--goal-specs-show",
+        action="store_true",
+        default=False,
+        help="with --goal-specs: print every goal spec's tree, reward formula, observation layout and budget, "
+        "train nothing, and report its items skipped",
+    )
     parser.addini("goal_specs", type="bool", default=False, help="run goal specs without --goal-specs")
     for option, ini, kind, default, text in _SETTINGS:
         group.addoption(option, default=None, help=f"{text} (ini: {ini}, default: {default or 'none'})")
@@ -144,17 +153,13 @@ def _parse_options(config: pytest.Config) -> _Options:
         raise pytest.UsageError(
             f"--goal-specs-budget-scale: expected a number > 0, got {get('--goal-specs-budget-scale')!r}"
         ) from None
-    workers_text = get("--goal-specs-workers")
-    workers: int | str = workers_text
+    from specguard.workers import resolve_workers
+
     workerinput = getattr(config, "workerinput", None)
-    if workers_text == "auto" and workerinput is not None:
-        # Under xdist the cores are shared among its workers: do not oversubscribe them.
-        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-        workers = max(1, cores // int(workerinput.get("workercount", 1)))
-    elif workers_text != "auto":
-        if not workers_text.isdigit() or int(workers_text) < 1:
-            raise pytest.UsageError(f"--goal-specs-workers: expected an integer >= 1 or 'auto', got {workers_text!r}")
-        workers = int(workers_text)
+    try:  # under xdist, "auto" shares the cores among its workers
+        workers = resolve_workers(get("--goal-specs-workers"), share=int((workerinput or {}).get("workercount", 1)))
+    except ValueError as e:
+        raise pytest.UsageError(f"--goal-specs-workers: {e}") from None
     undecided = get("--goal-specs-undecided")
     if undecided not in UNDECIDED:
         raise pytest.UsageError(f"--goal-specs-undecided: expected one of {', '.join(UNDECIDED)}, got {undecided!r}")
@@ -168,7 +173,7 @@ def _parse_options(config: pytest.Config) -> _Options:
         report_dir=Path(report) if report else None,
         save=config.getoption("goal_specs_save"),
         compare=config.getoption("goal_specs_compare"),
-        baseline_dir=Path(get("--goal-specs-baseline-dir")),
+        baseline_dir=Path(get("--goal-specs-baseline-dir") or Path(get("--goal-specs-cache-dir")).parent / "baselines"),
         executor=_checked_executor(get("--goal-specs-executor")),
     )
 
@@ -216,6 +221,7 @@ def pytest_configure(config: pytest.Config) -> None:
             state.executor = make_executor(options.executor, workers=1)
         except ExecutorError as e:
             raise pytest.UsageError(f"--goal-specs-executor: {e}") from None
+    state.progress = _terminal_progress(config)
     config.stash[_SESSION] = state
     config.pluginmanager.register(_Recorder(config, state), "specguard-recorder")
 
@@ -288,13 +294,42 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
 
 def _scaled(state: _Session, spec: Any) -> Any:
-    if state.options.budget_scale == 1.0:
-        return spec
-    return dataclasses.replace(spec, budget=spec.budget.scaled(state.options.budget_scale))
+    return spec.scaled(state.options.budget_scale)
+
+
+def _terminal_progress(config: pytest.Config) -> Callable[[Any], None]:
+    """The progress sink of a session: events as lines through pytest's terminal reporter.
+
+    Not captured (no ``-s`` needed), each on a line of its own. On a terminal,
+    every event (a line per tenth of each seed's budget); in a log (not a tty,
+    or no markup), only the line that ends each seed's run; under ``-q``, none.
+    """
+
+    def write(event: Any) -> None:
+        from specguard.progress import format_event
+
+        if config.get_verbosity() < 0:
+            return
+        reporter = config.pluginmanager.get_plugin("terminalreporter")
+        if reporter is None:  # e.g. -p no:terminal: stderr, as `specguard run` does
+            if event.finished:
+                from specguard.progress import print_event
+
+                print_event(event)
+            return
+        live = reporter.isatty and config.get_terminal_writer().hasmarkup
+        if not live and not event.finished:
+            return
+        capture = config.pluginmanager.get_plugin("capturemanager")
+        with capture.global_and_fixture_disabled() if capture is not None else contextlib.nullcontext():
+            reporter.ensure_newline()
+            reporter.write_line(format_event(event))
+
+    return write
 
 
 def _run(state: _Session, spec: Any) -> Any:
-    from specguard.engine import print_progress, run_spec
+    from specguard.engine import run_spec
     from specguard.fingerprint import fingerprint_spec
 
     # Every goal item of a spec shares one result, under the spec's whole identity
@@ -305,7 +340,7 @@ def _run(state: _Session, spec: Any) -> Any:
             spec,
             workers=state.options.workers,
             cache_dir=state.options.cache_dir,
-            progress=print_progress,
+            progress=state.progress,
             executor=state.executor or "local",
         )
         state.memo[key].spec_key = key
@@ -324,6 +359,8 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
 
     state = pyfuncitem.config.stash[_SESSION]
     where = f"{pyfuncitem.path.name}::{pyfuncitem.name}"
+    if marker.kwargs.get("error"):  # a malformed @goal_spec fails its own item, not the collection
+        pytest.fail(f"{where}: {marker.kwargs['error']}", pytrace=False)
     args = {name: pyfuncitem.funcargs[name] for name in pyfuncitem._fixtureinfo.argnames}
     spec = pyfuncitem.obj(**args)
     if not isinstance(spec, Spec):
@@ -335,6 +372,8 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
         result = _run(state, _scaled(state, spec))
     except SpecError as e:
         error = f"{where}: {e}"
+        if _detailed(pyfuncitem.config):  # the worker's own traceback only when asked for
+            error += "".join(f"\n\n{note}" for note in getattr(e, "__notes__", ()))
     if error is not None:  # outside the handler: one message, not a chain of two
         pytest.fail(error, pytrace=False)
     baseline = (state.baseline, state.options.compare or "latest") if state.baseline is not None else None
@@ -344,6 +383,7 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
         row = check.to_row()
         if state.options.report_dir is not None:
             row["curves"] = [r.curve for r in result.runs]
+            state.specs.setdefault(row["group"], _scaled(state, spec))  # the spec as trained: its cache entries
         pyfuncitem.user_properties.append((PROPERTY, json.dumps(row)))
         pyfuncitem.user_properties += [(f"{PROPERTY}.{check.goal}.{k}", v) for k, v in check.junit_properties()]
         if check.outcome is Outcome.FAILED:
@@ -351,7 +391,10 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
         elif check.outcome is Outcome.UNDECIDED:
             undecided.append(check.message())
     if failures or (undecided and state.options.undecided == "fail"):
-        raise GoalMissed("\n\n".join(failures + undecided))
+        text = "\n\n".join(failures + undecided)
+        if _detailed(pyfuncitem.config) and result.tracebacks:
+            text += "".join(f"\n\nworker traceback (seed {k}):\n{tb}" for k, tb in sorted(result.tracebacks.items()))
+        raise GoalMissed(text)
     if undecided and state.options.undecided == "xfail":
         pytest.xfail("undecided: " + "\n\n".join(undecided))
     if undecided:
@@ -359,6 +402,11 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
             "undecided goal spec passed by --goal-specs-undecided=pass:\n" + "\n".join(undecided), stacklevel=1
         )
     return True
+
+
+def _detailed(config: pytest.Config) -> bool:
+    """Whether the user asked for details: ``-v`` or ``--tb=long``."""
+    return bool(config.get_verbosity() > 0 or config.getoption("tbstyle", "auto") == "long")
 
 
 @pytest.hookimpl(wrapper=True)
@@ -414,8 +462,15 @@ def _write_outputs(config: pytest.Config, state: _Session) -> list[Path]:
     written: list[Path] = []
     if state.options.report_dir is not None:
         from specguard.report import write_reports
+        from specguard.rollout import report_gifs
 
-        written += write_reports(state.options.report_dir, state.rows)
+        gifs = report_gifs(state.options.report_dir, state.rows, state.specs, state.options.cache_dir)
+        written += write_reports(state.options.report_dir, state.rows, gifs=gifs)
+        written += [gif.path for gif in gifs.values() if gif.path is not None]
+        terminal = config.pluginmanager.get_plugin("terminalreporter")
+        for group, gif in gifs.items():
+            if gif.path is None and terminal is not None:
+                terminal.write_line(f"specguard: {group}: {gif.text}")
     if state.options.save:
         from specguard.compare import save_baseline
 
@@ -428,3 +483,59 @@ def _write_outputs(config: pytest.Config, state: _Session) -> list[Path]:
         )
         written.append(path)
     return written
+
+
+# -- showing (--goal-specs-show) -----------------------------------------------------
+
+SHOW_PROPERTY = "specguard.show"
+SHOWN = "shown, not trained"
+_SHOWN_GROUPS = pytest.StashKey[set[str]]()
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_call(item: pytest.Item) -> None:
+    """Under ``--goal-specs-show``, a goal spec item renders its spec and is skipped instead of training."""
+    marker = item.get_closest_marker(MARKER)
+    if not item.config.getoption("goal_specs_show", False) or marker is None or not isinstance(item, pytest.Function):
+        return
+    if not item.config.stash[_SESSION].options.enabled or marker.kwargs.get("error"):
+        return  # skipped without --goal-specs; a malformed @goal_spec fails as usual
+    from specguard.error import SpecError
+    from specguard.gate import with_thresholds
+    from specguard.show import render_spec
+    from specguard.spec import Spec
+
+    group = _group(item)
+    shown = item.config.stash.setdefault(_SHOWN_GROUPS, set())
+    if group in shown:  # one rendering (and one budget warning) per spec, not per goal item
+        pytest.skip(SHOWN)
+    where = f"{item.path.name}::{item.name}"
+    spec = item.obj(**{name: item.funcargs[name] for name in item._fixtureinfo.argnames})
+    if not isinstance(spec, Spec):
+        pytest.fail(f"{where}: a goal spec must return a specguard.Spec, got {type(spec).__name__}", pytrace=False)
+    error: str | None = None
+    try:
+        spec, _ = with_thresholds(spec, marker.kwargs.get("expect"), item.funcargs.get(GOAL_FIXTURE))
+        text = render_spec(_scaled(item.config.stash[_SESSION], spec), group)
+    except SpecError as e:
+        error = f"{where}: {e}"
+    if error is not None:
+        pytest.fail(error, pytrace=False)
+    shown.add(group)
+    item.user_properties.append((SHOW_PROPERTY, text))
+    pytest.skip(SHOWN)
+
+
+def pytest_terminal_summary(terminalreporter: Any) -> None:
+    """Print the specs ``--goal-specs-show`` rendered (on the xdist controller too: they travel in the reports)."""
+    texts: dict[str, None] = {}
+    for reports in terminalreporter.stats.values():
+        for report in reports:
+            for key, value in getattr(report, "user_properties", ()):
+                if key == SHOW_PROPERTY:
+                    texts.setdefault(str(value), None)
+    if texts:
+        terminalreporter.write_sep("=", f"specguard goal specs: {SHOWN}")
+        for text in texts:
+            terminalreporter.write_line(text)
+            terminalreporter.write_line("")

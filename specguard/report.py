@@ -2,19 +2,36 @@
 
 Every function takes *rows*: the plain dicts of :meth:`specguard.gate.GoalCheck.to_row`
 plus ``"verdict"`` (what pytest reported: passed, failed, xfailed, xpassed,
-undecided) and optionally ``"comparison"`` and ``"curves"``.
+undecided) and optionally ``"comparison"`` and ``"curves"`` (one curve per run,
+in the order of ``"per_seed"``). The Markdown links the PNG and the rollout
+GIFs of :mod:`specguard.rollout` written beside it.
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+from urllib.parse import quote
 
-__all__ = ["markdown", "plot_curves", "table_lines", "write_reports"]
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from specguard.rollout import Gif
+
+from specguard.text import render_table
+
+__all__ = ["curves_figure", "markdown", "plot_curves", "table_lines", "write_reports"]
 
 Row = dict[str, Any]
+
+
+def _per_seed(row: Row) -> str:
+    """Per-seed successes, compactly: ``29/30, 27/30`` (a seed that crashed: ``error``)."""
+    cells = [f"{s['successes']}/{s['episodes']}" for s in row.get("per_seed") or []]
+    cells += ["error"] * len(row.get("errors") or {})
+    return ", ".join(cells) or "-"
 
 
 def _cells(row: Row) -> list[str]:
@@ -26,32 +43,43 @@ def _cells(row: Row) -> list[str]:
         f"[{lo:.2f}, {hi:.2f}]",
         f">= {row['threshold']:g}",
         f"{row['runs_met']}/{row['runs']}",
+        _per_seed(row),
         row["verdict"],
-        f"{row['train_seconds']:.1f}s",
-        "yes" if row["cached"] else "no",
+        "cached" if row["cached"] else f"{row['train_seconds']:.1f}s",
     ]
     if row.get("comparison"):
         cells.append(row["comparison"])
     return cells
 
 
-HEADER = ["spec", "goal", "success", "interval", "threshold", "runs met", "verdict", "training", "cached"]
+HEADER = ["spec", "goal", "success", "interval", "threshold", "runs met", "per seed", "verdict", "training"]
 
 
 def table_lines(rows: Sequence[Row]) -> list[str]:
-    """The terminal summary: spec x goal -> success, interval, threshold, verdict, training time, cached."""
+    """The terminal summary: spec x goal -> success, interval, threshold, runs met, per-seed successes, verdict,
+    and training time (``cached`` for a row whose runs all came from the cache)."""
     compared = any(r.get("comparison") for r in rows)
     header = HEADER + (["vs baseline"] if compared else [])
     body = [_cells(r) + ([""] if compared and not r.get("comparison") else []) for r in rows]
-    widths = [max(len(c[i]) for c in [header, *body]) for i in range(len(header))]
-    out = ["  ".join(h.ljust(w) for h, w in zip(header, widths)).rstrip()]
-    out.append("  ".join("-" * w for w in widths))
-    out += ["  ".join(c.ljust(w) for c, w in zip(cells, widths)).rstrip() for cells in body]
+    out = render_table(header, body)
     return out
 
 
-def markdown(rows: Sequence[Row]) -> str:
-    """A Markdown summary ready to paste into a pull request."""
+def _first_seed(rows: Sequence[Row], group: str) -> int | None:
+    for r in rows:
+        if r["group"] == group and r.get("per_seed"):
+            return int(r["per_seed"][0]["seed"])
+    return None
+
+
+def markdown(rows: Sequence[Row], *, plot: str | None = None, gifs: Mapping[str, Gif] | None = None) -> str:
+    """A Markdown summary ready to paste into a pull request.
+
+    Args:
+        plot: the file name of the success plot written beside the Markdown, linked as an image.
+        gifs: per spec (group), its rollout GIF (linked by file name, so it must lie beside the
+            Markdown) with its caption, or the note saying why there is none.
+    """
     compared = any(r.get("comparison") for r in rows)
     header = HEADER + (["vs baseline"] if compared else [])
     counts: dict[str, int] = {}
@@ -74,69 +102,156 @@ def markdown(rows: Sequence[Row]) -> str:
         lines += ["", "### Failing goals", ""]
         for r in failing:
             lines.append(f"- `{r['group']}` / `{r['goal']}`" + (f": {r['hint']}" if r.get("hint") else ""))
-    return "\n".join(lines) + "\n"
+    if plot or gifs:
+        lines += ["", "### Figures", ""]
+    if plot:
+        lines += [f"![success per goal over training, one panel per spec]({quote(plot)})", ""]
+    for group, gif in (gifs or {}).items():
+        seed = _first_seed(rows, group)
+        if gif.path is not None:
+            lines += [
+                f"**`{group}`**, seed {seed}, one evaluation episode: {gif.text}",
+                "",
+                f"![rollout of {group}]({quote(gif.path.name)})",
+                "",
+            ]
+        else:
+            lines += [f"**`{group}`**: {gif.text}", ""]
+    return "\n".join(lines).rstrip("\n") + "\n"
 
 
-def plot_curves(rows: Sequence[Row], path: Path) -> bool:
-    """Per-goal success over training, one panel per spec, one line per goal (the paper's Figure 4 layout).
-
-    Success is the share of training episodes ending in the goal, averaged over
-    seeds. Returns False (and writes nothing) when no row carries curves.
-    """
-    specs: dict[str, list[list[dict[str, Any]]]] = {}
+def _goals(rows: Sequence[Row]) -> dict[str, dict[str, Any]]:
+    """Per spec (group), in order of appearance: its curves, their seeds and the thresholds of its asserted goals."""
+    specs: dict[str, dict[str, Any]] = {}
     for r in rows:
-        if r.get("curves"):
-            specs.setdefault(r["group"], r["curves"])
-    if not specs:
-        return False
-    import matplotlib
+        if not r.get("curves"):
+            continue
+        entry = specs.setdefault(group := r["group"], {"curves": r["curves"], "seeds": None, "thresholds": {}})
+        if entry["seeds"] is None:
+            seeds = [s["seed"] for s in r.get("per_seed") or []]  # per_seed and curves follow the runs' order
+            entry["seeds"] = list(seeds) if len(seeds) == len(r["curves"]) else list(range(len(r["curves"])))
+        specs[group]["thresholds"][r["goal"]] = r["threshold"]
+    return specs
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+
+def curves_figure(rows: Sequence[Row]) -> Figure | None:
+    """The success plot as a matplotlib ``Figure`` (no pyplot, no backend switch); ``None`` without curves.
+
+    One panel per spec (the paper's Figure 4 layout). Per asserted goal, in one
+    colour: each seed's success over its training episodes as a thin line
+    labelled with the seed, the seeds' mean in bold, the goal's threshold as a
+    dashed horizontal line and, where curve points carry ``"evaluation"``, the
+    seeds' mean evaluation success as markers. Every artist has a ``gid``:
+    ``"<goal>:seed <n>"``, ``"<goal>:mean"``, ``"<goal>:threshold"``, ``"<goal>:evaluation"``.
+    """
+    specs = _goals(rows)
+    if not specs:
+        return None
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
     from matplotlib.ticker import MaxNLocator
 
     ncols = min(4, len(specs))
     nrows = -(-len(specs) // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 3.2 * nrows), squeeze=False, sharey=True)
+    fig = Figure(figsize=(4.6 * ncols, 3.4 * nrows))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(nrows, ncols, squeeze=False, sharey=True)
     flat = [ax for row in axes for ax in row]
     for ax in flat[len(specs) :]:
         ax.set_visible(False)
-    for ax, (group, curves) in zip(flat, specs.items()):
-        goals = sorted({g for run in curves for point in run for g in point["success"]})
-        for goal in goals:
+    for ax, (group, entry) in zip(flat, specs.items()):
+        curves, seeds, thresholds = entry["curves"], entry["seeds"], entry["thresholds"]
+        goals = sorted(thresholds)
+        right = 0
+        evaluated = False
+        ends: list[tuple[float, int, str, str, str]] = []  # each seed's number at its curve's end
+        for i, goal in enumerate(goals):
+            colour = f"C{i % 10}"
             by_step: dict[int, list[float]] = {}
-            for run in curves:
-                for point in run:
-                    if goal in point["success"]:
-                        by_step.setdefault(point["timesteps"], []).append(point["success"][goal])
+            evals: dict[int, list[float]] = {}
+            for seed, run in zip(seeds, curves):
+                points = [p for p in run if goal in p["success"]]
+                xs = [p["timesteps"] for p in points]
+                ys = [p["success"][goal] for p in points]
+                for p in run:
+                    if goal in (p.get("evaluation") or {}):
+                        evals.setdefault(p["timesteps"], []).append(p["evaluation"][goal])
+                for x, y in zip(xs, ys):
+                    by_step.setdefault(x, []).append(y)
+                if not xs:
+                    continue
+                right = max(right, xs[-1])
+                ax.plot(xs, ys, color=colour, linewidth=0.8, alpha=0.45, gid=f"{goal}:seed {seed}")
+                ends.append((ys[-1], xs[-1], f"s{seed}", colour, f"{goal}:seed {seed}:label"))
             steps = sorted(by_step)
-            ax.plot(steps, [sum(by_step[s]) / len(by_step[s]) for s in steps], label=goal, marker=".")
+            if steps:
+                mean = [sum(by_step[s]) / len(by_step[s]) for s in steps]
+                ax.plot(steps, mean, color=colour, linewidth=2.2, label=goal, gid=f"{goal}:mean")
+            ax.axhline(thresholds[goal], color=colour, linestyle="--", linewidth=1.0, gid=f"{goal}:threshold")
+            if evals:
+                evaluated = True
+                xs = sorted(evals)
+                ax.plot(
+                    xs,
+                    [sum(evals[x]) / len(evals[x]) for x in xs],
+                    linestyle="none",
+                    marker="o",
+                    markersize=5,
+                    markerfacecolor="white",
+                    color=colour,
+                    gid=f"{goal}:evaluation",
+                )
+        ceiling = 2.0
+        for y, x, text, colour, gid in sorted(ends, reverse=True):
+            ceiling = min(y, ceiling - 0.045)  # labels of curves ending together stack down instead of overlapping
+            ax.text(x, ceiling, f" {text}", fontsize=6, color=colour, va="center", ha="left", gid=gid)
         ax.set_title(group.split("::", 1)[-1], fontsize=9)
         ax.set_xlabel("training steps")
         ax.xaxis.set_major_locator(MaxNLocator(4))
+        if right:
+            ax.set_xlim(0, right * 1.1)  # room for the seed labels
         ax.set_ylim(-0.05, 1.05)
         ax.grid(alpha=0.3)
-        if goals:
-            ax.legend(fontsize=7)
+        handles, labels = ax.get_legend_handles_labels()
+        handles.append(Line2D([], [], color="grey", linestyle="--", linewidth=1.0))
+        labels.append("threshold")
+        handles.append(Line2D([], [], color="grey", linewidth=0.8, alpha=0.6))
+        labels.append("seeds (s<n>); bold: mean")
+        if evaluated:
+            handles.append(Line2D([], [], color="grey", linestyle="none", marker="o", markerfacecolor="white"))
+            labels.append("evaluation")
+        ax.legend(handles, labels, fontsize=7)
     for row in axes:
         row[0].set_ylabel("success (training episodes)")
     fig.tight_layout()
+    return fig
+
+
+def plot_curves(rows: Sequence[Row], path: Path) -> bool:
+    """Write :func:`curves_figure` as a PNG to ``path``; returns False (and writes nothing) when no row has curves.
+
+    Uses the Agg canvas directly, so the user's matplotlib backend is left as it was.
+    """
+    fig = curves_figure(rows)
+    if fig is None:
+        return False
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return True
 
 
-def write_reports(directory: Path, rows: Sequence[Row]) -> list[Path]:
-    """Write ``goal-specs.json``, ``goal-specs.md`` and ``goal-specs.png`` (if there are curves)."""
+def write_reports(directory: Path, rows: Sequence[Row], *, gifs: Mapping[str, Gif] | None = None) -> list[Path]:
+    """Write ``goal-specs.json``, ``goal-specs.md`` and ``goal-specs.png`` (if there are curves).
+
+    Args:
+        gifs: per spec, its rollout GIF (already written into ``directory``) or a
+            note (:func:`specguard.rollout.report_gifs`); the Markdown links them.
+    """
     directory.mkdir(parents=True, exist_ok=True)
-    written = []
     data = directory / "goal-specs.json"
     data.write_text(json.dumps({"goals": list(rows)}, indent=1))
-    written.append(data)
-    md = directory / "goal-specs.md"
-    md.write_text(markdown(rows))
-    written.append(md)
     png = directory / "goal-specs.png"
-    if plot_curves(rows, png):
-        written.append(png)
-    return written
+    plotted = plot_curves(rows, png)
+    md = directory / "goal-specs.md"
+    md.write_text(markdown(rows, plot=png.name if plotted else None, gifs=gifs))
+    return [data, md] + ([png] if plotted else [])

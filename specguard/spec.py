@@ -15,6 +15,7 @@ Example:
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from numbers import Real
@@ -112,6 +113,15 @@ class Spec:
     @property
     def label(self) -> str:
         return self.name or str(getattr(self.tree, "name", "?"))
+
+    def scaled(self, factor: float) -> Spec:
+        """This spec with its training budget multiplied by ``factor`` (the one place budgets are scaled).
+
+        ``factor`` 1 returns the spec itself, so its identity (and cache key) is unchanged.
+        """
+        if factor == 1:
+            return self
+        return dataclasses.replace(self, budget=self.budget.scaled(factor))
 
     @property
     def thresholds(self) -> dict[str, float]:

@@ -22,6 +22,7 @@ import gymnasium as gym
 
 from specguard.env import make_baseline_env, make_env
 from specguard.error import InvalidSpec, SpecError
+from specguard.progress import decode_update, encode_update, format_event
 from specguard.spec import ALGORITHMS, Spec
 from specguard.stats import RunVerdict, run_verdict
 from specguard.workers import Report
@@ -43,6 +44,8 @@ CURVE_POINTS = 10
 
 class TrainingError(SpecError):
     """The environment or a user function failed while a run trained or was evaluated."""
+
+    default_hint = "reproduce it without training: build sg.make_env(...) and step it from the seed named above"
 
 
 @dataclass
@@ -140,12 +143,10 @@ class _GoalCurve:
             if self._episodes:
                 rates = {p: c / self._episodes for p, c in self._counts.items()}
                 self.points.append({"timesteps": num_timesteps, "episodes": self._episodes, "success": rates})
-            if self.report is not None:
-                root = "no training episode finished yet"
-                if self._episodes:
-                    root = f"reached in {next(iter(rates.values())):.0%} of {self._episodes} training episodes"
+            if self.report is not None:  # numbers, as JSON: the parent makes the event (specguard.progress)
+                root = next(iter(rates.values())) if self._episodes else None
                 elapsed = time.perf_counter() - self.start
-                line = f"{num_timesteps}/{self.total} steps, {elapsed:.0f}s, root goal: {root}"
+                line = encode_update(num_timesteps, self.total, elapsed, root, self._episodes)
                 self.report("train", num_timesteps, line)
             self._counts, self._episodes = {}, 0
         if self.deadline is not None and time.perf_counter() > self.deadline:
@@ -163,8 +164,8 @@ def train_run(
 ) -> tuple[RunResult, Any]:
     """Train and evaluate one run of ``spec`` with ``seed``.
 
-    ``progress``, if given, receives a line at each of the learning curve's
-    points (every tenth of the budget), for CI logs. ``report``, if given,
+    ``progress``, if given, receives a formatted line (:mod:`specguard.progress`)
+    at each of the learning curve's points (every tenth of the budget). ``report``, if given,
     receives ``(phase, step, line)`` as the run moves through building the
     env, training and evaluation (worker processes pass it to the parent).
 
@@ -190,7 +191,7 @@ def train_run(
         if report is not None:
             report(phase, step, line)
         if progress is not None and line is not None:
-            progress(f"[specguard] {spec.label} seed {seed}: {line}")
+            progress(format_event(decode_update(spec.label, seed, line)))
 
     emit("build", None, None)
     try:

@@ -53,7 +53,18 @@ from typing import Any
 
 import cloudpickle
 
-__all__ = ["Done", "Failure", "Outcome", "Report", "Task", "TaskRunner", "outcome_of", "run_tasks"]
+__all__ = [
+    "Done",
+    "Failure",
+    "Outcome",
+    "Report",
+    "Task",
+    "TaskRunner",
+    "outcome_of",
+    "parse_workers",
+    "resolve_workers",
+    "run_tasks",
+]
 
 Report = Callable[[str, int | None, str | None], None]
 """``report(phase, step, line)``: tells the parent where the task is; ``line`` is a progress line or None."""
@@ -66,6 +77,41 @@ _EXIT_GRACE_S = 10.0
 
 _MAX_MESSAGES_PER_WAKEUP = 64
 """Messages read from one live child before the others get their turn (a chatty task must not starve them)."""
+
+
+def parse_workers(value: object) -> int | str:
+    """The one worker-count rule: ``"auto"`` or an integer >= 1 (digit strings accepted, as from options).
+
+    Raises:
+        ValueError: anything else, with what was expected.
+    """
+    if value == "auto":
+        return "auto"
+    if isinstance(value, str) and value.strip().isdigit():
+        value = int(value)
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ValueError(f"expected an integer >= 1 or 'auto', got {value!r}")
+    return value
+
+
+def resolve_workers(value: object, *, share: int = 1) -> int:
+    """Parallel processes for ``value``: ``"auto"`` is the usable cores divided among ``share`` sharers.
+
+    Under pytest-xdist, ``share`` is the number of xdist workers, so they do not
+    oversubscribe the cores between them.
+
+    Raises:
+        ValueError: see :func:`parse_workers`.
+    """
+    parsed = parse_workers(value)
+    if parsed != "auto":
+        assert isinstance(parsed, int)
+        return parsed
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    return max(1, cores // max(1, share))
 
 
 @dataclass(frozen=True)

@@ -63,8 +63,9 @@ def test_run_passes_and_fails_with_exit_status(spec_file, tmp_path, capsys):
 def test_run_prints_progress_lines(spec_file, tmp_path, capsys):
     main(["run", f"{spec_file}::easy", "--workers", "1", "--no-cache", "--budget-scale", "2"])
     err = capsys.readouterr().err
-    assert "[specguard] pendulum: training seed 0 (256 steps)" in err
-    assert "[specguard] pendulum: seed 0 done" in err
+    assert "[specguard] pendulum seed 0: training, 256 steps" in err
+    assert "[specguard] pendulum seed 0: done, 256/256 steps in " in err
+    assert "[specguard] pendulum seed 0:  25/256 steps " in err  # a line per tenth of the budget
 
 
 @pytest.mark.parametrize(

@@ -77,7 +77,7 @@ def test_a_failing_seed_keeps_the_others(tmp_path):
     assert [r.seed for r in result.runs] == [0]
     assert "seed 1, training step" in result.errors[1] and "RuntimeError: boom" in result.errors[1]
     assert not result.passed
-    assert any("seed 1 failed" in line for line in lines)
+    assert any("seed 1: failed" in line for line in lines)
 
 
 def test_spec_errors_from_workers_reach_the_caller(tmp_path):
@@ -231,7 +231,7 @@ def test_sigterm_to_specguard_run_ends_every_worker_promptly_and_stores_nothing(
     spec_file.write_text(CLI_SPEC.format(steps=50_000))  # the first progress line comes at 5 000 steps
     process = _cli(spec_file, tmp_path / "cache")
     try:
-        _wait_for_line(process, "root goal:")  # a worker is training
+        _wait_for_line(process, "root goal")  # a worker is training
         workers = _children(process.pid)
         assert workers
         process.send_signal(signal.SIGTERM)
@@ -254,7 +254,7 @@ def test_two_processes_asking_for_the_same_run_train_it_once(tmp_path):
     outputs = [p.communicate(timeout=300) for p in (first, second)]
     assert [p.returncode for p in (first, second)] == [0, 0]
     stderr = [err for _, err in outputs]
-    assert sum("training seed 0" in err for err in stderr) == 1, stderr
-    assert sum("seed 0 from cache" in err for err in stderr) == 1, stderr
+    assert sum("seed 0: training" in err for err in stderr) == 1, stderr
+    assert sum("seed 0: from cache" in err for err in stderr) == 1, stderr
     tables = [out.splitlines()[1:] for out, _ in outputs]  # the first line holds the wall time
     assert tables[0] == tables[1]

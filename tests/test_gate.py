@@ -127,3 +127,20 @@ def test_check_item_fails_a_passing_goal_that_dropped_against_the_baseline():
     moved = check_item(result, s, ["pendulum"], "g", baseline=(changed, "main"))[0]
     assert moved.comparison.endswith("(the spec changed since baseline 'main')")
     assert dict(same.junit_properties())["interval"].startswith("[0.")
+
+
+def test_never_reached_suggests_a_distance_only_for_a_reachable_goal():
+    cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+    budget = sg.Budget(timesteps=10)
+    inside = sg.Spec(cartpole, sg.Goal("edge_zone", x=(4.0, 4.5)), budget=budget, expect=0.5)
+    from specguard.error import UnreachableGoal
+
+    with pytest.raises(UnreachableGoal):  # an impossible goal never reaches training ...
+        sg.make_env(cartpole, sg.Goal("far", x=(10, None)))
+    hint = check_goal(result_of(inside, [(0, 30), (0, 30)]), inside, "edge_zone", "g").hint
+    assert hint == "sparse goal never reached in 2/2 seeds: consider a Distance annotation on 'edge_zone'"
+    # ... and should a result for one arrive (an old cache), the hint says impossible, not "add a Distance".
+    far = sg.Spec(cartpole, sg.Goal("far", x=(10, None)), budget=budget, expect=0.5)
+    hint = check_goal(result_of(far, [(0, 30), (0, 30)]), far, "far", "g").hint
+    assert hint.startswith("goal impossible, not just never reached: goal box x in [10, inf] lies outside")
+    assert "Distance" not in hint

@@ -93,8 +93,8 @@ def test_pass_fail_xfail_summary_and_junit(pytester):
     result.stdout.fnmatch_lines(
         [
             "*= specguard goal specs =*",
-            "spec*goal*success*interval*threshold*runs met*verdict*training*cached",
-            "test_specs.py::test_tiny*pendulum/stabilization*>= 0*2/2*passed*no",
+            "spec*goal*success*interval*threshold*runs met*per seed*verdict*training",
+            "test_specs.py::test_tiny*pendulum/stabilization*>= 0*2/2*/4, */4*passed*",
             "test_specs.py::test_tiny*pendulum/position*0% (0/8)*>= 0.95*0/2*xfailed*",
             "test_specs.py::test_root_fails*pendulum*0% (0/4)*>= 0.9*0/1*failed*",
         ]
@@ -297,20 +297,31 @@ def test_bad_input_gives_one_clear_error_and_other_specs_still_run(pytester):
     )
 
 
-def test_malformed_decorator_is_a_collection_error(pytester):
+def test_a_malformed_decorator_fails_its_item_and_the_other_specs_still_run(pytester):
     write(
         pytester,
         """
-        @sg.goal_spec(expect={"stabilization": 1.5})
+        @sg.goal_spec(expect={"stabilization": 1.0})
         def test_bad(pendulum, tree):
+            return tiny(pendulum, tree)
+
+
+        @sg.goal_spec(expect={"stabilization": 0.0})
+        def test_fine(pendulum, tree):
             return tiny(pendulum, tree)
         """,
     )
-    result = pytester.runpytest("-p", "no:cacheprovider")
-    result.assert_outcomes(errors=1)
+    result = run(pytester, "--goal-specs")
+    result.assert_outcomes(passed=1, failed=1)
     result.stdout.fnmatch_lines(
-        ["*goal_spec 'test_bad'.expect[[]'stabilization']: expected a success rate in [[]0, 1), got 1.5"]
+        [
+            "*test_specs.py::test_bad[[]spec[]]: goal_spec 'test_bad'.expect[[]'stabilization'[]]: a threshold of 1 "
+            "can never be met: a run meets a threshold when its whole confidence interval lies at or above it*",
+            "*Hint: ask for e.g. 0.95*",
+        ]
     )
+    assert "Traceback" not in result.stdout.str()
+    run(pytester).assert_outcomes(skipped=2)
 
 
 @pytest.mark.parametrize(
@@ -368,3 +379,66 @@ def test_plain_pytest_does_not_import_heavy_modules(pytester):
         """
     )
     pytester.runpytest_subprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)
+
+
+BROKEN_ENV = """
+import gymnasium as gym
+
+
+class Boom(gym.Wrapper):
+    def step(self, action):
+        raise RuntimeError("the env broke")
+
+
+@sg.goal_spec(expect={"stabilization": 0.0})
+def test_broken(tree):
+    initial = sg.InitialEnv(lambda: Boom(gym.make("Pendulum-v1")), features=("x", "y", "omega"))
+    budget = sg.Budget(timesteps=64, min_seeds=1, eval_episodes=2)
+    return sg.Spec(initial, tree, budget=budget, hyperparameters=TINY)
+"""
+
+
+def test_a_worker_error_is_one_clean_message_with_its_traceback_only_under_verbose(pytester):
+    write(pytester, BROKEN_ENV)
+    quiet = run(pytester, "--goal-specs", "--goal-specs-no-cache")
+    quiet.assert_outcomes(failed=1)
+    quiet.stdout.fnmatch_lines(
+        ["*seed 0 failed: Spec 'pendulum', seed 0, training step 0: the environment raised RuntimeError: the env broke"]
+    )
+    text = quiet.stdout.str()
+    assert "Traceback" not in text and "_RemoteTraceback" not in text and "During handling" not in text
+    verbose = run(pytester, "--goal-specs", "--goal-specs-no-cache", "-v")
+    verbose.stdout.fnmatch_lines(["*worker traceback (seed 0):*", "Traceback (most recent call last):*"])
+
+
+TRAJECTORY = """
+def test_the_trained_agent(goal_spec_result, pendulum, tree):
+    result = goal_spec_result(tiny(pendulum, tree))
+    model = result.model(0)
+    assert type(model).__name__ == "PPO"
+    episodes = result.rollout(0, episodes=2)
+    assert len(episodes) == 2
+    last = episodes[0][-1]
+    assert last["truncated"] and len(episodes[0]) == 200  # Pendulum's time limit: never upright in 128 steps
+    assert set(last["info"]["goals"]) == {"pendulum", "pendulum/position", "pendulum/stabilization"}
+    assert model.predict(episodes[0][0]["obs"], deterministic=True)[0] == episodes[0][0]["action"]
+"""
+
+
+def test_the_trained_agent_is_at_hand(pytester):
+    write(pytester, TRAJECTORY)
+    run(pytester, "--goal-specs").assert_outcomes(passed=1)
+
+
+def test_baselines_live_beside_the_cache_dir_by_default(pytester):
+    write(
+        pytester,
+        """
+        @sg.goal_spec(expect={"stabilization": 0.0})
+        def test_gate(pendulum, tree):
+            return tiny(pendulum, tree)
+        """,
+    )
+    run(pytester, "--goal-specs", "--goal-specs-save", "main").assert_outcomes(passed=1)
+    assert (pytester.path / "baselines" / "main.json").is_file()  # run() puts the cache at ./cache
+    assert not (pytester.path / ".specguard").exists()

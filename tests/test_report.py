@@ -2,24 +2,44 @@
 
 from __future__ import annotations
 
-from specguard.report import markdown, table_lines, write_reports
+from pathlib import Path
+
+import matplotlib
+import pytest
+
+from specguard.report import curves_figure, markdown, plot_curves, table_lines, write_reports
+from specguard.rollout import Gif
+
+
+def curve(*rates, evaluation=None):
+    points = [{"timesteps": 10 * (i + 1), "episodes": 3, "success": {"pendulum": r}} for i, r in enumerate(rates)]
+    if evaluation is not None:
+        points[-1]["evaluation"] = {"pendulum": evaluation}
+    return points
+
 
 ROW = {
     "group": "t.py::test_w",
     "goal": "pendulum",
     "success": 0.9,
-    "successes": 27,
-    "episodes": 30,
+    "successes": 56,
+    "episodes": 60,
     "interval": [0.73, 0.98],
     "threshold": 0.8,
     "runs_met": 2,
     "runs": 2,
+    "per_seed": [
+        {"seed": 0, "successes": 29, "episodes": 30, "verdict": "met"},
+        {"seed": 1, "successes": 27, "episodes": 30, "verdict": "met"},
+    ],
+    "errors": {},
     "verdict": "passed",
     "train_seconds": 80.0,
-    "cached": True,
+    "cached": False,
     "hint": None,
-    "curves": [[{"timesteps": 10, "episodes": 3, "success": {"pendulum": 0.5}}]],
+    "curves": [curve(0.5, 0.9), curve(0.2, 0.8)],
 }
+CACHED = {**ROW, "goal": "pendulum/stabilization", "threshold": 0.5, "cached": True}
 FAILED = {
     **ROW,
     "goal": "pendulum/position",
@@ -29,7 +49,7 @@ FAILED = {
 }
 
 
-def test_table_lines():
+def test_table_lines_show_per_seed_successes_and_training_time():
     lines = table_lines([ROW])
     assert lines[0].split() == [
         "spec",
@@ -39,34 +59,115 @@ def test_table_lines():
         "threshold",
         "runs",
         "met",
+        "per",
+        "seed",
         "verdict",
         "training",
-        "cached",
     ]
     assert lines[2].split() == [
         "t.py::test_w",
         "pendulum",
         "90%",
-        "(27/30)",
+        "(56/60)",
         "[0.73,",
         "0.98]",
         ">=",
         "0.8",
         "2/2",
+        "29/30,",
+        "27/30",
         "passed",
         "80.0s",
-        "yes",
     ]
+
+
+def test_cached_rows_say_cached_instead_of_old_training_seconds():
+    lines = table_lines([ROW, CACHED])
+    assert lines[2].endswith("80.0s")
+    assert lines[3].endswith("cached") and "80.0s" not in lines[3]
+    text = markdown([ROW, CACHED])
+    assert "| 29/30, 27/30 | passed | 80.0s |" in text
+    assert "| 29/30, 27/30 | passed | cached |" in text
+
+
+def test_a_crashed_seed_shows_in_the_per_seed_column():
+    row = {**ROW, "per_seed": ROW["per_seed"][:1], "errors": {"1": "boom"}, "runs_met": 1}
+    assert "29/30, error" in table_lines([row])[2]
 
 
 def test_markdown_lists_failing_goals_and_comparisons():
     text = markdown([ROW, FAILED])
     assert "1 failed, 1 passed (2 goals)" in text
     assert "| vs baseline |" in text
+    assert "| per seed |" in text
     assert "- `t.py::test_w` / `pendulum/position`: consider a Distance" in text
+
+
+def test_markdown_links_the_figures_beside_it():
+    gifs = {
+        "t.py::test_w": Gif(Path("/r/t.py__test_w.gif"), "pendulum, 200 steps; goals met at the end: pendulum", 40),
+        "t.py::test_x": Gif(None, "no rollout GIF: the run cache is off"),
+    }
+    text = markdown([ROW, {**ROW, "group": "t.py::test_x"}], plot="goal-specs.png", gifs=gifs)
+    assert "](goal-specs.png)" in text
+    assert "![rollout of t.py::test_w](t.py__test_w.gif)" in text
+    assert "seed 0, one evaluation episode: pendulum, 200 steps; goals met at the end: pendulum" in text
+    assert "**`t.py::test_x`**: no rollout GIF: the run cache is off" in text
+    assert "### Figures" not in markdown([ROW])
+
+
+def lines_of(fig, goal):
+    return [line for ax in fig.axes for line in ax.get_lines() if (line.get_gid() or "").startswith(f"{goal}:")]
+
+
+def test_figure_has_a_thin_line_per_seed_a_bold_mean_and_the_threshold():
+    fig = curves_figure([ROW])
+    lines = lines_of(fig, "pendulum")
+    gids = sorted(line.get_gid() for line in lines)
+    assert gids == ["pendulum:mean", "pendulum:seed 0", "pendulum:seed 1", "pendulum:threshold"]
+    curves = [line for line in lines if not line.get_gid().endswith(":threshold")]
+    assert len(curves) == len(ROW["curves"]) + 1  # N seeds + the mean
+    by_gid = {line.get_gid(): line for line in lines}
+    assert list(by_gid["pendulum:mean"].get_ydata()) == pytest.approx([0.35, 0.85])
+    assert by_gid["pendulum:mean"].get_linewidth() > by_gid["pendulum:seed 0"].get_linewidth()
+    threshold = by_gid["pendulum:threshold"]
+    assert threshold.get_linestyle() == "--" and list(threshold.get_ydata()) == [0.8, 0.8]
+    labels = [t.get_text().strip() for ax in fig.axes for t in ax.texts]
+    assert sorted(labels) == ["s0", "s1"]  # each seed's number with its curve
+
+
+def test_figure_has_one_panel_per_spec_and_only_asserted_goals():
+    other = {**ROW, "group": "t.py::test_other", "curves": [curve(0.1, 0.2)], "per_seed": ROW["per_seed"][:1]}
+    fig = curves_figure([ROW, CACHED, other])
+    visible = [ax for ax in fig.axes if ax.get_visible()]
+    assert [ax.get_title() for ax in visible] == ["test_w", "test_other"]
+    # CACHED asserts pendulum/stabilization, which these curves do not carry: its threshold only
+    assert [line.get_gid() for line in lines_of(fig, "pendulum/stabilization")] == ["pendulum/stabilization:threshold"]
+    assert len([line for line in visible[1].get_lines() if line.get_gid() == "pendulum:seed 0"]) == 1
+
+
+def test_evaluation_checkpoints_are_markers():
+    row = {**ROW, "curves": [curve(0.5, 0.9, evaluation=1.0), curve(0.2, 0.8, evaluation=0.5)]}
+    (marks,) = [line for line in lines_of(curves_figure([row]), "pendulum") if line.get_gid() == "pendulum:evaluation"]
+    assert list(marks.get_xdata()) == [20] and list(marks.get_ydata()) == [0.75]
+    assert marks.get_marker() == "o" and marks.get_linestyle() == "None"
+    assert not [line for line in lines_of(curves_figure([ROW]), "pendulum") if "evaluation" in line.get_gid()]
+
+
+def test_plotting_leaves_the_matplotlib_backend_alone(tmp_path):
+    before = matplotlib.get_backend()
+    matplotlib.use("svg")  # any backend but Agg: writing a report must not switch it
+    try:
+        assert plot_curves([ROW], tmp_path / "p.png")
+        assert matplotlib.get_backend() == "svg"
+    finally:
+        matplotlib.use(before)
+    assert (tmp_path / "p.png").read_bytes()[:4] == b"\x89PNG"
 
 
 def test_write_reports(tmp_path):
     written = write_reports(tmp_path / "r", [ROW, FAILED])
     assert [p.name for p in written] == ["goal-specs.json", "goal-specs.md", "goal-specs.png"]
+    assert "](goal-specs.png)" in (tmp_path / "r" / "goal-specs.md").read_text()
     assert write_reports(tmp_path / "s", [{**ROW, "curves": None}])[-1].name == "goal-specs.md"
+    assert "goal-specs.png" not in (tmp_path / "s" / "goal-specs.md").read_text()

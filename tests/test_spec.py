@@ -64,3 +64,10 @@ def test_wrong_field_types():
         sg.Spec("Pendulum-v1", pendulum.trees["w"], budget=BUDGET)
     with pytest.raises(sg.InvalidSpec, match=r"\.tree: expected a Goal or All node"):
         sg.Spec(lunar_lander.initial_env, "lander", budget=BUDGET)
+
+
+def test_scaled_multiplies_the_training_budget_only():
+    s = sg.Spec(pendulum.initial_env, pendulum.trees["w"], budget=sg.Budget(timesteps=1000, min_seeds=3))
+    assert s.scaled(1) is s
+    half = s.scaled(0.5)
+    assert half.budget.timesteps == 500 and half.budget.min_seeds == 3 and half.tree is s.tree

@@ -21,7 +21,7 @@ from typing import Any
 import cloudpickle
 import pytest
 
-from specguard.workers import Done, Failure, Outcome, Report, Task, run_tasks
+from specguard.workers import Done, Failure, Outcome, Report, Task, parse_workers, resolve_workers, run_tasks
 
 cloudpickle.register_pickle_by_value(sys.modules[__name__])
 
@@ -327,7 +327,7 @@ def write_pid_then_sleep(pid_file, *, report):
 PARENT = """
 import signal, sys
 import sg_worker_helper
-from specguard.workers import Task, run_tasks
+from specguard.workers import Task, run_tasks, parse_workers, resolve_workers
 
 try:
     run_tasks([Task(0, sg_worker_helper.write_pid_then_sleep, (sys.argv[1],))], max_workers=1)
@@ -380,3 +380,22 @@ def test_child_exits_by_itself_when_its_parent_is_killed(tmp_path: Path) -> None
     finally:
         if not _pid_exited(child_pid):
             os.kill(child_pid, signal.SIGKILL)
+
+
+@pytest.mark.parametrize(("value", "parsed"), [("auto", "auto"), (3, 3), ("2", 2), (" 4 ", 4)])
+def test_parse_workers(value, parsed):
+    assert parse_workers(value) == parsed
+
+
+@pytest.mark.parametrize("value", [0, -1, "0", "two", 1.5, True, None, ""])
+def test_parse_workers_refuses(value):
+    with pytest.raises(ValueError, match=r"expected an integer >= 1 or 'auto', got "):
+        parse_workers(value)
+
+
+def test_auto_shares_the_cores():
+    cores = resolve_workers("auto")
+    assert cores >= 1
+    assert resolve_workers("auto", share=cores) == 1
+    assert resolve_workers("auto", share=cores * 4) == 1  # never 0
+    assert resolve_workers(5, share=8) == 5  # an explicit count is taken as given

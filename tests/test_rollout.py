@@ -1,0 +1,143 @@
+"""Rollouts of a trained policy and their GIFs."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from PIL import Image
+
+import specguard as sg
+from specguard.cache import Cache
+from specguard.rollout import Gif, load_model, report_gifs, rollout, write_gif
+from specguard.train import train_run
+
+TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
+
+
+def cartpole_spec(**kwargs):
+    cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+    # the root (both goals) is hardly reached, so the episode runs until the pole falls: many frames
+    tree = sg.All(sg.Goal("centre", x=(-0.5, 0.5)), sg.Goal("fast", v=(2.0, 100.0)), name="cartpole")
+    budget = sg.Budget(timesteps=128, min_seeds=1, eval_episodes=2)
+    return sg.Spec(cartpole, tree, budget=budget, hyperparameters=TINY, **kwargs)
+
+
+@pytest.fixture(scope="module")
+def trained():
+    spec = cartpole_spec()
+    result, model = train_run(spec, 0)
+    return spec, result, model
+
+
+def test_rollout_returns_the_steps_of_each_episode(trained):
+    spec, _, model = trained
+    episodes = rollout(model, spec, episodes=2)
+    assert len(episodes) == 2
+    for steps in episodes:
+        assert steps and all(set(s) == {"obs", "action", "reward", "terminated", "truncated", "info"} for s in steps)
+        assert steps[-1]["terminated"] or steps[-1]["truncated"]
+        assert not any(s["terminated"] or s["truncated"] for s in steps[:-1])
+        assert set(steps[-1]["info"]["goals"]) == {"cartpole", "cartpole/centre", "cartpole/fast"}
+    again = rollout(model, spec, episodes=2)  # deterministic policy, seeded episodes
+    assert [len(s) for s in again] == [len(s) for s in episodes]
+    assert np.array_equal(again[1][-1]["obs"], episodes[1][-1]["obs"])
+
+
+def test_gif_has_the_episode_and_a_caption_naming_the_goals(trained, tmp_path):
+    spec, _, model = trained
+    gif = write_gif(model, spec, tmp_path / "cartpole.gif")
+    assert gif.written and gif.path == tmp_path / "cartpole.gif"
+    with Image.open(gif.path) as image:
+        assert image.format == "GIF" and image.n_frames > 1
+        image.seek(0)
+        first = np.asarray(image.convert("L"))
+        image.seek(image.n_frames - 1)
+        last = np.asarray(image.convert("L"))
+    # the caption is drawn at the bottom of the last frame (CartPole leaves that area blank)
+    assert (first[-20:] < 100).sum() == 0 and (last[-20:] < 100).sum() > 50
+    (steps,) = rollout(model, spec)  # the same episode: same seed, deterministic
+    goals = steps[-1]["info"]["goals"]
+    met = ", ".join(p for p, inside in goals.items() if inside) or "none"
+    assert f"{len(steps)} steps; goals met at the end: {met}" in gif.text
+    assert all(path in gif.text for path in goals)
+
+
+def test_long_episodes_are_subsampled(trained, tmp_path):
+    spec, _, model = trained
+    gif = write_gif(model, spec, tmp_path / "few.gif", max_frames=5)
+    assert gif.written and 1 < gif.frames <= 5
+
+
+class Blind(gym.Env):
+    """An env that renders nothing."""
+
+    observation_space = gym.spaces.Box(-1.0, 1.0, (1,), dtype=np.float32)
+    action_space = gym.spaces.Discrete(2)
+
+    def __init__(self, render_mode=None):
+        self.render_mode = render_mode
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        return np.zeros(1, dtype=np.float32), {}
+
+    def step(self, action):
+        return np.zeros(1, dtype=np.float32), 0.0, True, False, {}
+
+    def render(self):
+        return None
+
+
+def blind_spec():
+    tree = sg.All(sg.Goal("zero", x=(-0.5, 0.5)), name="blind")
+    return sg.Spec(sg.InitialEnv(Blind, features=("x",)), tree, budget=sg.Budget(timesteps=64, min_seeds=1))
+
+
+class Model:
+    def predict(self, obs, deterministic=True):
+        return np.int64(0), None
+
+
+def test_an_env_without_rgb_array_frames_gives_a_note(tmp_path):
+    gif = write_gif(Model(), blind_spec(), tmp_path / "blind.gif")
+    assert gif == Gif(None, gif.text) and "does not render rgb_array frames" in gif.text
+    assert not (tmp_path / "blind.gif").exists()
+
+
+def test_an_env_that_cannot_take_a_render_mode_gives_a_note(tmp_path):
+    spec = blind_spec()
+    spec = sg.Spec(
+        sg.InitialEnv(lambda: Blind(), features=("x",)), spec.tree, budget=spec.budget
+    )  # the factory takes no render_mode
+    gif = write_gif(Model(), spec, tmp_path / "blind.gif")
+    assert not gif.written and "cannot be made to render rgb_array" in gif.text
+
+
+def test_a_render_that_raises_gives_a_note(tmp_path, monkeypatch):
+    def broken(self):
+        raise RuntimeError("no display")
+
+    monkeypatch.setattr(Blind, "render", broken)
+    gif = write_gif(Model(), blind_spec(), tmp_path / "blind.gif")
+    assert not gif.written and "rendering failed (RuntimeError: no display)" in gif.text
+
+
+def test_report_gifs_load_the_first_seeds_cached_model(trained, tmp_path):
+    spec, result, model = trained
+    Cache(tmp_path / "cache").store(spec, 0, result, model)
+    loaded, normalizer = load_model(spec, 0, tmp_path / "cache")
+    assert normalizer is None and type(loaded) is type(model)
+    rows = [
+        {"group": "t.py::test_cart", "per_seed": [{"seed": 0}]},
+        {"group": "t.py::test_cart", "per_seed": [{"seed": 0}]},
+        {"group": "t.py::test_elsewhere", "per_seed": [{"seed": 0}]},
+        {"group": "t.py::test_uncached", "per_seed": [{"seed": 3}]},
+    ]
+    specs = {"t.py::test_cart": spec, "t.py::test_uncached": spec}
+    gifs = report_gifs(tmp_path / "r", rows, specs, tmp_path / "cache")
+    assert list(gifs) == ["t.py::test_cart", "t.py::test_elsewhere", "t.py::test_uncached"]
+    assert gifs["t.py::test_cart"].path == tmp_path / "r" / "t.py__test_cart.gif" and gifs["t.py::test_cart"].frames > 1
+    assert "another process" in gifs["t.py::test_elsewhere"].text and not gifs["t.py::test_elsewhere"].written
+    assert "not in the cache" in gifs["t.py::test_uncached"].text
+    assert "cache is off" in report_gifs(tmp_path / "r", rows[:1], specs, None)["t.py::test_cart"].text

@@ -1,0 +1,134 @@
+"""Look before you train: `--goal-specs-show`, `specguard show` on a pytest file, and budget rounding."""
+
+from __future__ import annotations
+
+import sys
+import textwrap
+import warnings
+
+import pytest
+
+import specguard as sg
+from specguard.budget import trained_timesteps
+from specguard.show import has_goal_specs, render_spec
+
+SPECS = textwrap.dedent(
+    """
+    import pytest
+    import specguard as sg
+
+
+    @pytest.fixture
+    def cartpole():
+        return sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+
+
+    @sg.goal_spec(expect={"balance": 0.8, "upright": 0.9})
+    def test_balance(cartpole):
+        upright = sg.Goal("upright", theta=(-0.05, 0.05)).annotate(
+            sg.Constraint(lambda s, a: abs(s.omega) > 2.0, budget=3, name="no_spin")
+        )
+        tree = sg.All(sg.Goal("centre", x=(-0.5, 0.5)), upright, name="balance")
+        return sg.Spec(cartpole, tree, budget=sg.Budget(timesteps=512))
+    """
+)
+
+EXPECTED = [
+    "== test_cartpole_specs.py::test_balance",
+    "InitialEnv('CartPole-v1', features=('x', 'v', 'theta', 'omega')), PPO, constructed env",
+    "All 'balance'",
+    "├── Goal 'centre': -0.5 <= x <= 0.5",
+    "R = 0.5*R[centre] + 0.5*(R[upright] + P[upright:no_spin])",
+    "observation: 5 components (features, then one counter per constraint)",
+    "  x                                [-4.8, 4.8]",
+    "  theta                            [-0.418879, 0.418879]",
+    "  counter balance/upright:no_spin  [0, 3]",
+    "budget: 2048 timesteps per seed (512 asked, rounded up to whole PPO rollouts of 2048 = 2048 steps x 1 env), "
+    "2 seeds, 30 eval episodes (up to 120)",
+    "expect: balance >= 0.8, balance/upright >= 0.9",
+]
+
+
+@pytest.fixture
+def spec_file(pytester):
+    pytester.makeini("[pytest]\ngoal_specs_workers = 1\n")
+    return pytester.makepyfile(test_cartpole_specs=SPECS)
+
+
+def test_goal_specs_show_prints_each_spec_once_and_trains_nothing(pytester, spec_file):
+    cache = pytester.path / "cache"
+    result = pytester.runpytest_subprocess(
+        "-p", "no:cacheprovider", f"--goal-specs-cache-dir={cache}", "--goal-specs", "--goal-specs-show", "-rs"
+    )
+    result.assert_outcomes(skipped=2, warnings=1)
+    out = result.stdout.str()
+    for line in EXPECTED:
+        assert line in out.splitlines(), line
+    assert out.count("== test_cartpole_specs.py::test_balance") == 1  # two goal items, one spec
+    assert "shown, not trained" in out
+    assert "budget of 512 timesteps trains 2048" in out  # the rounding warning, once
+    assert not cache.exists()  # nothing trained, nothing cached
+
+
+def test_goal_specs_show_fails_a_refused_spec_without_training(pytester):
+    pytester.makepyfile(
+        test_far="""
+        import specguard as sg
+
+        @sg.goal_spec(expect=0.5)
+        def test_far():
+            cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+            return sg.Spec(cartpole, sg.Goal("far", x=(10, None)), budget=sg.Budget(timesteps=2048))
+        """
+    )
+    result = pytester.runpytest_subprocess("-p", "no:cacheprovider", "--goal-specs", "--goal-specs-show")
+    result.assert_outcomes(failed=1)
+    result.stdout.fnmatch_lines(["*test_far.py::test_far*far: goal box x in [[]10, inf] lies outside the bounds*"])
+
+
+def test_specguard_show_on_a_pytest_goal_spec_file_resolves_its_fixtures(pytester, spec_file):
+    assert has_goal_specs(spec_file)
+    result = pytester.run(sys.executable, "-m", "specguard", "show", str(spec_file))
+    assert result.ret == 0, result.stdout.str() + result.stderr.str()
+    out = result.stdout.str()
+    for line in EXPECTED:
+        assert line in out.splitlines(), line
+    assert "defines no" not in out + result.stderr.str()
+    assert not (pytester.path / ".specguard").exists()
+
+
+def test_render_spec_is_the_one_rendering():
+    cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+    spec = sg.Spec(cartpole, sg.Goal("centre", x=(-0.5, 0.5)), budget=sg.Budget(timesteps=4096), n_envs=2)
+    text = render_spec(spec, "mine")
+    assert text.splitlines()[0] == "== mine"
+    assert "budget: 4096 timesteps per seed (2 envs), 2 seeds" in text
+    assert "observation: 4 components" in text
+
+
+@pytest.mark.parametrize(
+    ("timesteps", "algorithm", "hyperparameters", "n_envs", "trained"),
+    [
+        (512, "PPO", {}, 1, 2048),
+        (4096, "PPO", {}, 2, 4096),
+        (100_000, "PPO", {"n_steps": 1024}, 4, 102_400),
+        (101, "A2C", {}, 4, 120),
+        (100, "A2C", {}, 4, 100),
+        (10, "DQN", {}, 1, 12),
+        (10, "SAC", {}, 3, 12),
+        (10, "SAC", {"train_freq": (2, "step")}, 1, 10),
+    ],
+)
+def test_trained_timesteps_round_up_to_whole_collections(timesteps, algorithm, hyperparameters, n_envs, trained):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert trained_timesteps(sg.Budget(timesteps=timesteps), algorithm, hyperparameters, n_envs) == trained
+
+
+def test_rounding_up_by_more_than_ten_percent_warns_once():
+    with pytest.warns(UserWarning, match=r"budget of 512 timesteps trains 2048: PPO collects 2048 steps") as seen:
+        assert trained_timesteps(512, "PPO", {}, 1) == 2048
+    assert len(seen) == 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert trained_timesteps(1900, "PPO", {}, 1) == 2048  # 7.8% more: no warning
