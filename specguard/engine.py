@@ -16,7 +16,6 @@ Example:
 
 from __future__ import annotations
 
-import sys
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -38,14 +37,6 @@ from specguard.workers import resolve_workers as workers_for
 __all__ = ["GoalVerdict", "SpecResult", "resolve_workers", "run_spec"]
 
 Progress = Callable[[ProgressEvent], None]
-
-
-def print_progress(event: ProgressEvent | str) -> None:
-    """The default progress sink: the event as one flushed line on stderr, which CI logs capture."""
-    if isinstance(event, ProgressEvent):
-        print_event(event)
-    else:
-        print(event, file=sys.stderr, flush=True)
 
 
 def resolve_workers(workers: int | str) -> int:
@@ -383,7 +374,7 @@ def run_spec(
     *,
     workers: int | str = "auto",
     cache_dir: str | Path | None = ".specguard/cache",
-    progress: Progress | None = print_progress,
+    progress: Progress | None = print_event,
     lock_timeout: float = 3600.0,
     executor: str | Executor = LOCAL,
 ) -> SpecResult:

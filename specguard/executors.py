@@ -36,6 +36,7 @@ __all__ = ["LOCAL", "DaskExecutor", "Executor", "ExecutorError", "LocalExecutor"
 LOCAL = "local"
 DASK_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx", "inproc")
 _POLL_S = 0.25
+ADDRESS_EXPECTED = "expected 'local' or a Dask scheduler address such as 'tcp://host:8786'"
 
 Where = tuple[str, "int | None"]  # a task's last reported phase and step
 
@@ -71,10 +72,7 @@ def check_address(address: object) -> str:
         scheme, sep, rest = text.partition("://")
         if sep and scheme in DASK_SCHEMES and rest:
             return text
-    raise ExecutorError(
-        f"executor: expected 'local' or a Dask scheduler address such as 'tcp://host:8786' "
-        f"(schemes: {', '.join(DASK_SCHEMES)}), got {address!r}"
-    )
+    raise ExecutorError(f"executor: {ADDRESS_EXPECTED} (schemes: {', '.join(DASK_SCHEMES)}), got {address!r}")
 
 
 def make_executor(address: str, *, workers: int) -> Executor:
