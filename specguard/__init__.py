@@ -33,12 +33,12 @@ __version__ = "0.1.0"
 
 _EXPORTS = {
     "All": "specguard.nodes",
-    "Annotation": "specguard.nodes",
+    "Annotation": "specguard.extend",
     "Budget": "specguard.budget",
     "Cache": "specguard.cache",
     "CompiledTree": "specguard.compiled",
-    "Constraint": "specguard.nodes",
-    "Distance": "specguard.nodes",
+    "Constraint": "specguard.annotations",
+    "Distance": "specguard.annotations",
     "EvaluationError": "specguard.error",
     "FingerprintError": "specguard.error",
     "Goal": "specguard.nodes",
@@ -49,7 +49,7 @@ _EXPORTS = {
     "InitialEnv": "specguard.initial_env",
     "InitialEnvError": "specguard.error",
     "InvalidSpec": "specguard.error",
-    "Node": "specguard.nodes",
+    "Node": "specguard.extend",
     "Spec": "specguard.spec",
     "SpecError": "specguard.error",
     "SpecResult": "specguard.engine",
@@ -101,6 +101,12 @@ __all__ = [
 def __getattr__(name: str) -> Any:
     module = _EXPORTS.get(name)
     if module is None:
+        if name[:1].isupper():  # an operator from an installed plugin, e.g. sg.AnyOf
+            from specguard.registry import registered
+
+            found = registered().get(name)
+            if found is not None:
+                return found
         raise AttributeError(f"module 'specguard' has no attribute {name!r}")
     value = getattr(importlib.import_module(module), name)
     if name != "GoalEnv":  # the deprecated name warns on every use
@@ -113,6 +119,7 @@ def __dir__() -> list[str]:
 
 
 if TYPE_CHECKING:
+    from specguard.annotations import Constraint, Distance
     from specguard.budget import Budget
     from specguard.cache import Cache
     from specguard.compiled import CompiledTree, compile_tree
@@ -129,7 +136,8 @@ if TYPE_CHECKING:
         UnknownFeature,
         UnreachableGoal,
     )
+    from specguard.extend import Annotation, Node
     from specguard.initial_env import InitialEnv
-    from specguard.nodes import All, Annotation, Constraint, Distance, Goal, Node
+    from specguard.nodes import All, Goal
     from specguard.reward_formula import formula
     from specguard.spec import Spec

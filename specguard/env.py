@@ -63,13 +63,17 @@ def _features(obs: Any, state: Callable[[Any], Any] | None, features: tuple[str,
 class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
     """Wraps an initial env into the environment Algorithm 1 constructs from ``tree``.
 
-    * observation: ``state(obs*)`` followed by one counter per constraint
-      (Algorithm 1's order), a float32 ``Box`` with finite bounds where known;
+    * observation: ``state(obs*)`` followed by the own state of the nodes and
+      annotations that have one (constraint counters, sequence stages), in
+      Algorithm 1's order, a float32 ``Box`` with finite bounds where known;
     * reward: the root requirements' ``R_G``, a Python float;
-    * ``terminated``: the base env's, or the root goal reached, or a counter at 0;
+    * ``terminated``: the base env's, or the root goal reached, or a counter at
+      0, or a node's own termination;
       ``truncated``: the base env's;
     * ``info["goals"]``: ``{path: bool}`` membership of ``s'`` in every node's
-      goal (also after ``reset``); ``info["reward_terms"]``: every weighted
+      goal (also after ``reset``); ``info["safe"]``: per constraint-like
+      annotation (``path:name``), whether the episode has had no violation
+      so far; ``info["reward_terms"]``: every weighted
       component by key, summing to the reward; ``info["base_reward"]``: the
       initial env's own reward.
 
@@ -110,7 +114,7 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         )
         gym.Wrapper.__init__(self, env)
         if not isinstance(tree, Node):
-            raise InvalidSpec("tree", f"expected a Goal or All node, got {tree!r}")
+            raise InvalidSpec("tree", f"expected a goal-tree node (Goal, All, ...), got {tree!r}")
         self.tree = tree
         self.features = tuple(features)
         self.compiled = compile_tree(tree, self.features)  # validates feature names, even for "reference"
@@ -126,26 +130,25 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         base_space = env.observation_space
         if state is None:
             check_identity_observation(tree.name, self.features, base_space)
-        n_counters = len(self.evaluator.counter_keys)
+        slots = [slot for _, slot in self.evaluator.slots]
         low = np.full(self._n, -np.inf) if feature_low is None else np.asarray(feature_low, dtype=np.float64)
         high = np.full(self._n, np.inf) if feature_high is None else np.asarray(feature_high, dtype=np.float64)
-        budgets = np.asarray(self.evaluator.budgets, dtype=np.float64)
         self.observation_space = gym.spaces.Box(
-            np.concatenate([low, np.zeros(n_counters)]).astype(np.float32),
-            np.concatenate([high, budgets]).astype(np.float32),
+            np.concatenate([low, [s.low for s in slots]]).astype(np.float32),
+            np.concatenate([high, [s.high for s in slots]]).astype(np.float32),
             dtype=np.float32,
         )
         if action_space is not None:
             self.action_space = action_space
         # The base observation can be handed on untouched when nothing is added or converted.
-        self._passthrough = state is None and n_counters == 0 and base_space.dtype == np.float32
+        self._passthrough = state is None and not slots and base_space.dtype == np.float32
 
     # -- mapping ---------------------------------------------------------------
 
     def _observation(self, obs: Any, f: list[float]) -> np.ndarray:
         if self._passthrough:
             return obs  # type: ignore[no-any-return]
-        return np.array(f + self.evaluator.counters, dtype=np.float32)
+        return np.array(f + self.evaluator.own_state, dtype=np.float32)
 
     # -- gymnasium API -------------------------------------------------------
 
@@ -156,6 +159,7 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         f = _features(obs, self._state, self.features, self.tree.name)
         members = self.evaluator.reset(f)
         info["goals"] = dict(zip(self.evaluator.paths, members))
+        info["safe"] = dict(zip(self.evaluator.safety_keys, self.evaluator.safe))
         return self._observation(obs, f), info
 
     def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
@@ -164,13 +168,14 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         f = _features(obs, self._state, self.features, self.tree.name)
         reward, ended, members, terms = self.evaluator.step(action, f)
         info["goals"] = dict(zip(self.evaluator.paths, members))
+        info["safe"] = dict(zip(self.evaluator.safety_keys, self.evaluator.safe))
         info["reward_terms"] = terms
         info["base_reward"] = float(base_reward)
         return self._observation(obs, f), reward, bool(terminated or ended), bool(truncated), info
 
 
 class GoalInfo(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
-    """Reports ``info["goals"]`` of a goal tree and changes nothing else.
+    """Reports ``info["goals"]`` and ``info["safe"]`` of a goal tree and changes nothing else.
 
     The paper's *baseline*: the initial env keeps its own observation, reward
     and termination, and its episodes are judged by the same goals.
@@ -194,21 +199,24 @@ class GoalInfo(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         if state is None:
             check_identity_observation(tree.name, self.features, env.observation_space)
 
-    def _goals(self, obs: Any) -> dict[str, bool]:
-        f = _features(obs, self._state, self.features, self.tree.name)
-        return dict(zip(self.evaluator.paths, self.evaluator.members(f)))
+    def _info(self, info: dict[str, Any], members: tuple[bool, ...]) -> dict[str, Any]:
+        info["goals"] = dict(zip(self.evaluator.paths, members))
+        info["safe"] = dict(zip(self.evaluator.safety_keys, self.evaluator.safe))
+        return info
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         obs, info = self.env.reset(seed=seed, options=options)
-        info["goals"] = self._goals(obs)
-        return obs, info
+        f = _features(obs, self._state, self.features, self.tree.name)
+        return obs, self._info(info, self.evaluator.reset(f))
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
         if not math.isfinite(reward):
             raise EvaluationError(f"{self.tree.name}: the initial env returned a non-finite reward {reward!r}")
-        info["goals"] = self._goals(obs)
-        return obs, reward, terminated, truncated, info
+        f = _features(obs, self._state, self.features, self.tree.name)
+        # The goals' own state (stages, counters) follows the episode; the spec's reward and termination do not apply.
+        members = self.evaluator.step(action, f)[2]
+        return obs, reward, terminated, truncated, self._info(info, members)
 
 
 def make_baseline_env(initial_env: InitialEnv, tree: Node, **make_kwargs: Any) -> GoalInfo:
@@ -245,7 +253,7 @@ def make_env(initial_env: InitialEnv, tree: Node, *, evaluator: EvaluatorName = 
     if not isinstance(initial_env, InitialEnv):
         raise InitialEnvError(f"make_env: expected an InitialEnv as first argument, got {initial_env!r}")
     if not isinstance(tree, Node):
-        raise InvalidSpec("make_env", f"expected a Goal or All node as tree, got {tree!r}")
+        raise InvalidSpec("make_env", f"expected a goal-tree node (Goal, All, ...) as tree, got {tree!r}")
     compile_tree(tree, initial_env.features)  # fail before building the base env
     base = initial_env.make(**make_kwargs)
     try:

@@ -56,6 +56,7 @@ from typing import Any
 import numpy as np
 
 from specguard.error import FingerprintError
+from specguard.extend import Annotation, Node
 
 __all__ = ["PROBE_STEPS", "SpecFingerprint", "canonical", "digest", "fingerprint_spec", "probe", "versions"]
 
@@ -216,6 +217,11 @@ class _Encoder:
             return [type(obj).__name__, self.encode(obj.__func__, where)]
         if isinstance(obj, property):
             return ["property", self.encode((obj.fget, obj.fset, obj.fdel), where)]
+        if isinstance(obj, (Node, Annotation)):
+            # A goal-tree node through the protocol: its exact description (SPEC.md section 6), then
+            # what pickle stores of it (the functions its description only names, by their code).
+            text = obj.describe()
+            return ["spec-node", text, self._object(obj, f"{where} ({text})")]
         if isinstance(obj, types.CellType):
             try:
                 contents = obj.cell_contents

@@ -10,8 +10,8 @@ from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from specguard.engine import SpecResult
+from specguard.extend import SHAPING, Node
 from specguard.goals import resolve_goal
-from specguard.nodes import Distance, Node
 from specguard.spec import Spec
 from specguard.stats import Outcome, QuorumVerdict, RunVerdict
 
@@ -102,7 +102,7 @@ def _node(tree: Node, path: str) -> Node:
 def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[RunVerdict]) -> str | None:
     runs = result.runs
     never = [r.seed for r in runs if r.successes[path] == 0]
-    shaped = any(isinstance(a, Distance) for _, n in _node(spec.tree, path).walk() for a in n.annotations)
+    shaped = any(a.role == SHAPING for _, n in _node(spec.tree, path).walk() for a in n.annotations)
     if never:
         from specguard.checks import unreachable_reason
 

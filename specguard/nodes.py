@@ -20,238 +20,27 @@ Example:
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from numbers import Integral, Real
-from typing import Any, ClassVar
+from numbers import Real
+from typing import TYPE_CHECKING, ClassVar
 
+from specguard.annotations import Constraint, Distance
 from specguard.error import InvalidSpec
+from specguard.extend import Annotation, Box, ChildWeights, Context, Node, check_children, component_weights
+from specguard.validation import ANNOTATION_SEPARATOR, PATH_SEPARATOR, check_name, check_weight, number_text
 
-__all__ = ["All", "Annotation", "Constraint", "Distance", "Goal", "Node"]
+if TYPE_CHECKING:
+    from hypothesis.strategies import SearchStrategy
 
-PATH_SEPARATOR = "/"
-ANNOTATION_SEPARATOR = ":"
+__all__ = ["All", "Annotation", "Constraint", "Distance", "Goal", "Node", "component_weights"]
 
-
-def _check_name(kind: str, name: object) -> str:
-    """The name as a plain ``str`` (a ``str`` subclass could override ``__repr__`` or ``__format__``)."""
-    if not isinstance(name, str) or not name.strip():
-        raise InvalidSpec(f"{kind} {name!r}", f"expected a non-empty string as name, got {name!r}")
-    name = str.__str__(name)
-    for sep in (PATH_SEPARATOR, ANNOTATION_SEPARATOR):
-        if sep in name:
-            raise InvalidSpec(
-                f"{kind} {name!r}",
-                f"a name may not contain {sep!r}, which separates node paths",
-                hint="use '_' or '-' inside names",
-            )
-    return name
-
-
-def _check_weight(where: str, weight: object) -> float | None:
-    if weight is None:
-        return None
-    if isinstance(weight, bool) or not isinstance(weight, Real):
-        raise InvalidSpec(where, f"expected weight to be a number, got {weight!r}")
-    value = float(weight)
-    if not math.isfinite(value) or value < 0:
-        raise InvalidSpec(where, f"expected a finite weight >= 0, got {weight!r}")
-    return value
+# Re-exported: modules written before the extension API import these from here.
+_REEXPORTED = (ANNOTATION_SEPARATOR, PATH_SEPARATOR, Annotation, Constraint, Distance, component_weights)
 
 
 def _fmt(x: float) -> str:
-    return f"{x:g}"
-
-
-def _fn_label(fn: Callable[..., Any]) -> str:
-    name = getattr(fn, "__qualname__", None)
-    return name.rsplit("<locals>.", 1)[-1] if isinstance(name, str) else repr(fn)
-
-
-# ---------------------------------------------------------------------------
-# Annotations
-# ---------------------------------------------------------------------------
-
-
-class Annotation:
-    """Base of node annotations (SPEC.md section 2, step 2 of Algorithm 1).
-
-    Attributes:
-        normalised: whether the annotation's reward takes part in the default
-            ``1/N`` weighting of its node's components (distances do, the
-            constraint penalty does not).
-        symbol: the letter the reward formula uses for the component.
-    """
-
-    normalised: ClassVar[bool] = True
-    symbol: ClassVar[str] = "A"
-    name: str | None
-    weight: float | None
-
-
-@dataclass(frozen=True)
-class Distance(Annotation):
-    """Potential-based distance shaping: ``R = (fn(s) - fn(s')) / scale``.
-
-    Args:
-        fn: the distance of a state to the goal, ``>= 0``. It receives the state
-            with attribute access by feature name (``s.x``).
-        scale: the specified maximum distance ``d`` (``> 0``).
-        weight: the component's weight inside its node; ``None`` for the
-            default ``1/N``.
-        name: the component's name in ``info["reward_terms"]``.
-    """
-
-    normalised: ClassVar[bool] = True
-    symbol: ClassVar[str] = "D"
-
-    fn: Callable[[Any], float]
-    scale: float
-    weight: float | None = None
-    name: str = "distance"
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "name", _check_name("Distance", self.name))
-        where = f"Distance {self.name!r}"
-        if not callable(self.fn):
-            raise InvalidSpec(where, f"expected fn to be callable as fn(s), got {self.fn!r}")
-        scale = self.scale
-        if isinstance(scale, bool) or not isinstance(scale, Real):
-            raise InvalidSpec(where, f"expected scale to be a number, got {scale!r}")
-        if not math.isfinite(scale) or scale <= 0:
-            raise InvalidSpec(
-                where,
-                f"expected scale > 0 (the maximum distance to the goal), got {scale!r}",
-                hint="scale divides the shaping reward, so it must be a positive finite number",
-            )
-        object.__setattr__(self, "scale", float(scale))
-        object.__setattr__(self, "weight", _check_weight(where, self.weight))
-
-    def __repr__(self) -> str:
-        weight = "" if self.weight is None else f", weight={_fmt(self.weight)}"
-        name = "" if self.name == "distance" else f", name={self.name!r}"
-        return f"Distance({_fn_label(self.fn)}, scale={_fmt(self.scale)}{weight}{name})"
-
-
-@dataclass(frozen=True)
-class Constraint(Annotation):
-    """A safety constraint: a violation counter with a budget (SPEC.md section 2).
-
-    Args:
-        fn: ``fn(s, a) -> bool``, true for a violating state-action pair.
-        budget: ``delta >= 1``, the violations allowed in an episode; the
-            episode ends when the counter ``delta - violations`` reaches 0.
-        weight: the penalty's weight; defaults to 1 and is not part of the
-            ``1/N`` normalisation.
-        name: the component's name; defaults to ``"constraint"``.
-    """
-
-    normalised: ClassVar[bool] = False
-    symbol: ClassVar[str] = "P"
-
-    fn: Callable[[Any, Any], bool]
-    budget: int = 1
-    weight: float | None = None
-    name: str | None = None
-
-    def __post_init__(self) -> None:
-        if self.name is None:
-            object.__setattr__(self, "name", "constraint")
-        object.__setattr__(self, "name", _check_name("Constraint", self.name))
-        where = f"Constraint {self.name!r}"
-        if not callable(self.fn):
-            raise InvalidSpec(where, f"expected fn to be callable as fn(s, a), got {self.fn!r}")
-        budget = self.budget
-        if isinstance(budget, bool) or not isinstance(budget, Integral) or budget < 1:
-            raise InvalidSpec(
-                where,
-                f"expected budget to be an integer >= 1 (violations allowed per episode), got {budget!r}",
-            )
-        object.__setattr__(self, "budget", int(budget))
-        object.__setattr__(self, "weight", _check_weight(where, self.weight))
-
-    def __repr__(self) -> str:
-        weight = "" if self.weight is None else f", weight={_fmt(self.weight)}"
-        name = "" if self.name == "constraint" else f", name={self.name!r}"
-        return f"Constraint({_fn_label(self.fn)}, budget={self.budget}{weight}{name})"
-
-
-# ---------------------------------------------------------------------------
-# Nodes
-# ---------------------------------------------------------------------------
-
-
-class Node:
-    """Base of goal-tree nodes. Subclasses are frozen dataclasses."""
-
-    kind: ClassVar[str] = "Node"
-    name: str
-    annotations: tuple[Annotation, ...]
-
-    @property
-    def children(self) -> tuple[Node, ...]:
-        return ()
-
-    def annotate(self, *annotations: Annotation) -> Node:
-        """Return a copy of this node with ``annotations`` appended, applied in order.
-
-        Raises:
-            InvalidSpec: an argument is not an annotation, or two annotations
-                of the node share a name.
-        """
-        for a in annotations:
-            if not isinstance(a, Annotation):
-                raise InvalidSpec(
-                    f"{self.kind} {self.name!r}",
-                    f"annotate() expects Distance or Constraint annotations, got {a!r}",
-                )
-        combined = self.annotations + tuple(annotations)
-        names = [a.name for a in combined]
-        for n in names:
-            if names.count(n) > 1:
-                raise InvalidSpec(
-                    f"{self.kind} {self.name!r}",
-                    f"two annotations are named {n!r}; names must be unique per node",
-                    hint="pass name=... to one of them",
-                )
-        new = object.__new__(type(self))
-        for field_name, value in vars(self).items():
-            object.__setattr__(new, field_name, value)
-        object.__setattr__(new, "annotations", combined)
-        return new
-
-    def walk(self, prefix: str = "") -> Iterator[tuple[str, Node]]:
-        """Yield ``(path, node)`` for this node and its descendants, depth first, parents first."""
-        path = f"{prefix}{PATH_SEPARATOR}{self.name}" if prefix else self.name
-        yield path, self
-        for child in self.children:
-            yield from child.walk(path)
-
-    def describe(self) -> str:
-        """One line saying what the node is, without its children."""
-        raise NotImplementedError
-
-    def pretty(self) -> str:
-        """The tree as indented text, one node per line, annotations below their node."""
-        lines: list[str] = []
-        self._pretty(lines, "", "")
-        return "\n".join(lines)
-
-    def _pretty(self, lines: list[str], first: str, rest: str) -> None:
-        lines.append(first + self.describe())
-        kids = self.children
-        lead = rest + ("│   " if kids else "    ")
-        for a in self.annotations:
-            lines.append(f"{lead}+ {a!r}")
-        for i, child in enumerate(kids):
-            last = i == len(kids) - 1
-            child._pretty(lines, rest + ("└── " if last else "├── "), rest + ("    " if last else "│   "))
-
-    def __str__(self) -> str:
-        return self.pretty()
-
-    def _annotations_repr(self) -> str:
-        return f".annotate({', '.join(map(repr, self.annotations))})" if self.annotations else ""
+    return number_text(x)
 
 
 Bound = tuple[float, float]
@@ -320,7 +109,7 @@ class Goal(Node):
     annotations: tuple[Annotation, ...]
 
     def __init__(self, name: str, /, **bounds: object) -> None:
-        name = _check_name("Goal", name)
+        name = check_name("Goal", name)
         if not bounds:
             raise InvalidSpec(
                 f"Goal {name!r}",
@@ -337,6 +126,19 @@ class Goal(Node):
         object.__setattr__(self, "name", name)
         object.__setattr__(self, "bounds", parsed)
         object.__setattr__(self, "annotations", ())
+
+    # -- the extension protocol: a box goal, membership reward (SPEC.md "Leaf") --
+
+    def box(self, child_boxes: Sequence[Box | None]) -> Box:
+        return {f: (lo, hi) for f, lo, hi in self.bounds}
+
+    def contains(self, ctx: Context) -> bool:
+        s = ctx.s
+        return all(lo <= getattr(s, f) <= hi for f, lo, hi in self.bounds)
+
+    @classmethod
+    def refinements(cls, leaf: Node) -> SearchStrategy[Node] | None:
+        return None  # a leaf refines nothing; operators refine leaves
 
     def describe(self) -> str:
         parts = []
@@ -374,28 +176,16 @@ class All(Node):
     """
 
     kind: ClassVar[str] = "All"
+    own_reward: ClassVar[bool] = False
     name: str
     nodes: tuple[Node, ...]
     weights: tuple[float, ...] | None
     annotations: tuple[Annotation, ...]
 
     def __init__(self, *children: Node, name: str, weights: Sequence[float] | None = None) -> None:
-        name = _check_name("All", name)
+        name = check_name("All", name)
         where = f"All {name!r}"
-        if not children:
-            raise InvalidSpec(where, "expected at least one child node, got none")
-        for c in children:
-            if not isinstance(c, Node):
-                raise InvalidSpec(where, f"expected children to be Goal or All nodes, got {c!r}")
-        seen: set[str] = set()
-        for c in children:
-            if c.name in seen:
-                raise InvalidSpec(
-                    where,
-                    f"two children are named {c.name!r}; sibling names must be unique "
-                    "because node paths identify goals",
-                )
-            seen.add(c.name)
+        children = check_children("All", name, children)
         parsed: tuple[float, ...] | None = None
         if weights is not None:
             if isinstance(weights, (str, bytes)) or not isinstance(weights, Sequence):
@@ -405,7 +195,7 @@ class All(Node):
                     where,
                     f"expected {len(children)} weights (one per child), got {len(weights)}: {tuple(weights)!r}",
                 )
-            checked = [_check_weight(f"{where}, weight of {c.name!r}", w) for c, w in zip(children, weights)]
+            checked = [check_weight(f"{where}, weight of {c.name!r}", w) for c, w in zip(children, weights)]
             parsed = tuple(w for w in checked if w is not None)
             if len(parsed) != len(children):
                 raise InvalidSpec(where, f"expected a number for every weight, got {tuple(weights)!r}")
@@ -425,10 +215,47 @@ class All(Node):
     def children(self) -> tuple[Node, ...]:
         return self.nodes
 
-    def child_weights(self) -> tuple[float, ...]:
+    def weights_in_force(self) -> tuple[float, ...]:
         """The weights in force: the user's, or ``1/N`` each."""
         n = len(self.nodes)
         return self.weights if self.weights is not None else (1.0 / n,) * n
+
+    # -- the extension protocol (SPEC.md "AND-operator") ----------------------
+
+    def child_weights(self) -> tuple[ChildWeights, ...]:
+        return tuple(ChildWeights.same(w) for w in self.weights_in_force())  # R = sum_i w_i R_i
+
+    def box(self, child_boxes: Sequence[Box | None]) -> Box | None:
+        if any(b is None for b in child_boxes):
+            return None
+        out: dict[str, tuple[float, float]] = {}
+        for b in child_boxes:  # G = intersection of G_i
+            assert b is not None
+            for f, (lo, hi) in b.items():
+                old_lo, old_hi = out.get(f, (-math.inf, math.inf))
+                out[f] = (max(old_lo, lo), min(old_hi, hi))
+        return out
+
+    def contains(self, ctx: Context) -> bool:
+        return all(ctx.inside)
+
+    def potential(self, ctx: Context) -> float:
+        return 0.0  # no own term: the children's potentials, weighted, are the node's
+
+    def reward(self, before: Context, action: object, after: Context) -> float:
+        return 0.0
+
+    @classmethod
+    def strategy(cls, children: Sequence[Node], name: str) -> SearchStrategy[Node]:
+        from specguard.strategies import weights
+
+        return weights(len(children)).map(lambda w: cls(*children, name=name, weights=w))
+
+    @classmethod
+    def refinements(cls, leaf: Node) -> SearchStrategy[Node] | None:
+        from specguard.strategies import refinements
+
+        return refinements(leaf) if isinstance(leaf, Goal) else None
 
     def describe(self) -> str:
         weights = "" if self.weights is None else f" weights=({', '.join(_fmt(w) for w in self.weights)})"
@@ -438,17 +265,3 @@ class All(Node):
         kids = ", ".join(map(repr, self.nodes))
         weights = "" if self.weights is None else f", weights={self.weights!r}"
         return f"All({kids}, name={self.name!r}{weights}){self._annotations_repr()}"
-
-
-def component_weights(node: Node) -> tuple[float, tuple[float, ...]]:
-    """The weights of a node's reward components: its core and each annotation.
-
-    SPEC.md section 2, "Reward components and weights": ``1/N`` over the core
-    and the normalised annotations (distances); a constraint defaults to 1 and
-    is outside the normalisation; a weight the user set replaces its default.
-    The core's weight is always its default (the parent's weight scales it).
-    """
-    n = 1 + sum(1 for a in node.annotations if a.normalised)
-    default = 1.0 / n
-    ann = tuple(a.weight if a.weight is not None else (default if a.normalised else 1.0) for a in node.annotations)
-    return default, ann

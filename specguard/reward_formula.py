@@ -20,9 +20,12 @@ from __future__ import annotations
 
 from collections import Counter
 
-from specguard.nodes import All, Goal, Node, component_weights
+from specguard.extend import SAFETY, SHAPING, ChildWeights, Node, component_weights
+from specguard.validation import number_text
 
 __all__ = ["formula"]
+
+_ROLES = ("core", SHAPING, SAFETY)
 
 
 def _weighted(w: float, expr: str) -> str:
@@ -30,7 +33,7 @@ def _weighted(w: float, expr: str) -> str:
         return expr
     if " + " in expr:
         expr = f"({expr})"
-    return f"{w:g}*{expr}"
+    return f"{number_text(w)}*{expr}"
 
 
 def formula(tree: Node) -> str:
@@ -38,7 +41,10 @@ def formula(tree: Node) -> str:
 
     Components are labelled by node name, or by the path below the root where
     a name occurs twice; annotations other than the default ``distance`` and
-    ``constraint`` add their name (``D[position:near]``).
+    ``constraint`` add their name (``D[position:near]``). A child whose
+    components its parent passes on with different weights per role (an
+    ``AnyOf`` passes its children's distances but not their goal rewards) shows
+    each group with its weight; a group weighted 0 is left out.
     """
     paths = list(tree.walk())
     counts = Counter(node.name for _, node in paths)
@@ -49,21 +55,32 @@ def formula(tree: Node) -> str:
             return node.name
         return path[len(root_prefix) :] if path.startswith(root_prefix) else path
 
-    def expr(node: Node, path: str) -> str:
+    def expr(node: Node, path: str, roles: frozenset[str]) -> str:
+        """The node's reward restricted to the components of ``roles``."""
         name = label(path, node)
-        if isinstance(node, Goal):
-            core = f"R[{name}]"
-        elif isinstance(node, All):
-            core = " + ".join(
-                _weighted(w, expr(c, f"{path}/{c.name}")) for c, w in zip(node.children, node.child_weights())
-            )
-        else:
-            core = f"{type(node).__name__}[{name}]"
+        core_parts = []
+        if node.own_reward and "core" in roles:
+            core_parts.append(node.formula_term(name))
+        for c, passed in zip(node.children, node.child_weights()):
+            core_parts.extend(_child(c, f"{path}/{c.name}", passed, roles))
         core_w, ann_w = component_weights(node)
-        parts = [_weighted(core_w, core)]
+        parts = [_weighted(core_w, " + ".join(core_parts))] if core_parts else []
         for a, w in zip(node.annotations, ann_w):
-            suffix = "" if a.name in ("distance", "constraint") else f":{a.name}"
-            parts.append(_weighted(w, f"{a.symbol}[{name}{suffix}]"))
+            if a.role in roles and w != 0:
+                suffix = "" if a.name in ("distance", "constraint") else f":{a.name}"
+                parts.append(_weighted(w, f"{a.symbol}[{name}{suffix}]"))
         return " + ".join(parts)
 
-    return f"R = {expr(tree, tree.name)}"
+    def _child(c: Node, path: str, w: ChildWeights, roles: frozenset[str]) -> list[str]:
+        groups: dict[float, set[str]] = {}
+        for role in _ROLES:
+            if role in roles and w.of(role) != 0:
+                groups.setdefault(w.of(role), set()).add(role)
+        out = []
+        for weight, group in groups.items():
+            e = expr(c, path, frozenset(group))
+            if e:
+                out.append(_weighted(weight, e))
+        return out
+
+    return f"R = {expr(tree, tree.name, frozenset(_ROLES)) or '0'}"

@@ -43,8 +43,8 @@ def _layout(spec: Spec) -> list[str]:
     env = make_env(spec.initial_env, spec.tree)
     try:
         space = env.observation_space
-        names = list(spec.initial_env.features) + [f"counter {k}" for k in env.evaluator.counter_keys]
-        lines = [f"observation: {len(names)} components (features, then one counter per constraint)"]
+        names = list(spec.initial_env.features) + [f"{slot.name} {k}" for k, slot in env.evaluator.slots]
+        lines = [f"observation: {len(names)} components (features, then the own state of nodes and annotations)"]
         width = max(len(n) for n in names)
         for name, lo, hi in zip(names, space.low.tolist(), space.high.tolist()):
             lines.append(f"  {name:<{width}}  {_interval(lo, hi)}")

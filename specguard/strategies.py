@@ -23,7 +23,9 @@ from typing import Any
 import numpy as np
 from hypothesis import strategies as st
 
-from specguard.nodes import All, Annotation, Constraint, Distance, Goal, Node
+from specguard.annotations import Constraint, Distance
+from specguard.extend import Annotation, Node
+from specguard.nodes import All, Goal
 
 __all__ = [
     "bounds",
@@ -36,6 +38,7 @@ __all__ = [
     "states",
     "trajectories",
     "trees",
+    "weights",
 ]
 
 # Goal bounds and state values share one small grid plus arbitrary floats in
@@ -79,7 +82,7 @@ def goals(draw: st.DrawFn, features: Sequence[str], name: str | None = None) -> 
     return Goal(name or draw(node_names()), **box)
 
 
-def _weights(n: int) -> st.SearchStrategy[list[float] | None]:
+def weights(n: int) -> st.SearchStrategy[list[float] | None]:
     """``None`` (the default ``1/N``) or ``n`` weights >= 0, at least one of them > 0."""
     return st.none() | st.lists(st.floats(0.0, 10.0), min_size=n, max_size=n).filter(lambda w: any(x > 0 for x in w))
 
@@ -116,40 +119,59 @@ def constraints(draw: st.DrawFn, features: Sequence[str], name: str = "constrain
     return Constraint(_constraint_fn(f, draw(_values)), budget=draw(st.integers(1, 4)), weight=weight, name=name)
 
 
-@st.composite
-def _annotations(draw: st.DrawFn, features: Sequence[str], allow: bool) -> tuple[Annotation, ...]:
-    if not allow:
-        return ()
-    out: list[Annotation] = []
-    for i in range(draw(st.integers(0, 2))):
-        if draw(st.booleans()):
-            out.append(draw(distances(features, name=f"distance{i}")))
-        else:
-            out.append(draw(constraints(features, name=f"constraint{i}")))
-    return tuple(out)
+def _annotated(node: Node, features: Sequence[str], kinds: Sequence[type[Annotation]]) -> st.SearchStrategy[Node]:
+    """``node`` with 0-2 annotations drawn from ``kinds`` (each class's ``strategy``)."""
+    if not kinds:
+        return st.just(node)
+
+    def one(i: int) -> st.SearchStrategy[Annotation]:
+        return st.sampled_from(list(kinds)).flatmap(lambda k: k.strategy(features, f"{k.__name__.lower()}{i}"))
+
+    extra = st.integers(0, 2).flatmap(lambda n: st.tuples(*(one(i) for i in range(n))))
+    return extra.map(lambda anns: node.annotate(*anns) if anns else node)
 
 
-@st.composite
 def trees(
-    draw: st.DrawFn,
     features: Sequence[str],
     max_depth: int = 3,
     max_children: int = 3,
-    annotations: bool = True,
+    annotations: bool | Sequence[type[Annotation]] = True,
     name: str | None = None,
-) -> Node:
-    """Random goal trees of ``Goal`` and ``All`` nodes over ``features``, optionally annotated."""
-    name = name or draw(node_names())
-    if max_depth <= 1 or draw(st.integers(0, 2)) == 0:
-        node: Node = draw(goals(features, name=name))
-    else:
-        n = draw(st.integers(1, max_children))
-        names = draw(st.lists(node_names(), min_size=n, max_size=n, unique=True))
-        kids = [draw(trees(features, max_depth - 1, max_children, annotations, name=k)) for k in names]
-        weights = draw(_weights(n))
-        node = All(*kids, name=name, weights=weights)
-    extra = draw(_annotations(features, annotations))
-    return node.annotate(*extra) if extra else node
+    operators: Sequence[type[Node]] = (All,),
+) -> st.SearchStrategy[Node]:
+    """Random goal trees over ``features``: ``Goal`` leaves combined by ``operators``, optionally annotated.
+
+    Built with ``st.recursive``, so counterexamples shrink towards small trees.
+
+    Args:
+        features: the feature names goals may bound.
+        max_depth: the deepest a tree may be (1: a single leaf).
+        max_children: the most children per operator.
+        annotations: ``True`` for ``Distance`` and ``Constraint``, ``False`` for
+            none, or the annotation classes to draw (each with a ``strategy``).
+        name: the root's name (a leaf root when ``max_depth`` is 1); random if ``None``.
+        operators: the operator classes to combine children with; each is drawn
+            through its ``strategy(children, name)`` classmethod.
+    """
+    kinds: tuple[type[Annotation], ...] = (
+        (Distance, Constraint) if annotations is True else () if annotations is False else tuple(annotations)
+    )
+    ops = tuple(operators)
+
+    def leaf(leaf_name: str | None = None) -> st.SearchStrategy[Node]:
+        return goals(features, name=leaf_name).flatmap(lambda g: _annotated(g, features, kinds))
+
+    def combine(kids: st.SearchStrategy[Node], op_name: st.SearchStrategy[str]) -> st.SearchStrategy[Node]:
+        children = st.lists(kids, min_size=1, max_size=max_children, unique_by=lambda n: n.name)
+        drawn = st.tuples(st.sampled_from(ops), children, op_name)
+        return drawn.flatmap(lambda t: t[0].strategy(t[1], t[2])).flatmap(lambda n: _annotated(n, features, kinds))
+
+    if max_depth <= 1 or not ops:
+        return leaf(name)
+    inner = st.recursive(leaf(), lambda kids: combine(kids, node_names()), max_leaves=max_children ** (max_depth - 1))
+    if name is None:
+        return inner
+    return st.one_of(leaf(name), combine(inner, st.just(name)))
 
 
 @st.composite
@@ -178,8 +200,7 @@ def refinements(draw: st.DrawFn, leaf: Goal, max_children: int = 3, loosen: bool
             f, lo, hi = bounded[k % len(bounded)]  # repeating one of the leaf's bounds leaves the intersection
             box[f] = (None if math.isinf(lo) else lo, None if math.isinf(hi) else hi)
         children.append(Goal(f"part{k}", **box))
-    weights = draw(_weights(n))
-    return All(*children, name=leaf.name, weights=weights)
+    return All(*children, name=leaf.name, weights=draw(weights(n)))
 
 
 def states(features: Sequence[str]) -> st.SearchStrategy[list[float]]:

@@ -26,7 +26,8 @@ def test_flat_and_reference_agree_step_by_step(tree, trajectory, data):
     flat = compile_tree(tree, FEATURES).evaluator()
     ref = ReferenceEvaluator(tree, FEATURES)
     assert flat.paths == ref.paths
-    assert flat.counter_keys == ref.counter_keys
+    assert flat.slots == ref.slots
+    assert flat.safety_keys == ref.safety_keys
     assert flat.reset(trajectory[0]) == ref.reset(trajectory[0])
     for a, f in zip(actions, trajectory[1:]):
         r1, end1, goals1, terms1 = flat.step(a, f)
@@ -37,7 +38,8 @@ def test_flat_and_reference_agree_step_by_step(tree, trajectory, data):
         assert list(terms1) == list(terms2)
         assert list(terms1.values()) == pytest.approx(list(terms2.values()), rel=1e-9, abs=1e-12)
         assert sum(terms1.values()) == pytest.approx(r1)
-        assert flat.counters == ref.counters
+        assert flat.own_state == ref.own_state
+        assert flat.safe == ref.safe
         if end1:
             break
 
@@ -45,12 +47,13 @@ def test_flat_and_reference_agree_step_by_step(tree, trajectory, data):
 @given(sgst.trees(FEATURES), st.lists(sgst.states(FEATURES), min_size=1, max_size=30))
 def test_batch_membership_agrees_with_reference(tree, batch):
     compiled = compile_tree(tree, FEATURES)
-    goals = process(tree).goals
+    req = process(tree)
     members = compiled.members(np.asarray(batch))
     assert members.shape == (len(batch), len(compiled.paths))
     for row, f in zip(members, batch):
         s = State._make(f)
-        assert row.tolist() == [goals[p](s) for p in compiled.paths]
+        x = ExtendedState(s, req.initial(s))
+        assert row.tolist() == [req.goals[p](x) for p in compiled.paths]
 
 
 @given(sgst.trees(FEATURES), st.data())
@@ -62,9 +65,10 @@ def test_batch_rewards_agree_with_reference(tree, data):
     compiled = compile_tree(tree, FEATURES)
     req = process(tree)
     terms = compiled.reward_terms(np.asarray(s), np.asarray(actions), np.asarray(s2))
-    counters = {k: b for k, b, _ in req.counters}
     for i in range(n):
-        ext, ext2 = ExtendedState(State._make(s[i]), counters), ExtendedState(State._make(s2[i]), counters)
+        first, second = State._make(s[i]), State._make(s2[i])
+        ext = ExtendedState(first, req.initial(first))
+        ext2 = ExtendedState(second, req.transition(ext, actions[i], second))
         expected = req.reward(ext, actions[i], ext2)
         assert list(expected) == list(compiled.term_keys)
         assert terms[i].tolist() == pytest.approx(list(expected.values()), rel=1e-9, abs=1e-12)
@@ -245,5 +249,5 @@ def test_names_reach_generated_code_only_as_string_literals(names):
     root, p, q, d, c = names
     assert list(terms) == [f"{root}/{p}", f"{root}/{p}:{d}", f"{root}/{p}:{c}", f"{root}/{q}"]
     assert ev.paths == (root, f"{root}/{p}", f"{root}/{q}")
-    assert ev.counters == [0] and ended
+    assert ev.own_state == [0.0] and ended
     assert r == pytest.approx(0.5 * (0.5 * (1.0 - 0.5) / 2.0 - 1.0))  # root weight 1/2: distance, penalty

@@ -139,12 +139,14 @@ def test_duplicate_annotation_names():
 
 
 def test_non_node_child():
-    with pytest.raises(sg.InvalidSpec, match=r"All 'r': expected children to be Goal or All nodes, got 'a'"):
+    with pytest.raises(sg.InvalidSpec, match=r"All 'r': expected children to be nodes \(Goal, All, ...\), got 'a'"):
         sg.All("a", name="r")  # type: ignore[arg-type]
 
 
 def test_annotate_with_a_non_annotation():
-    with pytest.raises(sg.InvalidSpec, match=r"Goal 'g': annotate\(\) expects Distance or Constraint"):
+    with pytest.raises(
+        sg.InvalidSpec, match=r"Goal 'g': annotate\(\) expects annotations \(Distance, Constraint, ...\)"
+    ):
         sg.Goal("g", x=0).annotate(dist)  # type: ignore[arg-type]
 
 

@@ -23,6 +23,16 @@ def inside(goal: sg.Goal, f: list[float]) -> bool:
     return all(lo <= s[name] <= hi for name, lo, hi in goal.bounds)
 
 
+def chain(req, trajectory, actions=None):
+    """The extended states of a trajectory, own states following the transitions."""
+    s = State._make(trajectory[0])
+    out = [ExtendedState(s, req.initial(s))]
+    for t, f in enumerate(trajectory[1:]):
+        s2 = State._make(f)
+        out.append(ExtendedState(s2, req.transition(out[-1], actions[t] if actions else 0, s2)))
+    return out
+
+
 def run(tree: sg.Node, trajectory: list[list[float]], actions: list[int] | None = None):
     """Rewards, terms and flags of the reference evaluator along a trajectory (stops when it ends)."""
     ev = ReferenceEvaluator(tree, FEATURES)
@@ -31,7 +41,7 @@ def run(tree: sg.Node, trajectory: list[list[float]], actions: list[int] | None 
     for t, f in enumerate(trajectory[1:]):
         a = actions[t] if actions else 0
         reward, ended, goals, terms = ev.step(a, f)
-        steps.append((reward, ended, goals, terms, ev.counters))
+        steps.append((reward, ended, goals, terms, ev.own_state))
         if ended:
             break
     return first, steps
@@ -49,7 +59,7 @@ def test_leaf_rewards_telescope_to_final_minus_initial_membership(goal, trajecto
 @given(sgst.goals(FEATURES), sgst.trajectories(FEATURES))
 def test_reentering_a_leaf_is_never_paid_twice(goal, trajectory):
     req = process(sg.All(goal, name="root"), root=False)  # no root termination: the whole trajectory runs
-    ext = [ExtendedState(State._make(f), {}) for f in trajectory]
+    ext = chain(req, trajectory)
     rewards = [sum(req.reward(s, 0, s2).values()) for s, s2 in pairwise(ext)]
     running = 0.0
     for r in rewards:
@@ -62,7 +72,7 @@ def test_reentering_a_leaf_is_never_paid_twice(goal, trajectory):
 def test_distance_shaping_telescopes(goal, distance, trajectory):
     tree = sg.All(goal.annotate(distance), name="root")
     req = process(tree, root=False)
-    ext = [ExtendedState(State._make(f), {}) for f in trajectory]
+    ext = chain(req, trajectory)
     key = f"root/{goal.name}:{distance.name}"
     _, weights = sg.nodes.component_weights(goal.annotate(distance))
     shaped = sum(req.reward(s, 0, s2)[key] for s, s2 in pairwise(ext))
@@ -77,7 +87,8 @@ def test_refinement_preserves_the_root_goal(data):
     g_leaf, g_refined = process(leaf).goal, process(refined).goal
     for f in data.draw(st.lists(sgst.states(FEATURES), min_size=1, max_size=20)):
         s = State._make(f)
-        assert g_leaf(s) == g_refined(s) == inside(leaf, f)
+        x = ExtendedState(s, {})
+        assert g_leaf(x) == g_refined(x) == inside(leaf, f)
 
 
 @given(st.data())
@@ -119,11 +130,13 @@ def test_and_reward_is_the_weighted_sum_of_the_childrens(data):
     node = sg.All(*kids, name="root", weights=weights)
     f, f2 = data.draw(sgst.states(FEATURES)), data.draw(sgst.states(FEATURES))
     a = data.draw(st.integers(0, 2))
-    reqs = [process(k, root=False) for k in kids]
-    counters = {key: data.draw(st.integers(0, b)) for r in reqs for key, b, _ in r.counters}
-    ext, ext2 = ExtendedState(State._make(f), counters), ExtendedState(State._make(f2), counters)
+    reqs = [process(k, f"root/{k.name}", root=False) for k in kids]
+    own = [
+        {key: (float(data.draw(st.integers(0, int(slot.high)))),) for r in reqs for key, slot in r.slots} for _ in "12"
+    ]
+    ext, ext2 = ExtendedState(State._make(f), own[0]), ExtendedState(State._make(f2), own[1])
     total = sum(process(node, root=False).reward(ext, a, ext2).values())
-    expected = sum(w * sum(r.reward(ext, a, ext2).values()) for w, r in zip(node.child_weights(), reqs))
+    expected = sum(w * sum(r.reward(ext, a, ext2).values()) for w, r in zip(node.weights_in_force(), reqs))
     assert total == pytest.approx(expected, abs=1e-9)
 
 
@@ -133,8 +146,8 @@ def test_parent_termination_includes_every_childs(data):
     f = data.draw(sgst.states(FEATURES))
     for path, node in tree.walk():
         req = process(node, path, root=False)
-        counters = {key: data.draw(st.integers(0, b)) for key, b, _ in req.counters}
-        ext = ExtendedState(State._make(f), counters)
+        own = {key: (float(data.draw(st.integers(0, int(slot.high)))),) for key, slot in req.slots}
+        ext = ExtendedState(State._make(f), own)
         for child in node.children:
             if process(child, f"{path}/{child.name}", root=False).terminal(ext):
                 assert req.terminal(ext)
@@ -145,11 +158,11 @@ def test_constraint_counters_never_increase_and_end_the_episode_at_zero(tree, tr
     actions = data.draw(st.lists(st.integers(0, 2), min_size=len(trajectory), max_size=len(trajectory)))
     ev = ReferenceEvaluator(tree, FEATURES)
     ev.reset(trajectory[0])
-    previous = ev.counters
-    assert previous == list(ev.budgets)
+    previous = ev.own_state
+    assert previous == [slot.high for _, slot in ev.slots]
     for t, f in enumerate(trajectory[1:]):
         _, ended, goals, _ = ev.step(actions[t], f)
-        counters = ev.counters
+        counters = ev.own_state
         assert all(0 <= c <= p for c, p in zip(counters, previous))
         assert ended == (goals[0] or 0 in counters)
         previous = counters

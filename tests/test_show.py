@@ -39,7 +39,7 @@ EXPECTED = [
     "All 'balance'",
     "├── Goal 'centre': -0.5 <= x <= 0.5",
     "R = 0.5*R[centre] + 0.5*(R[upright] + P[upright:no_spin])",
-    "observation: 5 components (features, then one counter per constraint)",
+    "observation: 5 components (features, then the own state of nodes and annotations)",
     "  x                                [-4.8, 4.8]",
     "  theta                            [-0.418879, 0.418879]",
     "  counter balance/upright:no_spin  [0, 3]",
