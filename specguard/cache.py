@@ -41,6 +41,7 @@ from typing import Any
 
 from specguard.error import SpecError
 from specguard.fingerprint import fingerprint_spec, versions
+from specguard.goals import result_keys
 from specguard.spec import Spec
 from specguard.train import RunResult
 
@@ -143,8 +144,13 @@ def _check_result(result: Any, seed: int, paths: Collection[str]) -> None:
     if not _is_int(episodes) or episodes < 1:
         raise ValueError(f"episodes {episodes!r} is not an integer >= 1")
     successes = result["successes"]
-    if not isinstance(successes, dict) or set(successes) != set(paths):
-        raise ValueError("successes do not list exactly the tree's goals")
+    if not isinstance(successes, dict):
+        raise ValueError("successes is not an object")
+    missing, extra = sorted(set(paths) - set(successes)), sorted(set(successes) - set(paths))
+    if missing or extra:  # e.g. an entry stored before safety rates were measured
+        parts = (("missing", missing), ("unexpected", extra))
+        diff = "; ".join(f"{what} {', '.join(map(repr, keys))}" for what, keys in parts if keys)
+        raise ValueError(f"successes do not list exactly the tree's goals and safety rates ({diff})")
     for path, k in successes.items():
         if not _is_int(k) or not 0 <= k <= episodes:
             raise ValueError(f"successes[{path!r}] = {k!r} is not an integer in [0, episodes={episodes}]")
@@ -160,6 +166,9 @@ def validate_record(
     record: Any, folder: Path, *, key: str, seed: int, paths: Collection[str], secret: bytes | None
 ) -> RunResult:
     """The run stored in ``record`` (parsed ``result.json`` of ``folder``), after every check.
+
+    ``paths`` are the keys the run must have measured, exactly: the tree's node
+    paths and its safety keys (:func:`specguard.goals.result_keys`).
 
     Raises:
         ValueError: the first check that failed, in words.
@@ -282,7 +291,7 @@ def model_files(model: Any, *, normalize: bool) -> dict[str, bytes]:
 
 
 def _paths(spec: Spec) -> list[str]:
-    return [p for p, _ in spec.tree.walk()]
+    return result_keys(spec.tree)
 
 
 def try_acquire(lock: Any) -> bool:

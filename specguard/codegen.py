@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from specguard.extend import Context
+from specguard.extend import Context, Node
 from specguard.reference import FLOAT_MAX, _call
 
 if TYPE_CHECKING:
@@ -138,7 +138,9 @@ def _step_source(tree: CompiledTree) -> str:
     distances = 0
     for k, t in enumerate(tree.terms):
         comment = f"  # {text(t.key)}"
-        if t.kind == "member":
+        if t.kind == "zero" or (t.kind == "member" and t.coef == 0.0):  # weighted 0 on its path
+            term = "0.0"
+        elif t.kind == "member":
             term = f"{number(t.coef)} * (m{t.node} - m[{t.node}])"
         elif t.kind == "node":
             term = f"{number(t.coef)} * g{t.node}"
@@ -184,7 +186,8 @@ def _termination_lines(tree: CompiledTree) -> list[str]:
     lines = []
     for i in reversed(range(len(tree.paths))):
         kids = [f"x{c}" for c in tree.children[i]]
-        node = (" or ".join(kids) or "False") if tree.fast[i] else f"_end{i}({_tuple(kids)})"
+        inline = tree.fast[i] or type(tree.nodes[i]).terminates is Node.terminates  # the default: any(ended)
+        node = (" or ".join(kids) or "False") if inline else f"_end{i}({_tuple(kids)})"
         lines.append(f"    x{i} = {' or '.join([node, *own.get(i, [])])}  # {text(tree.paths[i])}")
     return lines
 
@@ -212,6 +215,8 @@ class _GeneralNode:
         self.path, self.node = path, node
         self.start, self.stop = start, start + size
         self.own_reward = node.own_reward
+        self.default_reward = type(node).reward is Node.reward  # reward is the potential difference
+        self.last: tuple[Context, float] | None = None  # the last state's context and potential
         self.after = Context(None, (), ())
 
     def begin(self, s: Any, z: list[float], inside: tuple[bool, ...], init: bool) -> bool:
@@ -228,22 +233,60 @@ class _GeneralNode:
     def step(
         self, s: Any, a: Any, s2: Any, z: list[float], inside: tuple[bool, ...], inside2: tuple[bool, ...]
     ) -> tuple[bool, float]:
-        node, path = self.node, self.path
+        # The hot path calls the methods directly; if one raises, the checked path names it.
+        # Own state is written only once every method succeeded, so the checked re-run sees the same state.
+        try:
+            member, reward, q2 = self._step(s, a, s2, z, inside, inside2, _direct)
+        except Exception:
+            member, reward, q2 = self._step(s, a, s2, z, inside, inside2, self._checked)
+        if self.stop > self.start:
+            z[self.start : self.stop] = q2
+        return member, reward
+
+    def _checked(self, what: str, fn: Callable[..., Any], *args: Any) -> Any:
+        return _call(self.path, what, fn, *args)
+
+    def _step(
+        self,
+        s: Any,
+        a: Any,
+        s2: Any,
+        z: list[float],
+        inside: tuple[bool, ...],
+        inside2: tuple[bool, ...],
+        call: Callable[..., Any],
+    ) -> tuple[bool, float, tuple[float, ...]]:
+        node = self.node
         q = tuple(z[self.start : self.stop])
         before = Context(s, q, inside)
         if self.stop > self.start:
-            q2 = tuple(float(v) for v in _call(path, "next_state()", node.next_state, before, a, s2, inside2))
-            z[self.start : self.stop] = q2
+            q2 = tuple(float(v) for v in call("next_state()", node.next_state, before, a, s2, inside2))
         else:
             q2 = q
         after = self.after = Context(s2, q2, inside2)
-        member = bool(_call(path, "contains()", node.contains, after))
-        reward = float(_call(path, "reward()", node.reward, before, a, after)) if self.own_reward else 0.0
-        return member, reward
+        member = bool(call("contains()", node.contains, after))
+        if not self.own_reward:
+            return member, 0.0, q2
+        if self.default_reward:
+            # reward = potential(after) - potential(before): the potential of ``before`` was the last step's.
+            last = self.last
+            phi = (
+                last[1]
+                if last is not None and last[0] == before
+                else float(call("potential()", node.potential, before))
+            )
+            phi2 = float(call("potential()", node.potential, after))
+            self.last = (after, phi2)
+            return member, phi2 - phi, q2
+        return member, float(call("reward()", node.reward, before, a, after)), q2
 
     def end(self, ended: tuple[bool, ...]) -> bool:
         """Termination in the state of the last :meth:`step`, given the children's."""
         return bool(_call(self.path, "terminates()", self.node.terminates, self.after, ended))
+
+
+def _direct(what: str, fn: Callable[..., Any], *args: Any) -> Any:
+    return fn(*args)
 
 
 class _GeneralAnnotation:

@@ -13,6 +13,12 @@ allows, by a one-sided two-sample test at level ``alpha`` (default 0.05):
 
 It *improved* when the same test finds a rise.
 
+Safety rates (keys ``path:name``, :mod:`specguard.goals`) are stored and
+compared exactly as goals are, under ``group::path:name``. A goal or safety
+rate that a baseline has no figures for (a baseline saved before it was
+asserted, or before safety rates were measured) is not compared:
+:func:`specguard.gate.check_item` notes that instead of failing.
+
 Each stored goal also records its spec's identity
 (:attr:`specguard.fingerprint.SpecFingerprint.spec_key`, the key the cache and
 the plugin's shared results use), so a comparison says whether the spec

@@ -57,7 +57,7 @@ __all__ = ["CompiledTree", "Evaluator", "compile_tree"]
 @dataclass(frozen=True)
 class _Term:
     key: str  # "path" for a node's own core term, "path:name" for an annotation
-    kind: str  # "member" | "node" | "distance" | "counter" | "annotation"
+    kind: str  # "member" | "node" | "distance" | "counter" | "annotation" | "zero" (a shaping weighted 0)
     coef: float  # product of the weights on the path for its role, times its own weight (and 1/scale)
     node: int = -1  # member/node: index of its node in ``paths``
     fn: Callable[..., Any] | None = None  # distance/counter: the user's function
@@ -123,7 +123,7 @@ class CompiledTree:
     @property
     def all_fast(self) -> bool:
         """Whether every node and annotation compiled to a closed form (no own state beyond counters)."""
-        return all(self.fast) and all(t.kind in ("member", "distance", "counter") for t in self.terms)
+        return all(self.fast) and all(t.kind in ("member", "distance", "counter", "zero") for t in self.terms)
 
     @property
     def stateful(self) -> bool:
@@ -158,7 +158,9 @@ class CompiledTree:
         m, m2 = self.members(s), self.members(s2)
         out = np.empty((len(s), len(self.terms)))
         for j, t in enumerate(self.terms):
-            if t.kind == "member":
+            if t.kind == "zero":
+                out[:, j] = 0.0
+            elif t.kind == "member":
                 out[:, j] = t.coef * (m2[:, t.node].astype(np.float64) - m[:, t.node])
             elif t.kind == "distance":
                 out[:, j] = t.coef * (self._apply(t, s) - self._apply(t, s2))
@@ -371,6 +373,8 @@ def _annotation_term(key: str, a: Annotation, coef: float, slots: list[tuple[str
     start = len(slots)
     slots.extend((key, s) for s in a.state_slots())
     if isinstance(form, ShapingForm):  # the two closed forms the kernel knows (a tagged union, not a ladder)
+        if coef == 0.0:  # weighted 0 on its path (a Sequence takes over its children's distances): never called
+            return _Term(key, "zero", 0.0, annotation=a, owner=owner)
         return _Term(key, "distance", coef / form.scale, fn=form.fn, annotation=a, owner=owner)
     if isinstance(form, CounterForm):
         if len(slots) - start != 1:

@@ -1,8 +1,9 @@
 """Running a spec: seeds in parallel processes, sequential seeds, per-goal verdicts.
 
 ``run_spec`` trains ``budget.min_seeds`` runs (in parallel worker processes,
-each with one torch thread), judges every thresholded goal, and trains further
-seeds, up to ``budget.max_seeds``, only while some goal's quorum is still open.
+each with one torch thread), judges every thresholded goal and safety rate
+(keys of :mod:`specguard.goals`), and trains further seeds, up to
+``budget.max_seeds``, only while some quorum is still open.
 Runs come from the cache when an identical run was trained before
 (:mod:`specguard.cache`).
 
@@ -26,6 +27,7 @@ from specguard.cache import Cache, try_acquire, wait_for
 from specguard.error import SpecError
 from specguard.executors import LOCAL, Executor, make_executor
 from specguard.fingerprint import fingerprint_spec
+from specguard.goals import GOAL, kind, label, result_keys
 from specguard.progress import ProgressEvent, decode_update, print_event
 from specguard.spec import Spec
 from specguard.stats import QuorumVerdict, RunVerdict, quorum_verdict, run_verdict, success_interval
@@ -53,15 +55,15 @@ def resolve_workers(workers: int | str) -> int:
 
 @dataclass
 class GoalVerdict:
-    """One goal of a spec against its threshold, over all runs.
+    """One goal (or safety rate) of a spec against its threshold, over all runs.
 
     Attributes:
-        path: the node path.
+        path: the node path, or for a safety rate its key ``path:name``.
         threshold: the minimum success asked for.
         required: runs that must meet it.
         runs: each run's verdict, by seed order.
         verdict: passed, failed, or open (more runs could still decide it).
-        successes, episodes: pooled over runs.
+        successes, episodes: pooled over runs (for a safety rate: episodes without a violation).
         interval: the pooled success rate's confidence interval.
     """
 
@@ -139,7 +141,7 @@ class SpecResult:
             raise SpecError(f"Spec {self.spec!r}: {e}", hint="train it again: its cache entry is gone") from None
 
     def success(self, path: str) -> tuple[int, int]:
-        """Pooled ``(successes, episodes)`` of a goal over all runs."""
+        """Pooled ``(successes, episodes)`` of a goal (or safe episodes of a safety key) over all runs."""
         return sum(r.successes[path] for r in self.runs), sum(r.episodes for r in self.runs)
 
     def to_dict(self) -> dict[str, Any]:
@@ -148,7 +150,7 @@ class SpecResult:
             "passed": self.passed,
             "seconds": self.seconds,
             "runs": [r.to_dict() for r in self.runs],
-            "goals": {p: asdict(g) for p, g in self.goals.items()},
+            "goals": {p: {**asdict(g), "kind": kind(p)} for p, g in self.goals.items()},
             "errors": {str(k): v for k, v in self.errors.items()},
             "cached": {str(k): v for k, v in self.cached.items()},
             "confidence": self.confidence,
@@ -156,8 +158,12 @@ class SpecResult:
         }
 
     def table(self) -> str:
-        """A per-goal table: pooled success with interval, threshold, runs, verdict."""
+        """A per-goal table: pooled success with interval, threshold, runs, verdict.
+
+        Goals first, then the safety rates, labelled ``path:name (safe)``.
+        """
         paths = [p for r in self.runs[:1] for p in r.successes] or list(self.goals)
+        paths.sort(key=lambda p: kind(p) != GOAL)  # stable: each kind keeps its order
         header = ("goal", "success", f"{self.confidence:.0%} interval", "threshold", "runs met", "verdict")
         rows = []
         for p in paths:
@@ -167,7 +173,7 @@ class SpecResult:
             g = self.goals.get(p)
             met = "-" if g is None else f"{g.runs.count(RunVerdict.MET)}/{len(g.runs)} (need {g.required})"
             threshold = "-" if g is None else f">= {g.threshold:g}"
-            rows.append((p, rate, iv, threshold, met, "-" if g is None else g.verdict.value))
+            rows.append((label(p), rate, iv, threshold, met, "-" if g is None else g.verdict.value))
         lines = render_table(header, rows)
         for seed, message in self.errors.items():
             lines.append(f"seed {seed} failed: {message}")
@@ -259,7 +265,7 @@ class _Runs:
         self.executor = executor
         self.lock_timeout = lock_timeout
         self.say = say
-        self.paths = [p for p, _ in spec.tree.walk()]
+        self.paths = result_keys(spec.tree)  # what a cached run must have measured
         self.fingerprint = None if cache is None else fingerprint_spec(spec)
         if self.fingerprint is not None and not self.fingerprint.reproducible:
             self.cache = None
@@ -349,7 +355,7 @@ class _Runs:
 
     @staticmethod
     def _rates(run: RunResult) -> str:
-        return ", ".join(f"{p} {c}/{run.episodes}" for p, c in run.successes.items())
+        return ", ".join(f"{label(p)} {c}/{run.episodes}" for p, c in run.successes.items())
 
     def _event(self, seed: int, kind: Literal["done", "cached"], run: RunResult, message: str) -> None:
         """A finished run's event: its steps, training time and the root goal's evaluation success."""

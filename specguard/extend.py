@@ -74,6 +74,8 @@ __all__ = [
     "Node",
     "ShapingForm",
     "Slot",
+    "annotation_key",
+    "check_children",
     "component_weights",
     "goal_test",
 ]

@@ -196,6 +196,8 @@ class _Encoder:
             return ["list", [self.encode(v, f"{where}[{i}]") for i, v in enumerate(obj)]]
         if type(obj) is dict:
             return ["dict", self._items(obj.items(), where)]
+        if isinstance(obj, types.MappingProxyType):  # e.g. a dataclass field's metadata, in a user class's body
+            return ["mappingproxy", self._items(obj.items(), where)]
         if isinstance(obj, np.ndarray):
             if obj.dtype.hasobject:
                 return ["ndarray", "object", list(obj.shape), self.encode(obj.tolist(), where)]

@@ -1,7 +1,9 @@
-"""Judging one goal of a trained spec for a test item: outcome, message, figures.
+"""Judging one goal (or safety rate) of a trained spec for a test item: outcome, message, figures.
 
 Plain logic over :class:`specguard.engine.SpecResult`, used by the pytest
-plugin and unit-tested without pytest.
+plugin and unit-tested without pytest. A safety rate (key ``path:name``, see
+:mod:`specguard.goals`) is judged exactly as a goal is; its message and hint
+speak of violations.
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 from specguard.engine import SpecResult
 from specguard.extend import SHAPING, Node
-from specguard.goals import resolve_goal
+from specguard.goals import GOAL, SAFETY, kind, resolve_goal
 from specguard.spec import Spec
 from specguard.stats import Outcome, QuorumVerdict, RunVerdict
 
@@ -26,8 +28,13 @@ class GoalCheck:
     """One (spec, goal) item's figures and outcome; ``to_row()`` is plain data.
 
     Attributes:
+        goal: the node path, or a safety key ``path:name``.
         outcome: passed, failed, or undecided (the goal failed only because
             runs stayed undecided: none missed, none crashed).
+        success, successes: for a safety rate, the share and number of
+            episodes without a violation.
+        comparison: against the stored baseline, or a note that the baseline has no figures for it.
+        kind: ``"goal"`` or ``"safety"``.
     """
 
     group: str
@@ -49,6 +56,7 @@ class GoalCheck:
     hint: str | None = None
     comparison: str | None = None
     spec_key: str | None = None
+    kind: str = GOAL
 
     @property
     def key(self) -> str:
@@ -62,7 +70,7 @@ class GoalCheck:
     def junit_properties(self) -> list[tuple[str, Any]]:
         """The figures as ``(name, value)`` pairs for JUnit XML properties."""
         lo, hi = self.interval
-        names = ("success", "threshold", "successes", "episodes", "runs_met", "runs", "train_seconds", "cached")
+        names = ("kind", "success", "threshold", "successes", "episodes", "runs_met", "runs", "train_seconds", "cached")
         return [(n, getattr(self, n)) for n in names] + [("interval", f"[{lo:.4f}, {hi:.4f}]")]
 
     def message(self) -> str:
@@ -71,9 +79,12 @@ class GoalCheck:
         ]
         lo, hi = self.interval
         seeds = ", ".join(str(s["seed"]) for s in self.per_seed) or "none"
+        safety = self.kind == SAFETY
+        what = f"safety rate {self.goal!r}" if safety else f"goal {self.goal!r}"
+        rate = "safe (no violation) in" if safety else "success"
         lines = [
-            f"goal {self.goal!r} of spec {self.spec!r} {verb} its threshold",
-            f"  success {self.success:.0%} ({self.successes}/{self.episodes}), interval [{lo:.2f}, {hi:.2f}], "
+            f"{what} of spec {self.spec!r} {verb} its threshold",
+            f"  {rate} {self.success:.0%} ({self.successes}/{self.episodes}), interval [{lo:.2f}, {hi:.2f}], "
             f"threshold >= {self.threshold:g}",
             f"  runs: {self.runs_met} of {self.runs} met ({self.required} required); seeds {seeds}",
             "  per seed: "
@@ -99,7 +110,34 @@ def _node(tree: Node, path: str) -> Node:
     return dict(tree.walk())[path]
 
 
+def _undecided_hint(spec: Spec) -> str:
+    return (
+        f"runs stayed undecided after {spec.budget.max_eval_episodes} evaluation episodes: "
+        "raise budget.max_eval_episodes, or ask for a threshold further from the measured rate"
+    )
+
+
+def _safety_hint(spec: Spec, key: str, result: SpecResult, verdicts: list[RunVerdict]) -> str | None:
+    """What to try when a safety rate (``path:name``) missed its threshold."""
+    runs = result.runs
+    episodes = sum(r.episodes for r in runs)
+    if not episodes:
+        return None
+    if RunVerdict.UNDECIDED in verdicts and RunVerdict.MISSED not in verdicts:
+        return _undecided_hint(spec)
+    unsafe = episodes - sum(r.successes[key] for r in runs)
+    always = [r.seed for r in runs if r.successes[key] == 0]
+    where = f"; in every episode of {len(always)}/{len(runs)} seeds" if always else ""
+    return (
+        f"{key!r} was violated in {unsafe / episodes:.0%} of evaluation episodes{where} "
+        "(an episode with any violation counts as unsafe, whatever the annotation's budget): "
+        "consider a larger weight for its penalty, or a larger training budget"
+    )
+
+
 def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[RunVerdict]) -> str | None:
+    if kind(path) == SAFETY:
+        return _safety_hint(spec, path, result, verdicts)
     runs = result.runs
     never = [r.seed for r in runs if r.successes[path] == 0]
     shaped = any(a.role == SHAPING for _, n in _node(spec.tree, path).walk() for a in n.annotations)
@@ -130,17 +168,14 @@ def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[RunVerdict])
                 f"{rates[worst]:.0%}; consider a Distance on {worst!r} or a larger weight for it"
             )
     if RunVerdict.UNDECIDED in verdicts:
-        return (
-            f"runs stayed undecided after {spec.budget.max_eval_episodes} evaluation episodes: "
-            "raise budget.max_eval_episodes, or ask for a threshold further from the measured rate"
-        )
+        return _undecided_hint(spec)
     if any(r.stopped_early for r in runs):
         return "training stopped at the budget's wall-clock cap in some seeds"
     return None
 
 
 def check_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalCheck:
-    """The figures and outcome of goal ``path`` (which must have a threshold in ``spec``)."""
+    """The figures and outcome of goal (or safety key) ``path``, which must have a threshold in ``spec``."""
     verdict = result.goals[path]
     per_seed = [
         {"seed": r.seed, "successes": r.successes[path], "episodes": r.episodes, "verdict": v.value}
@@ -171,6 +206,7 @@ def check_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalChe
         errors=dict(result.errors),
         spec_key=result.spec_key,
         hint=None if outcome is Outcome.PASSED else _hint(spec, path, result, verdict.runs),
+        kind=kind(path),
     )
 
 
@@ -201,13 +237,19 @@ def check_item(
 ) -> list[GoalCheck]:
     """Check the goals of one test item, failing a passing goal whose success dropped against ``baseline``.
 
+    A goal or safety rate the baseline has no figures for (a baseline stored
+    before it was asserted, or before safety rates were measured) is not
+    compared; its ``comparison`` says so.
+
     Args:
         baseline: the stored baseline and its name.
     """
     checks = []
     for path in paths:
         check = check_goal(result, spec, path, group)
-        if baseline is not None and check.key in baseline[0].runs and check.runs_counts:
+        if baseline is not None and check.key not in baseline[0].runs:
+            check.comparison = f"not compared: baseline {baseline[1]!r} has no figures for it"
+        elif baseline is not None and check.runs_counts:
             from specguard.compare import compare
 
             comparison = compare(baseline[0].runs[check.key], check.runs_counts)
@@ -216,6 +258,7 @@ def check_item(
                 check.comparison += f" (the spec changed since baseline {baseline[1]!r})"
             if comparison.dropped and check.outcome is Outcome.PASSED:
                 check.outcome = Outcome.FAILED
-                check.hint = f"success {check.comparison} against baseline {baseline[1]!r}"
+                rate = "safety rate" if check.kind == SAFETY else "success"
+                check.hint = f"{rate} {check.comparison} against baseline {baseline[1]!r}"
         checks.append(check)
     return checks

@@ -289,4 +289,4 @@ class ReferenceEvaluator:
         x2 = ExtendedState(s2, self.req.transition(x, action, s2))
         terms = self.req.reward(x, action, x2)
         self._x = x2
-        return sum(terms.values()), self.req.terminal(x2), self._members(x2), terms
+        return float(sum(terms.values())), self.req.terminal(x2), self._members(x2), terms

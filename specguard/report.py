@@ -5,6 +5,10 @@ plus ``"verdict"`` (what pytest reported: passed, failed, xfailed, xpassed,
 undecided) and optionally ``"comparison"`` and ``"curves"`` (one curve per run,
 in the order of ``"per_seed"``). The Markdown links the PNG and the rollout
 GIFs of :mod:`specguard.rollout` written beside it.
+
+A row whose goal is a safety key ``path:name`` (its ``"kind"`` is
+``"safety"``) is a safety rate: tables label it ``path:name (safe)`` and list
+it after its spec's goals.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ if TYPE_CHECKING:
 
     from specguard.rollout import Gif
 
+from specguard.goals import is_safety_key, label
 from specguard.text import render_table
 
 __all__ = ["curves_figure", "markdown", "plot_curves", "table_lines", "write_reports"]
@@ -34,11 +39,19 @@ def _per_seed(row: Row) -> str:
     return ", ".join(cells) or "-"
 
 
+def _ordered(rows: Sequence[Row]) -> list[Row]:
+    """Rows by spec in order of first appearance, each spec's goals before its safety rates (otherwise stable)."""
+    first: dict[str, int] = {}
+    for r in rows:
+        first.setdefault(r["group"], len(first))
+    return sorted(rows, key=lambda r: (first[r["group"]], is_safety_key(r["goal"])))
+
+
 def _cells(row: Row) -> list[str]:
     lo, hi = row["interval"]
     cells = [
         row["group"],
-        row["goal"],
+        label(row["goal"]),
         f"{row['success']:.0%} ({row['successes']}/{row['episodes']})",
         f"[{lo:.2f}, {hi:.2f}]",
         f">= {row['threshold']:g}",
@@ -57,10 +70,13 @@ HEADER = ["spec", "goal", "success", "interval", "threshold", "runs met", "per s
 
 def table_lines(rows: Sequence[Row]) -> list[str]:
     """The terminal summary: spec x goal -> success, interval, threshold, runs met, per-seed successes, verdict,
-    and training time (``cached`` for a row whose runs all came from the cache)."""
+    and training time (``cached`` for a row whose runs all came from the cache).
+
+    Safety rates follow their spec's goals, labelled ``path:name (safe)``; their
+    success is the share of episodes without a violation."""
     compared = any(r.get("comparison") for r in rows)
     header = HEADER + (["vs baseline"] if compared else [])
-    body = [_cells(r) + ([""] if compared and not r.get("comparison") else []) for r in rows]
+    body = [_cells(r) + ([""] if compared and not r.get("comparison") else []) for r in _ordered(rows)]
     out = render_table(header, body)
     return out
 
@@ -93,15 +109,16 @@ def markdown(rows: Sequence[Row], *, plot: str | None = None, gifs: Mapping[str,
         "| " + " | ".join(header) + " |",
         "|" + "---|" * len(header),
     ]
-    for r in rows:
+    for r in _ordered(rows):
         cells = _cells(r) + ([""] if compared and not r.get("comparison") else [])
-        cells[1] = f"`{cells[1]}`"
+        cells[1] = f"`{r['goal']}` (safe)" if is_safety_key(r["goal"]) else f"`{cells[1]}`"
         lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
-    failing = [r for r in rows if r["verdict"] in ("failed", "undecided")]
+    failing = [r for r in _ordered(rows) if r["verdict"] in ("failed", "undecided")]
     if failing:
         lines += ["", "### Failing goals", ""]
         for r in failing:
-            lines.append(f"- `{r['group']}` / `{r['goal']}`" + (f": {r['hint']}" if r.get("hint") else ""))
+            safe = " (safety rate)" if is_safety_key(r["goal"]) else ""
+            lines.append(f"- `{r['group']}` / `{r['goal']}`{safe}" + (f": {r['hint']}" if r.get("hint") else ""))
     if plot or gifs:
         lines += ["", "### Figures", ""]
     if plot:
@@ -187,7 +204,7 @@ def curves_figure(rows: Sequence[Row]) -> Figure | None:
             steps = sorted(by_step)
             if steps:
                 mean = [sum(by_step[s]) / len(by_step[s]) for s in steps]
-                ax.plot(steps, mean, color=colour, linewidth=2.2, label=goal, gid=f"{goal}:mean")
+                ax.plot(steps, mean, color=colour, linewidth=2.2, label=label(goal), gid=f"{goal}:mean")
             ax.axhline(thresholds[goal], color=colour, linestyle="--", linewidth=1.0, gid=f"{goal}:threshold")
             if evals:
                 evaluated = True

@@ -8,7 +8,11 @@ does), evaluation episode ``i`` of run ``seed`` uses
 ``EVAL_SEED_BASE + seed * EVAL_SEED_STRIDE + i``.
 
 A goal succeeds in an episode when the episode's last state lies in it,
-whether the episode terminated or was truncated.
+whether the episode terminated or was truncated. A safety annotation
+(``Constraint``, ``Avoid``: ``role == "safety"``) counts the episodes without a
+violation, read from the last step's ``info["safe"]``; its count is stored
+beside the goals' under its key ``path:name`` (:mod:`specguard.goals`), so
+verdicts, intervals, caches and baselines treat both alike.
 """
 
 from __future__ import annotations
@@ -57,11 +61,13 @@ class RunResult:
         seed: the training seed.
         timesteps: environment steps actually trained.
         episodes: evaluation episodes.
-        successes: per node path, evaluation episodes whose last state lies in the goal.
+        successes: per node path, evaluation episodes whose last state lies in the goal;
+            then per safety key (``path:name``), evaluation episodes without a violation.
         train_seconds: wall-clock training time.
         stopped_early: training hit the budget's wall-clock cap.
-        curve: success per goal over training episodes (stochastic policy),
-            ``[{"timesteps": t, "episodes": n, "success": {path: rate}}, ...]``.
+        curve: success per goal (and safety rate per safety key) over training
+            episodes (stochastic policy),
+            ``[{"timesteps": t, "episodes": n, "success": {key: rate}}, ...]``.
     """
 
     spec: str
@@ -84,11 +90,21 @@ def _policy_action(space: gym.Space[Any], action: Any) -> Any:
     return int(action) if isinstance(space, gym.spaces.Discrete) else action
 
 
+def _count_episode(counts: dict[str, int], info: Mapping[str, Any]) -> None:
+    """Add one finished episode's last ``info``: its goals (by path), then its safety (by ``path:name``)."""
+    for key, ok in info["goals"].items():
+        counts[key] = counts.get(key, 0) + int(ok)
+    for key, ok in info.get("safe", {}).items():
+        counts[key] = counts.get(key, 0) + int(ok)
+
+
 def evaluate(policy: Callable[[Any], Any], env: gym.Env, episodes: int, seeds: list[int] | range) -> dict[str, int]:
-    """Run ``episodes`` episodes of ``policy`` on ``env`` (which reports ``info["goals"]``).
+    """Run ``episodes`` episodes of ``policy`` on ``env`` (which reports ``info["goals"]`` and ``info["safe"]``).
 
     Returns:
-        Per node path, the number of episodes whose last state lies in the goal.
+        Per node path, the number of episodes whose last state lies in the
+        goal; then per safety key (``path:name``), the number of episodes
+        without a violation (the last step's ``info["safe"]``).
     """
     counts: dict[str, int] = {}
     for i in range(episodes):
@@ -97,8 +113,7 @@ def evaluate(policy: Callable[[Any], Any], env: gym.Env, episodes: int, seeds: l
         while not done:
             obs, _, terminated, truncated, info = env.step(_policy_action(env.action_space, policy(obs)))
             done = terminated or truncated
-        for path, inside in info["goals"].items():
-            counts[path] = counts.get(path, 0) + int(inside)
+        _count_episode(counts, info)
     return counts
 
 
@@ -113,7 +128,7 @@ TICKS = 100  # step reports per run (cheap; they tell where a run was when it di
 
 
 class _GoalCurve:
-    """An SB3 callback body: success per goal over finished training episodes, and the wall-clock cap."""
+    """An SB3 callback body: success per goal (and safety rate) over finished training episodes, and the cap."""
 
     def __init__(self, every: int, wall_clock_s: float | None, total: int, report: Report | None) -> None:
         self.every = max(1, every)
@@ -133,8 +148,7 @@ class _GoalCurve:
         for done, info in zip(dones, infos):
             if done and "goals" in info:
                 self._episodes += 1
-                for p, inside in info["goals"].items():
-                    self._counts[p] = self._counts.get(p, 0) + int(inside)
+                _count_episode(self._counts, info)
         if self.report is not None and num_timesteps >= self._next_tick:
             self._next_tick = num_timesteps + self._tick
             self.report("train", num_timesteps, None)
@@ -144,7 +158,7 @@ class _GoalCurve:
                 rates = {p: c / self._episodes for p, c in self._counts.items()}
                 self.points.append({"timesteps": num_timesteps, "episodes": self._episodes, "success": rates})
             if self.report is not None:  # numbers, as JSON: the parent makes the event (specguard.progress)
-                root = next(iter(rates.values())) if self._episodes else None
+                root = next(iter(rates.values())) if self._episodes else None  # goals come first, the root first
                 elapsed = time.perf_counter() - self.start
                 line = encode_update(num_timesteps, self.total, elapsed, root, self._episodes)
                 self.report("train", num_timesteps, line)

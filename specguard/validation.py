@@ -116,6 +116,6 @@ def function_text(fn: Callable[..., Any]) -> str:
     Never ``repr(fn)``, which holds a memory address.
     """
     name = getattr(fn, "__qualname__", None) or getattr(fn, "__name__", None)
-    if isinstance(name, str):
-        return name.rsplit("<locals>.", 1)[-1]
-    return type(fn).__qualname__  # a callable object: its class
+    if not isinstance(name, str):
+        name = type(fn).__qualname__  # a callable object: its class
+    return name.rsplit("<locals>.", 1)[-1]

@@ -79,6 +79,9 @@ DAMAGE = {
     "forged successes": lambda f: _edit(f, lambda r: r["result"]["successes"].update(pendulum=2)),
     "forged episodes": lambda f: _edit(f, lambda r: r["result"].update(episodes=1000)),
     "missing goal": lambda f: _edit(f, lambda r: (r["result"]["successes"].pop("pendulum"), _resign(r))),
+    "unknown safety key": lambda f: _edit(
+        f, lambda r: (r["result"]["successes"].update({"pendulum:x": 0}), _resign(r))
+    ),
     "successes above episodes": lambda f: _edit(
         f, lambda r: (r["result"]["successes"].update(pendulum=r["result"]["episodes"] + 1), _resign(r))
     ),
@@ -115,6 +118,23 @@ def test_a_forged_entry_is_retrained_by_run_spec(tmp_path):
     with pytest.warns(UserWarning, match="checksum does not match"):
         again = sg.run_spec(s, workers=1, cache_dir=tmp_path, progress=None)
     assert again.cached == {0: False} and not again.passed
+
+
+def test_an_entry_without_the_safety_rates_is_discarded_and_retrained(tmp_path):
+    # An entry stored before safety rates were measured (same key, no "path:name" counts) must not crash the
+    # verdicts with a KeyError: it fails validation, is discarded with a warning, and the run is trained again.
+    fast = sg.Constraint(lambda s, a: abs(s.omega) > 7.5, name="fast")
+    s = spec(sg.All(*pendulum.trees["b"].children, name="pendulum").annotate(fast), expect={"fast": 0.0})
+    first = sg.run_spec(s, workers=1, cache_dir=tmp_path, progress=None)
+    assert "pendulum:fast" in first.runs[0].successes
+    folder = Cache(tmp_path).entry(s, 0)
+    _edit(folder, lambda r: (r["result"]["successes"].pop("pendulum:fast"), _resign(r)))
+    missing = r"successes do not list exactly the tree's goals and safety rates \(missing 'pendulum:fast'\)\)"
+    with pytest.warns(UserWarning, match=missing):
+        again = sg.run_spec(s, workers=1, cache_dir=tmp_path, progress=None)
+    assert again.cached == {0: False} and again.passed
+    assert again.runs[0].successes == first.runs[0].successes  # the same run, retrained
+    assert Cache(tmp_path).load(s, 0) is not None
 
 
 def test_with_a_secret_only_entries_signed_with_it_are_trusted(tmp_path, trained):

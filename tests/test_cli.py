@@ -60,6 +60,34 @@ def test_run_passes_and_fails_with_exit_status(spec_file, tmp_path, capsys):
     assert "== hard: FAILED" in capsys.readouterr().out
 
 
+def test_run_reports_safety_rates_in_the_table_and_the_json(tmp_path, capsys):
+    path = tmp_path / "safe_specs.py"
+    path.write_text(
+        SPEC_FILE
+        + textwrap.dedent(
+            """
+            spin = sg.Constraint(lambda s, a: abs(s.omega) > 8.5, name="spin")  # |omega| <= 8: never violated
+            safe = sg.Spec(pendulum, tree.annotate(spin), budget=budget, expect={"spin": 0.3}, hyperparameters=tiny)
+            """
+        )
+    )
+    report = tmp_path / "out.json"
+    assert main(["show", f"{path}::safe"]) == 0
+    assert "expect: pendulum:spin >= 0.3" in capsys.readouterr().out
+    args = ["--workers", "1", "--no-cache", "--quiet", "--json", str(report)]
+    assert main(["run", f"{path}::safe", *args]) == 0
+    rows = [line.split() for line in capsys.readouterr().out.splitlines()]
+    goals = [row[0] for row in rows if row and row[0].startswith("pendulum")]
+    assert goals == ["pendulum", "pendulum/position", "pendulum/stabilization", "pendulum:spin"]
+    (spin,) = [row for row in rows if row and row[0] == "pendulum:spin"]
+    assert spin[1:4] == ["(safe)", "100%", "(4/4)"] and spin[-1] == "passed"  # undecided at 2 episodes, met at 4
+    data = json.loads(report.read_text())["safe"]
+    assert data["passed"] is True
+    assert data["goals"]["pendulum:spin"]["kind"] == "safety"
+    assert (data["goals"]["pendulum:spin"]["successes"], data["goals"]["pendulum:spin"]["episodes"]) == (4, 4)
+    assert data["runs"][0]["successes"]["pendulum:spin"] == 4
+
+
 def test_run_prints_progress_lines(spec_file, tmp_path, capsys):
     main(["run", f"{spec_file}::easy", "--workers", "1", "--no-cache", "--budget-scale", "2"])
     err = capsys.readouterr().err

@@ -9,6 +9,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import specguard as sg
+from specguard import strategies as sgst
 from specguard.compiled import compile_tree
 from specguard.extend import ChildWeights, Context, Node, Slot
 from specguard.reference import ReferenceEvaluator
@@ -108,9 +109,24 @@ def test_general_nodes_are_called_and_fast_ones_inlined():
     source = compile_tree(_named_tree("r", "p", "q", "d", "c", "l"), FEATURES).source
     assert "_node1(" in source  # the latch, from its definition
     assert "0.0 <= f0 <= 1.0  # 'r/l/p'" in source  # its child, a box test
-    assert "x1 = _end1((x2,)) or" not in source  # the child's counter ends the child's subtree...
-    assert "x2 = False or z[0] <= 0.0  # 'r/l/p'" in source
-    assert "x1 = _end1((x2,))  # 'r/l'" in source  # ...and the latch is asked, given it
+    assert "x2 = False or z[0] <= 0.0  # 'r/l/p'" in source  # the child's counter ends the child's subtree...
+    assert "x1 = x2  # 'r/l'" in source  # ...and the latch's default termination, any(ended), is inlined
+
+
+class EndingLatch(Latch):
+    """A latch that also ends the episode once latched: its own termination is asked."""
+
+    def terminates(self, ctx: Context, ended: tuple[bool, ...]) -> bool:
+        return any(ended) or ctx.q[0] == 1.0
+
+
+def test_an_own_termination_is_asked_given_the_childrens():
+    tree = sg.All(EndingLatch(sg.Goal("p", a=(0, 1)), name="l"), sg.Goal("q", b=(None, 0)), name="r")
+    assert "x1 = _end1((x2,))  # 'r/l'" in compile_tree(tree, FEATURES).source
+    for ev in (compile_tree(tree, FEATURES).evaluator(), ReferenceEvaluator(tree, FEATURES)):
+        ev.reset([5.0, 1.0, 0.0])
+        assert ev.step(0, [5.0, 1.0, 0.0])[1] is False
+        assert ev.step(0, [0.5, 1.0, 0.0])[1] is True  # latched: its own termination, though the root is not met
 
 
 def test_a_latch_keeps_its_goal_after_leaving_the_child():
@@ -121,3 +137,23 @@ def test_a_latch_keeps_its_goal_after_leaving_the_child():
         _, ended, goals, _ = ev.step(0, [5.0, 0.0, 0.0])  # left p, latch holds; q reached: the root
         assert (ended, goals) == (True, (True, True, False, True))
         assert ev.own_state == [1.0]
+
+
+@given(
+    st.data(),
+    sgst.trajectories(FEATURES, max_size=15),
+)
+def test_trees_mixing_fast_and_general_nodes_agree_with_the_reference(data, trajectory):
+    tree = data.draw(sgst.trees(FEATURES, operators=(sg.All, Latch, EndingLatch)))
+    actions = data.draw(st.lists(st.integers(0, 2), min_size=len(trajectory), max_size=len(trajectory)))
+    flat, ref = compile_tree(tree, FEATURES).evaluator(), ReferenceEvaluator(tree, FEATURES)
+    assert (flat.slots, flat.safety_keys) == (ref.slots, ref.safety_keys)
+    assert flat.reset(trajectory[0]) == ref.reset(trajectory[0])
+    for a, f in zip(actions, trajectory[1:]):
+        r1, end1, goals1, terms1 = flat.step(a, f)
+        r2, end2, goals2, terms2 = ref.step(a, f)
+        assert r1 == pytest.approx(r2, rel=1e-9, abs=1e-12)
+        assert (end1, goals1, list(terms1)) == (end2, goals2, list(terms2))
+        assert (flat.own_state, flat.safe) == (ref.own_state, ref.safe)
+        if end1:
+            break

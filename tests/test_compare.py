@@ -66,3 +66,33 @@ def test_corrupt_baselines_name_the_file(tmp_path, content):
 def test_missing_baseline(tmp_path):
     with pytest.raises(BaselineError, match="does not exist; store one first with --goal-specs-save"):
         load_baseline(tmp_path / "none.json")
+
+
+def test_safety_rates_round_trip_and_old_baselines_without_them_are_noted(tmp_path):
+    import specguard as sg
+    from example_specs import pendulum
+    from specguard.engine import SpecResult, _judge
+    from specguard.gate import check_item
+    from specguard.train import RunResult
+
+    old = tmp_path / "old.json"  # saved before safety rates were measured: goals only
+    old.write_text('{"format": 2, "goals": {"g::pendulum": {"runs": [[30, 30], [29, 30]], "spec": null}}}')
+    new = tmp_path / "new.json"
+    save_baseline(new, {"g::pendulum": [(30, 30)], "g::pendulum:fast": [(28, 30), (30, 30)]})
+    assert load_baseline(new).runs["g::pendulum:fast"] == [(28, 30), (30, 30)]
+
+    fast = sg.Constraint(lambda s, a: abs(s.omega) > 7.5, name="fast")
+    tree = sg.All(*pendulum.trees["b"].children, name="pendulum").annotate(fast)
+    spec = sg.Spec(pendulum.initial_env, tree, budget=sg.Budget(10), expect={"pendulum": 0.5, "fast": 0.5})
+    counts = {"pendulum": 30, "pendulum/position": 30, "pendulum/stabilization": 30, "pendulum:fast": 29}
+    runs = [
+        RunResult(spec="pendulum", seed=i, timesteps=10, episodes=30, successes=counts, train_seconds=1.0)
+        for i in (0, 1)
+    ]
+    result = SpecResult(spec="pendulum", runs=runs, goals=_judge(spec, runs, 0))
+    paths = ["pendulum", "pendulum:fast"]
+    goal, safety = check_item(result, spec, paths, "g", baseline=(load_baseline(old), "old"))
+    assert goal.comparison.startswith("unchanged within chance")
+    assert safety.comparison == "not compared: baseline 'old' has no figures for it" and safety.outcome == "passed"
+    _, safety = check_item(result, spec, paths, "g", baseline=(load_baseline(new), "new"))
+    assert safety.comparison.startswith("unchanged within chance: 97% -> 97%")

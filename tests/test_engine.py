@@ -258,3 +258,70 @@ def test_two_processes_asking_for_the_same_run_train_it_once(tmp_path):
     assert sum("seed 0: from cache" in err for err in stderr) == 1, stderr
     tables = [out.splitlines()[1:] for out, _ in outputs]  # the first line holds the wall time
     assert tables[0] == tables[1]
+
+
+# -- safety rates: judged, tabled and serialised like goals ---------------------------------------------------
+
+FAST = sg.Constraint(lambda s, a: abs(s.omega) > 7.5, name="fast")
+SAFE_TREE = sg.All(*pendulum.trees["b"].children, name="pendulum").annotate(FAST)
+
+
+def _safety_result(per_seed, expect):
+    from specguard.engine import SpecResult, _judge
+    from specguard.train import RunResult
+
+    s = sg.Spec(pendulum.initial_env, SAFE_TREE, budget=sg.Budget(timesteps=10), expect=expect)
+    runs = [
+        RunResult(
+            spec="pendulum",
+            seed=i,
+            timesteps=10,
+            episodes=30,
+            # the safety key first: tables put the goals first whatever the order a run reports
+            successes={"pendulum:fast": safe, "pendulum": 30, "pendulum/position": 30, "pendulum/stabilization": 30},
+            train_seconds=1.0,
+        )
+        for i, safe in enumerate(per_seed)
+    ]
+    result = SpecResult(spec="pendulum", runs=runs, goals={})
+    result.goals = _judge(s, runs, 0)
+    return result
+
+
+def test_safety_rates_are_judged_tabled_and_serialised_like_goals():
+    result = _safety_result([12, 30], {"fast": 0.8, "pendulum": 0.5})
+    crash = result.goals["pendulum:fast"]
+    assert crash.runs == ["missed", "met"] and crash.verdict == "failed" and not result.passed
+    assert (crash.successes, crash.episodes) == (42, 60) and result.success("pendulum:fast") == (42, 60)
+    assert crash.interval[0] < 0.7 < crash.interval[1]
+    lines = result.table().splitlines()
+    assert [line.split()[0] for line in lines[2:]] == [
+        "pendulum",
+        "pendulum/position",
+        "pendulum/stabilization",
+        "pendulum:fast",
+    ]
+    assert lines[-1].split("  ")[0] == "pendulum:fast (safe)"
+    assert lines[-1].split()[2:] == ["70%", "(42/60)", "[0.57,", "0.81]", ">=", "0.8", "1/2", "(need", "2)", "failed"]
+    data = json.loads(json.dumps(result.to_dict()))
+    assert data["goals"]["pendulum:fast"]["kind"] == "safety" and data["goals"]["pendulum"]["kind"] == "goal"
+    assert data["runs"][0]["successes"]["pendulum:fast"] == 12
+
+
+def test_progress_lines_label_safety_rates():
+    from specguard.engine import _Runs
+
+    run = _safety_result([12], {"fast": 0.0}).runs[0]
+    assert _Runs._rates(run).startswith("pendulum:fast (safe) 12/30, pendulum 30/30")
+
+
+def test_a_safety_threshold_is_asserted_end_to_end(tmp_path):
+    # A constraint nothing violates (|omega| <= 8 in Pendulum): its safety rate is 100%, met in both runs.
+    never = sg.Constraint(lambda s, a: abs(s.omega) > 8.5, name="never")
+    tree = sg.All(*pendulum.trees["b"].children, name="pendulum").annotate(never)
+    budget = sg.Budget(timesteps=128, min_seeds=2, max_seeds=4, eval_episodes=4)
+    s = sg.Spec(pendulum.initial_env, tree, budget=budget, hyperparameters=TINY, expect={"never": 0.3}, quorum=2)
+    result = sg.run_spec(s, workers=2, cache_dir=None, progress=None)
+    assert result.passed and result.goals["pendulum:never"].runs == ["met", "met"]
+    assert result.success("pendulum:never") == (8, 8)
+    assert result.table().splitlines()[-1].split()[:4] == ["pendulum:never", "(safe)", "100%", "(8/8)"]

@@ -349,3 +349,23 @@ def test_fingerprints_are_computed_once_per_spec_object():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert fingerprint_spec(s) is fingerprint_spec(s)
+
+
+def test_a_user_operator_dataclass_is_keyed_by_its_description_and_its_code():
+    from example_specs.at_least import AtLeast
+
+    def tree(k):
+        return AtLeast(k, sg.Goal("p", x=(0, 1)), sg.Goal("q", y=(0, 1)), name="r")
+
+    keys = {digest(tree(1)), digest(tree(2))}
+    assert len(keys) == 2  # its fields (and description) differ
+    assert digest(tree(1)) == digest(tree(1))
+    encoded = json.dumps(canonical(tree(2)))
+    assert "AtLeast 'r' k=2" in encoded  # through the protocol: describe()
+
+    class Changed(AtLeast):
+        def contains(self, ctx):  # type: ignore[no-untyped-def]
+            return sum(ctx.inside) > self.k
+
+    changed = Changed(1, sg.Goal("p", x=(0, 1)), sg.Goal("q", y=(0, 1)), name="r")
+    assert digest(changed) != digest(tree(1))  # same description, other code

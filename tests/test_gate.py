@@ -144,3 +144,74 @@ def test_never_reached_suggests_a_distance_only_for_a_reachable_goal():
     hint = check_goal(result_of(far, [(0, 30), (0, 30)]), far, "far", "g").hint
     assert hint.startswith("goal impossible, not just never reached: goal box x in [10, inf] lies outside")
     assert "Distance" not in hint
+
+
+# -- safety rates ---------------------------------------------------------------------------------------------
+
+FAST = sg.Constraint(lambda s, a: abs(s.omega) > 7.5, name="fast")
+
+
+def safety_spec(expect, **budget):
+    tree = sg.All(*pendulum.trees["b"].children, name="pendulum").annotate(FAST)
+    return sg.Spec(pendulum.initial_env, tree, budget=sg.Budget(timesteps=10, **budget), expect=expect)
+
+
+def safety_result(spec, safe_per_seed, episodes=30):
+    runs = [
+        RunResult(
+            spec=spec.label,
+            seed=i,
+            timesteps=10,
+            episodes=episodes,
+            successes={**{p: episodes for p, _ in spec.tree.walk()}, "pendulum:fast": k},
+            train_seconds=1.0,
+        )
+        for i, k in enumerate(safe_per_seed)
+    ]
+    result = SpecResult(spec=spec.label, runs=runs, goals={})
+    result.goals = _judge(spec, runs, 0)
+    return result
+
+
+def test_a_missed_safety_threshold_speaks_of_violations():
+    s = safety_spec({"fast": 0.8})
+    check = check_goal(safety_result(s, [0, 10]), s, "pendulum:fast", "g")
+    assert check.outcome == "failed" and check.kind == "safety"
+    assert check.hint == (
+        "'pendulum:fast' was violated in 83% of evaluation episodes; in every episode of 1/2 seeds (an episode with "
+        "any violation counts as unsafe, whatever the annotation's budget): consider a larger weight for its "
+        "penalty, or a larger training budget"
+    )
+    message = check.message()
+    assert message.startswith("safety rate 'pendulum:fast' of spec 'pendulum' missed its threshold\n")
+    assert "  safe (no violation) in 17% (10/60), interval [0.08, 0.29], threshold >= 0.8" in message
+    assert "per seed: seed 0: 0/30 (missed), seed 1: 10/30 (missed)" in message
+    assert check.to_row()["kind"] == "safety"
+    assert dict(check.junit_properties())["kind"] == "safety"
+
+
+def test_a_passing_or_undecided_safety_rate():
+    s = safety_spec({"pendulum:fast": 0.8, "pendulum": 0.5}, max_eval_episodes=30)
+    passed = check_goal(safety_result(s, [30, 30]), s, "pendulum:fast", "g")
+    assert passed.outcome == "passed" and passed.hint is None
+    assert passed.message().startswith("safety rate 'pendulum:fast' of spec 'pendulum' met its threshold")
+    undecided = check_goal(safety_result(s, [26, 30]), s, "pendulum:fast", "g")
+    assert undecided.outcome is Outcome.UNDECIDED
+    assert undecided.hint.startswith("runs stayed undecided after 30 evaluation episodes")
+    goal = check_goal(safety_result(s, [30, 30]), s, "pendulum", "g")
+    assert goal.kind == "goal" and dict(goal.junit_properties())["kind"] == "goal"
+
+
+def test_old_baselines_without_a_safety_rate_are_noted_not_compared():
+    from specguard.gate import check_item
+
+    s = safety_spec({"pendulum": 0.3, "fast": 0.3})
+    result = safety_result(s, [20, 21])
+    old = Baseline({"g::pendulum": [(30, 30), (30, 30)]}, {})  # stored before safety rates were measured
+    goal, safety = check_item(result, s, ["pendulum", "pendulum:fast"], "g", baseline=(old, "main"))
+    assert goal.comparison.startswith("unchanged within chance")
+    assert safety.outcome == "passed" and safety.comparison == "not compared: baseline 'main' has no figures for it"
+    dropped = Baseline({"g::pendulum:fast": [(30, 30), (30, 30)]}, {})
+    safety = check_item(result, s, ["pendulum:fast"], "g", baseline=(dropped, "main"))[0]
+    assert safety.outcome == "failed"
+    assert safety.hint.startswith("safety rate dropped: 100% -> 68%") and safety.hint.endswith("baseline 'main'")

@@ -92,3 +92,83 @@ def test_root_key_survives_pickling():
 
 def _a_test():
     """A function for @goal_spec to decorate (pytest marks only functions that look like tests)."""
+
+
+# -- safety rates: keys path:name of safety annotations, resolved by the same function --------------------------
+
+CRASH = sg.Constraint(lambda s, a: s.a > 5, name="crash")
+SAFE_TREE = sg.All(
+    sg.Goal("up", a=(0, 1)).annotate(sg.Constraint(lambda s, a: False, name="spin")),
+    sg.Goal("spin", a=(1, 2)),  # a node named like the constraint on "up"
+    sg.Goal("near", a=(0, 2)).annotate(sg.Distance(abs, scale=1.0)),
+    name="lunar",
+).annotate(CRASH)
+
+
+def test_safety_keys_are_path_colon_name_of_safety_annotations_only():
+    from specguard.goals import is_safety_key, kind, label, result_keys, safety_keys
+
+    assert safety_keys(SAFE_TREE) == ["lunar:crash", "lunar/up:spin"]  # tree order; Distance has no rate
+    assert result_keys(SAFE_TREE) == ["lunar", "lunar/up", "lunar/spin", "lunar/near", "lunar:crash", "lunar/up:spin"]
+    assert safety_keys(TREE) == []
+    assert is_safety_key("lunar:crash") and not is_safety_key("lunar/up")
+    assert (kind("lunar:crash"), kind("lunar")) == ("safety", "goal")
+    assert (label("lunar:crash"), label("lunar/up")) == ("lunar:crash (safe)", "lunar/up")
+
+
+def test_every_annotation_whose_role_is_safety_gets_a_key():
+    from specguard.extend import Annotation
+    from specguard.goals import resolve_goal, safety_keys
+
+    class Guard(Annotation):  # a third party's constraint-like annotation: only its role matters, not its class
+        role = "safety"
+
+        def __init__(self, name):
+            self.name, self.weight = name, None
+
+    tree = sg.Goal("g", a=(0, 1)).annotate(Guard("guard"))
+    assert safety_keys(tree) == ["g:guard"]
+    assert resolve_goal(tree, "guard", "here") == "g:guard"
+
+
+@pytest.mark.parametrize(
+    ("key", "resolved"),
+    [
+        ("lunar:crash", "lunar:crash"),  # the full key
+        ("crash", "lunar:crash"),  # a unique annotation name
+        ("lunar/up:spin", "lunar/up:spin"),  # a full key wins over the ambiguous name "spin"
+        ("lunar/spin", "lunar/spin"),
+        (ROOT, "lunar"),
+    ],
+)
+def test_resolve_safety_keys(key, resolved):
+    assert resolve_goal(SAFE_TREE, key, "here") == resolved
+
+
+def test_safety_key_errors_list_the_goals_and_the_safety_rates():
+    with pytest.raises(
+        sg.InvalidSpec, match=r"here: the name 'spin' is ambiguous; use one of the keys lunar/spin, lunar/up:spin"
+    ):
+        resolve_goal(SAFE_TREE, "spin", "here")
+    with pytest.raises(
+        sg.InvalidSpec,
+        match=r"here: no node or safety annotation is named 'lunar:crsh'; the tree's goals are lunar, lunar/up, "
+        r"lunar/spin, lunar/near; its safety rates are lunar:crash, lunar/up:spin",
+    ):
+        resolve_goal(SAFE_TREE, "lunar:crsh", "here")
+    with pytest.raises(sg.InvalidSpec, match=r"'lunar/near:distance' names an annotation that is not a safety") as e:
+        resolve_goal(SAFE_TREE, "lunar/near:distance", "here")
+    assert "not to shaping annotations such as Distance" in str(e.value)
+    with pytest.raises(sg.InvalidSpec, match=r"'distance' names an annotation that is not a safety annotation"):
+        resolve_goal(SAFE_TREE, "distance", "here")
+
+
+def test_safety_thresholds_in_spec_and_goal_spec():
+    cartpole = sg.InitialEnv("CartPole-v1", features=("a", "v", "theta", "omega"))
+    tree = sg.All(sg.Goal("up", a=(0, 1)), name="lunar").annotate(CRASH)
+    s = sg.Spec(cartpole, tree, budget=sg.Budget(timesteps=10), expect={"crash": 0.9, "lunar:crash": 0.8})
+    assert s.thresholds == {"lunar:crash": 0.8}  # both name the same rate; the later one wins, as for goals
+    spec_, paths = with_thresholds(sg.Spec(cartpole, tree, budget=sg.Budget(timesteps=10)), {"crash": 0.9}, "crash")
+    assert spec_.thresholds == {"lunar:crash": 0.9} and paths == ["lunar:crash"]
+    with pytest.raises(sg.InvalidSpec, match=r"expect\['lunar:crsh'\]: no node or safety annotation is named"):
+        sg.Spec(cartpole, tree, budget=sg.Budget(timesteps=10), expect={"lunar:crsh": 0.9})

@@ -111,6 +111,63 @@ def test_pass_fail_xfail_summary_and_junit(pytester):
     assert json.loads(props["specguard"])["outcome"] == "failed"
 
 
+def test_safety_thresholds_are_items_rows_and_junit_properties(pytester):
+    # A constraint Pendulum never violates (|omega| <= 8) and one violated at every step, whose budget never runs
+    # out: an episode with any violation is unsafe, so its safety rate is 0 while the episodes run to their end.
+    write(
+        pytester,
+        """
+        @pytest.fixture
+        def guarded(tree):
+            never = sg.Constraint(lambda s, a: abs(s.omega) > 8.5, name="never")
+            always = sg.Constraint(lambda s, a: True, budget=1000, name="always")
+            return tree.annotate(never, always)
+
+
+        @sg.goal_spec(expect={"stabilization": 0.0, "never": 0.3, "pendulum:always": 0.3})
+        def test_safe(pendulum, guarded):
+            return tiny(pendulum, guarded)
+        """,
+    )
+    junit = pytester.path / "junit.xml"
+    report = pytester.path / "report"
+    result = run(pytester, "--goal-specs", f"--junitxml={junit}", f"--goal-specs-report={report}")
+    result.assert_outcomes(passed=2, failed=1)
+    result.stdout.fnmatch_lines(
+        [
+            "*safety rate 'pendulum:always' of spec 'pendulum' missed its threshold",
+            "*safe (no violation) in 0% (0/16), interval [[]0.00, 0.21[]], threshold >= 0.3",
+            "*per seed: seed 0: 0/16 (missed)",
+            "*hint: 'pendulum:always' was violated in 100% of evaluation episodes; in every episode of 1/1 seeds*",
+        ]
+    )
+    result.stdout.fnmatch_lines(
+        [
+            "*= specguard goal specs =*",
+            "spec*goal*success*interval*threshold*runs met*per seed*verdict*training",
+            "test_specs.py::test_safe*pendulum/stabilization *>= 0 *1/1*passed*",
+            "test_specs.py::test_safe*pendulum:never (safe) *100% (16/16)*>= 0.3*1/1*16/16*passed*",
+            "test_specs.py::test_safe*pendulum:always (safe) *0% (0/16)*>= 0.3*0/1*0/16*failed*",
+        ]
+    )
+    props = {
+        p.get("name"): p.get("value")
+        for case in ET.parse(junit).getroot().iter("testcase")
+        if case.get("name") == "test_safe[pendulum:always]"
+        for p in case.iter("property")
+    }
+    assert props["specguard.pendulum:always.kind"] == "safety"
+    assert props["specguard.pendulum:always.success"] == "0.0"
+    assert props["specguard.pendulum:always.threshold"] == "0.3"
+    rows = json.loads((report / "goal-specs.json").read_text())["goals"]
+    assert {r["goal"]: r["kind"] for r in rows} == {
+        "pendulum/stabilization": "goal",
+        "pendulum:never": "safety",
+        "pendulum:always": "safety",
+    }
+    assert "| test_specs.py::test_safe | `pendulum:always` (safe) |" in (report / "goal-specs.md").read_text()
+
+
 def test_xpass_when_an_expected_miss_starts_passing(pytester):
     write(
         pytester,

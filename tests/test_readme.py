@@ -7,6 +7,9 @@ import io
 import re
 from pathlib import Path
 
+from example_specs.at_least import AtLeast
+from specguard.testing import parametrize_with_checks
+
 README = Path(__file__).resolve().parent.parent / "README.md"
 
 
@@ -36,3 +39,20 @@ def test_readme_goal_spec_example_collects_one_item_per_goal(pytester):
             "test_pendulum_specs.py::test_weighted[[]position[]]",
         ]
     )
+
+
+# -- README's "Writing an operator": the worked example is a tested file ----------------
+
+
+def test_readme_operator_example_is_the_tested_file():
+    blocks = re.findall(r"```python\n(.*?)```", README.read_text(encoding="utf-8"), flags=re.S)
+    shown = next(b for b in blocks if "class AtLeast(Node)" in b)
+    source = (README.parent / "example_specs" / "at_least.py").read_text(encoding="utf-8")
+    for line in shown.splitlines():
+        if line.strip() and not line.lstrip().startswith("..."):
+            assert line in source, f"README shows a line the file does not have: {line!r}"
+
+
+@parametrize_with_checks([AtLeast])
+def test_readme_operator_passes_the_contract_kit(operator, check):
+    check(operator)

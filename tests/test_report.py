@@ -171,3 +171,47 @@ def test_write_reports(tmp_path):
     assert "](goal-specs.png)" in (tmp_path / "r" / "goal-specs.md").read_text()
     assert write_reports(tmp_path / "s", [{**ROW, "curves": None}])[-1].name == "goal-specs.md"
     assert "goal-specs.png" not in (tmp_path / "s" / "goal-specs.md").read_text()
+
+
+# -- safety rates -----------------------------------------------------------------------------------------------
+
+SAFETY = {
+    **ROW,
+    "goal": "pendulum:fast",
+    "kind": "safety",
+    "threshold": 0.9,
+    "verdict": "failed",
+    "hint": "'pendulum:fast' was violated in 10% of evaluation episodes",
+    "curves": [
+        [{"timesteps": 10, "episodes": 3, "success": {"pendulum": 0.5, "pendulum:fast": 0.6}}],
+        [{"timesteps": 10, "episodes": 3, "success": {"pendulum": 0.2, "pendulum:fast": 0.8}}],
+    ],
+}
+OTHER = {**ROW, "group": "t.py::test_x"}
+
+
+def test_safety_rows_are_labelled_and_follow_their_specs_goals():
+    lines = table_lines([SAFETY, ROW, OTHER, CACHED])  # items in any order
+    assert [line.split()[:3] for line in lines[2:]] == [
+        ["t.py::test_w", "pendulum", "90%"],
+        ["t.py::test_w", "pendulum/stabilization", "90%"],
+        ["t.py::test_w", "pendulum:fast", "(safe)"],
+        ["t.py::test_x", "pendulum", "90%"],
+    ]
+    assert lines[4].split()[3:9] == ["90%", "(56/60)", "[0.73,", "0.98]", ">=", "0.9"]
+
+
+def test_markdown_shows_safety_rates_after_the_goals():
+    text = markdown([SAFETY, ROW])
+    body = [line for line in text.splitlines() if line.startswith("| t.py")]
+    assert [line.split(" | ")[1] for line in body] == ["`pendulum`", "`pendulum:fast` (safe)"]
+    assert "- `t.py::test_w` / `pendulum:fast` (safety rate): 'pendulum:fast' was violated in 10%" in text
+
+
+def test_figure_labels_an_asserted_safety_rate_as_safety():
+    fig = curves_figure([{**ROW, "curves": SAFETY["curves"]}, SAFETY])  # a spec's rows share its runs' curves
+    (mean,) = [line for line in lines_of(fig, "pendulum:fast") if line.get_gid() == "pendulum:fast:mean"]
+    assert mean.get_label() == "pendulum:fast (safe)" and list(mean.get_ydata()) == pytest.approx([0.7])
+    assert [line.get_gid() for line in lines_of(fig, "pendulum:fast") if "threshold" in line.get_gid()] == [
+        "pendulum:fast:threshold"
+    ]

@@ -82,3 +82,67 @@ def test_wall_clock_cap_stops_training():
     spec = tiny_spec(budget=sg.Budget(timesteps=100_000, eval_episodes=1, wall_clock_s=0.5))
     result, _ = train_run(spec, seed=0)
     assert result.stopped_early and result.timesteps < 100_000
+
+
+# -- safety rates: episodes without a violation, counted beside the goals ------------------------------------
+
+
+def replay_initial():
+    return sg.InitialEnv(lambda: ReplayEnv([[0.0], [1.0], [0.0], [1.0]]), features=("x",))
+
+
+def scripted(actions):
+    """A policy playing ``actions`` in order, whatever it observes."""
+    it = iter(actions)
+    return lambda obs: next(it)
+
+
+SEEDS = [EVAL_SEED_BASE, EVAL_SEED_BASE + 1, EVAL_SEED_BASE + 2]
+
+
+def test_evaluate_counts_episodes_without_a_violation_in_the_baseline_env():
+    tree = sg.All(
+        sg.Goal("up", x=(0.5, None)).annotate(sg.Constraint(lambda s, a: s.x > 0.5, name="hot")),
+        sg.Goal("any", x=(-1.0, None)),
+        name="root",
+    ).annotate(sg.Constraint(lambda s, a: a == 2, name="two"))
+    env = sg.make_baseline_env(replay_initial(), tree)  # 3 steps an episode: s = 0, 1, 0, 1
+    counts = evaluate(scripted([0, 0, 0, 2, 0, 0, 0, 0, 0]), env, episodes=3, seeds=SEEDS)
+    # "hot" is violated at step 2 of every episode (s = 1); "two" only in the second episode's first step.
+    assert counts == {"root": 3, "root/up": 3, "root/any": 3, "root/up:hot": 0, "root:two": 2}
+    assert list(counts)[:3] == ["root", "root/up", "root/any"]  # goals first, then the safety rates
+
+
+def test_evaluate_counts_an_episode_ended_by_its_constraint_as_unsafe():
+    tree = sg.Goal("far", x=(5.0, None)).annotate(
+        sg.Constraint(lambda s, a: a == 2, name="two"),  # budget 1: a violation ends the episode
+        sg.Constraint(lambda s, a: s.x > 0.5, budget=3, name="hot"),
+    )
+    env = sg.make_env(replay_initial(), tree)
+    # Episode 1 is ended by "two" after one step (before s = 1); episodes 2 and 3 run 3 steps and meet "hot".
+    counts = evaluate(scripted([2, 0, 0, 0, 0, 0, 0]), env, episodes=3, seeds=SEEDS)
+    assert counts == {"far": 0, "far:two": 2, "far:hot": 1}
+
+
+def test_training_curve_records_safety_rates():
+    from specguard.train import _GoalCurve
+
+    curve = _GoalCurve(every=2, wall_clock_s=None, total=4, report=None)
+    unsafe = {"goals": {"root": True}, "safe": {"root:c": False}}
+    safe = {"goals": {"root": False}, "safe": {"root:c": True}}
+    curve.on_step(1, [True, False], [unsafe, {}])
+    curve.on_step(2, [True, True], [safe, safe])
+    assert curve.points == [{"timesteps": 2, "episodes": 3, "success": {"root": 1 / 3, "root:c": 2 / 3}}]
+
+
+@pytest.mark.parametrize("baseline", [False, True])
+def test_runs_measure_the_safety_rate_of_every_constraint(baseline):
+    fast = sg.Constraint(lambda s, a: abs(s.omega) > 7.5, budget=2, name="fast")
+    tree = sg.All(*pendulum.trees["b"].children, name="pendulum").annotate(fast)
+    budget = sg.Budget(timesteps=128, eval_episodes=2, max_eval_episodes=4)
+    spec = sg.Spec(
+        pendulum.initial_env, tree, budget=budget, hyperparameters=TINY, baseline=baseline, expect={"fast": 0.0}
+    )
+    result, _ = train_run(spec, seed=0)
+    assert set(result.successes) == {"pendulum", "pendulum/position", "pendulum/stabilization", "pendulum:fast"}
+    assert 0 <= result.successes["pendulum:fast"] <= result.episodes

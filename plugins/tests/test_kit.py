@@ -1,0 +1,12 @@
+"""specguard's operator contract kit (the SPEC.md section 6 invariants) run on the plugin's classes."""
+
+from __future__ import annotations
+
+from specguard_plugins import AnyOf, Avoid, Sequence
+
+from specguard.testing import parametrize_with_checks
+
+
+@parametrize_with_checks([AnyOf, Sequence, Avoid])
+def test_contract(operator, check):
+    check(operator)

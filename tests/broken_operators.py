@@ -1,0 +1,174 @@
+"""Deliberately broken operators, written on the public extension API, for ``tests/test_contract.py``.
+
+Each breaks one invariant of SPEC.md section 6 the way a plausible bug would,
+and one check of :mod:`specguard.contract` must catch it (``CAUGHT_BY``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import specguard as sg
+from specguard.extend import ChildWeights, Context, Node, Slot, check_children
+
+
+class _Combiner(Node):
+    """An ``All``-like operator (goal: every child's), the base of the broken ones below."""
+
+    kind = "Combiner"
+
+    def __init__(self, *children: Node, name: str) -> None:
+        self.nodes = check_children(self.kind, name, children)
+        self.name = name
+        self.annotations = ()
+
+    @property
+    def children(self) -> tuple[Node, ...]:
+        return self.nodes
+
+    def child_weights(self) -> tuple[ChildWeights, ...]:
+        return (ChildWeights(core=0.0, shaping=1.0, safety=1.0),) * len(self.nodes)
+
+    def contains(self, ctx: Context) -> bool:
+        return all(ctx.inside)
+
+    def describe(self) -> str:
+        return f"{self.kind} {self.name!r}"
+
+
+class PaysEveryStep(_Combiner):
+    """Pays 1 for every step spent inside its goal, not for entering it: re-entry and staying are paid again."""
+
+    kind = "PaysEveryStep"
+
+    def reward(self, before: Context, action: Any, after: Context) -> float:
+        return 1.0 if self.contains(after) else 0.0  # the potential stays membership: it does not telescope
+
+
+class HiddenSequence(_Combiner):
+    """A sequence that keeps its stage in a mutable attribute instead of ``state_slots``: not in the observation."""
+
+    kind = "HiddenSequence"
+
+    def __init__(self, *children: Node, name: str) -> None:
+        super().__init__(*children, name=name)
+        self.progress = [0]  # hidden episode state, never reset
+
+    def child_weights(self) -> tuple[ChildWeights, ...]:
+        return (ChildWeights(core=0.0, shaping=0.0, safety=1.0),) * len(self.nodes)
+
+    def contains(self, ctx: Context) -> bool:
+        while self.progress[0] < len(self.nodes) and ctx.inside[self.progress[0]]:
+            self.progress[0] += 1
+        return self.progress[0] == len(self.nodes)
+
+
+class DropsTermination(_Combiner):
+    """Never terminates, even when a child's subtree ended (a constraint below it ran out of budget)."""
+
+    kind = "DropsTermination"
+
+    def terminates(self, ctx: Context, ended: tuple[bool, ...]) -> bool:
+        return False
+
+
+class AddressInDescribe(_Combiner):
+    """Describes itself with ``object.__repr__``: a memory address, different in every process."""
+
+    kind = "AddressInDescribe"
+
+    def describe(self) -> str:
+        return object.__repr__(self)
+
+
+class UnorderedDescribe(_Combiner):
+    """Lists its children from a set: the order follows the string hash seed, so it differs between processes."""
+
+    kind = "UnorderedDescribe"
+
+    def describe(self) -> str:
+        return f"{self.kind} {self.name!r} of {', '.join({c.name for c in self.nodes})}"
+
+
+class OverfullLatch(_Combiner):
+    """Remembers having been in its goal, but counts entries in a slot declared ``[0, 1]``, so it overflows."""
+
+    kind = "OverfullLatch"
+
+    def state_slots(self) -> tuple[Slot, ...]:
+        return (Slot("latched", 0.0, 1.0),)
+
+    def initial_state(self, ctx: Context) -> tuple[float, ...]:
+        return (1.0 if all(ctx.inside) else 0.0,)
+
+    def next_state(self, before: Context, action: Any, s2: Any, inside2: tuple[bool, ...]) -> tuple[float, ...]:
+        return (before.q[0] + 1.0,) if all(inside2) else before.q  # should be min(q + 1, 1)
+
+    def contains(self, ctx: Context) -> bool:
+        return ctx.q[0] >= 1.0
+
+
+class WrongBox(_Combiner):
+    """An OR operator (goal: any child's) that declares the intersection of its children's boxes as its box.
+
+    The flat evaluator trusts a declared box; the reference evaluator asks ``contains``.
+    """
+
+    kind = "WrongBox"
+    own_reward = False
+
+    def child_weights(self) -> tuple[ChildWeights, ...]:
+        return (ChildWeights.same(1.0 / len(self.nodes)),) * len(self.nodes)
+
+    def box(self, child_boxes: Any) -> Any:
+        return sg.All.box(self, child_boxes)  # type: ignore[arg-type]  # wrong: the union is not this box
+
+    def contains(self, ctx: Context) -> bool:
+        return any(ctx.inside)
+
+    def potential(self, ctx: Context) -> float:
+        return 0.0
+
+
+class InfiniteOutside(_Combiner):
+    """Its potential is ``-inf`` outside its goal, so its rewards are ``inf`` or NaN."""
+
+    kind = "InfiniteOutside"
+
+    def potential(self, ctx: Context) -> float:
+        return 0.0 if self.contains(ctx) else -math.inf
+
+
+class LooseRefinement(_Combiner):
+    """Refines a leaf into one child whose box is wider by 1 on the leaf's first feature: not the leaf's goal."""
+
+    kind = "LooseRefinement"
+
+    @classmethod
+    def refinements(cls, leaf: Node) -> Any:
+        from hypothesis import strategies as st
+
+        if not isinstance(leaf, sg.Goal):
+            return None
+
+        def side(v: float, widen: float) -> float | None:
+            return None if math.isinf(v) else v + widen
+
+        (f, lo, hi), *rest = leaf.bounds
+        box = {f: (side(lo, -1.0), side(hi, 1.0)), **{g: (side(a, 0.0), side(b, 0.0)) for g, a, b in rest}}
+        return st.just(cls(sg.Goal("part0", **box), name=leaf.name))
+
+
+CAUGHT_BY = {
+    PaysEveryStep: "check_core_reward_telescopes",
+    HiddenSequence: "check_markov",
+    DropsTermination: "check_termination_includes_children",
+    AddressInDescribe: "check_description_is_exact",
+    UnorderedDescribe: "check_description_is_exact",
+    OverfullLatch: "check_observations_in_space",
+    WrongBox: "check_flat_matches_reference",
+    InfiniteOutside: "check_rewards_are_finite_sums_of_terms",
+    LooseRefinement: "check_refinement_preserves_root_goal",
+}
+"""Each broken operator and the check that must catch it."""
