@@ -233,14 +233,40 @@ class _GeneralNode:
     def step(
         self, s: Any, a: Any, s2: Any, z: list[float], inside: tuple[bool, ...], inside2: tuple[bool, ...]
     ) -> tuple[bool, float]:
-        # The hot path calls the methods directly; if one raises, the checked path names it.
-        # Own state is written only once every method succeeded, so the checked re-run sees the same state.
+        # The hot path calls the methods directly (the body of ``_step``, inlined: this runs every env
+        # step); if one raises, ``_step`` re-runs checked and names it. Own state is written only once
+        # every method succeeded, so the checked re-run sees the same state.
         try:
-            member, reward, q2 = self._step(s, a, s2, z, inside, inside2, _direct)
+            node, start, stop = self.node, self.start, self.stop
+            q = tuple(z[start:stop])
+            before = _context(Context, (s, q, inside))
+            if stop > start:
+                q2 = node.next_state(before, a, s2, inside2)
+                if type(q2) is not tuple:
+                    q2 = tuple(q2)
+            else:
+                q2 = q
+            after = self.after = _context(Context, (s2, q2, inside2))
+            member = bool(node.contains(after))
+            if not self.own_reward:
+                reward = 0.0
+            elif self.default_reward:
+                # The last step's ``after`` is this step's ``before`` when nothing reset or restored in between:
+                # the same feature tuple object, and equal own state and children's memberships.
+                last = self.last
+                if last is not None and last[0][0] is s and last[0][1] == q and last[0][2] == inside:
+                    phi = last[1]
+                else:
+                    phi = float(node.potential(before))
+                phi2 = float(node.potential(after))
+                self.last = (after, phi2)
+                reward = phi2 - phi
+            else:
+                reward = float(node.reward(before, a, after))
         except Exception:
             member, reward, q2 = self._step(s, a, s2, z, inside, inside2, self._checked)
-        if self.stop > self.start:
-            z[self.start : self.stop] = q2
+        if stop > start:
+            z[start:stop] = q2
         return member, reward
 
     def _checked(self, what: str, fn: Callable[..., Any], *args: Any) -> Any:
@@ -285,8 +311,7 @@ class _GeneralNode:
         return bool(_call(self.path, "terminates()", self.node.terminates, self.after, ended))
 
 
-def _direct(what: str, fn: Callable[..., Any], *args: Any) -> Any:
-    return fn(*args)
+_context = tuple.__new__  # builds a Context from a tuple without NamedTuple.__new__'s argument handling
 
 
 class _GeneralAnnotation:

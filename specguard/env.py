@@ -127,6 +127,7 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         self._state = state
         self._execute = execute
         self._n = len(self.features)
+        self._paths, self._safety_keys = self.evaluator.paths, self.evaluator.safety_keys
         base_space = env.observation_space
         if state is None:
             check_identity_observation(tree.name, self.features, base_space)
@@ -158,17 +159,20 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         obs, info = self.env.reset(seed=seed, options=options)
         f = _features(obs, self._state, self.features, self.tree.name)
         members = self.evaluator.reset(f)
-        info["goals"] = dict(zip(self.evaluator.paths, members))
-        info["safe"] = dict(zip(self.evaluator.safety_keys, self.evaluator.safe))
+        info["goals"] = dict(zip(self._paths, members))
+        info["safe"] = self._safe()
         return self._observation(obs, f), info
+
+    def _safe(self) -> dict[str, bool]:
+        return dict(zip(self._safety_keys, self.evaluator.safe)) if self._safety_keys else {}
 
     def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
         base_action = action if self._execute is None else self._execute(action)
         obs, base_reward, terminated, truncated, info = self.env.step(base_action)
         f = _features(obs, self._state, self.features, self.tree.name)
         reward, ended, members, terms = self.evaluator.step(action, f)
-        info["goals"] = dict(zip(self.evaluator.paths, members))
-        info["safe"] = dict(zip(self.evaluator.safety_keys, self.evaluator.safe))
+        info["goals"] = dict(zip(self._paths, members))
+        info["safe"] = self._safe()
         info["reward_terms"] = terms
         info["base_reward"] = float(base_reward)
         return self._observation(obs, f), reward, bool(terminated or ended), bool(truncated), info

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from collections import abc
 from dataclasses import dataclass
+from itertools import accumulate
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from specguard.error import InvalidSpec
@@ -140,6 +141,18 @@ class Sequence(Node):
         object.__setattr__(self, "nodes", kids)
         object.__setattr__(self, "weights", parsed)
         object.__setattr__(self, "annotations", ())
+        # Derived once, read every step: stage(q) for q = 0..N, and each child's (annotation, weight) shapers.
+        stage_weights = self.stage_weights()
+        object.__setattr__(self, "_stage", tuple(accumulate(stage_weights, initial=0.0)))
+        shapers = tuple(
+            tuple(
+                (a, stage_weights[i] * (1.0 if a.weight is None else a.weight))
+                for a in c.annotations
+                if a.role == SHAPING
+            )
+            for i, c in enumerate(kids)
+        )
+        object.__setattr__(self, "_shapers", shapers)
 
     @property
     def children(self) -> tuple[Node, ...]:
@@ -176,7 +189,7 @@ class Sequence(Node):
 
     def stage_potential(self, q: int) -> float:
         """``stage(q)``: the stage rewards paid for reaching stage ``q`` from 0."""
-        return float(sum(self.stage_weights()[:q]))
+        return float(self._stage[q])  # type: ignore[attr-defined]
 
     def shaping_potential(self, s: Any, q: int) -> float:
         """``shaping(s, q)``: the active child's own shaping potentials in ``s``, scaled by its stage's weight.
@@ -186,15 +199,13 @@ class Sequence(Node):
         if q >= len(self.nodes):
             return 0.0
         total = 0.0
-        for a in self.nodes[q].annotations:
-            if a.role == SHAPING:
-                w = 1.0 if a.weight is None else a.weight
-                total += w * a.potential(s, ())
-        return self.stage_weights()[q] * total
+        for a, w in self._shapers[q]:  # type: ignore[attr-defined]
+            total += w * a.potential(s, ())
+        return total
 
     def potential(self, ctx: Context) -> float:
         q = int(ctx.q[0])
-        return self.stage_potential(q) + self.shaping_potential(ctx.s, q)
+        return self._stage[q] + self.shaping_potential(ctx.s, q)  # type: ignore[attr-defined, no-any-return]
 
     def describe(self) -> str:
         return f"Sequence {self.name!r}{weights_text(self.weights)}"

@@ -6,7 +6,6 @@ import math
 from collections import namedtuple
 
 import pytest
-from helpers import both_checkers, replay, rewards
 from hypothesis import given
 from hypothesis import strategies as st
 from specguard_plugins import AnyOf, Avoid, Sequence
@@ -16,6 +15,8 @@ from specguard import strategies as sgst
 from specguard.error import InvalidSpec
 from specguard.extend import ChildWeights, Context
 from specguard.reference import ExtendedState, process
+
+from .helpers import both_checkers, replay, rewards
 
 FEATURES = ("a", "b", "c")
 State = namedtuple("State", FEATURES)

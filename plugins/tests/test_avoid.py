@@ -8,13 +8,14 @@ import pickle
 import cloudpickle
 import numpy as np
 import pytest
-from helpers import both_checkers, replay, replay_env, rewards
 from hypothesis import given
 from specguard_plugins import AnyOf, Avoid, Sequence
 
 import specguard as sg
 from specguard.error import EvaluationError, InvalidSpec
 from specguard.extend import SAFETY, CounterForm, Slot
+
+from .helpers import both_checkers, replay, replay_env, rewards
 
 FEATURES = ("a", "b", "c")
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 from collections import namedtuple
 
 import pytest
-from helpers import both_checkers, replay, rewards
 from hypothesis import given
 from hypothesis import strategies as st
 from specguard_plugins import AnyOf, Avoid, Sequence
@@ -15,6 +14,8 @@ from specguard import strategies as sgst
 from specguard.error import InvalidSpec
 from specguard.extend import SHAPING, Annotation, ChildWeights, Context, Slot
 from specguard.reference import ReferenceEvaluator
+
+from .helpers import both_checkers, replay, rewards
 
 FEATURES = ("a", "b", "c")
 State = namedtuple("State", FEATURES)
