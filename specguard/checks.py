@@ -6,8 +6,9 @@ returns nothing otherwise. :func:`check_goals` runs them all; ``make_env`` and
 ``make_baseline_env`` call it, so ``run_spec`` refuses an impossible spec
 before training.
 
-Every node's goal is a box (an ``All``'s is the intersection of its
-children's), and every feature has bounds, finite where they are known
+Nodes whose goal is a box (a ``Goal``; an ``All``'s is the intersection of
+its children's) are checked; a node whose goal is not a box (an ``AnyOf``, a
+``Sequence``) is unbounded here. Every feature has bounds, finite where they are known
 (:meth:`specguard.InitialEnv.feature_bounds`). Boxes are compared at float32
 precision, the precision of the observations: CartPole's bound of ``x`` is
 ``float32(4.8)``, and a goal ``x=(4.8, None)`` meets it exactly.
@@ -95,14 +96,35 @@ def _unreachable(compiled: CompiledTree, low: ArrayLike, high: ArrayLike, node: 
 def check_goals_reachable(compiled: CompiledTree, low: ArrayLike, high: ArrayLike) -> None:
     """Every node's box (an ``All``'s: the intersection) meets the feature bounds on every feature.
 
+    A node below an operator whose goal is not a box (an OR, a sequence) only
+    warns: the operator may hold without it.
+
     Raises:
-        UnreachableGoal: for the innermost node whose box lies outside the bounds.
+        UnreachableGoal: for the innermost node whose box lies outside the bounds
+            when every ancestor's goal is a box within it (so the root can never hold).
     """
     lo, hi = _within(compiled, low, high)
+    parent = {k: i for i, kids in enumerate(compiled.children) for k in kids}
     for node in _innermost(compiled, np.asarray((lo > hi).any(axis=1))):
         found = _unreachable(compiled, low, high, node)
         assert found is not None
-        raise UnreachableGoal(compiled.paths[node], *found)
+        escape = _first_ancestor_without_a_box(compiled, parent, node)
+        if escape is None:  # every ancestor is a box inside this one's: the root can never hold either
+            raise UnreachableGoal(compiled.paths[node], *found)
+        warnings.warn(
+            f"{compiled.paths[node]}: {found[0]}; {compiled.paths[escape]} is not a box and may still hold "
+            "without it (e.g. through another alternative of an OR)",
+            stacklevel=4,  # the caller of make_env
+        )
+
+
+def _first_ancestor_without_a_box(compiled: CompiledTree, parent: dict[int, int], node: int) -> int | None:
+    """The nearest ancestor whose goal is not a box (an ``AnyOf``, a ``Sequence``), or None."""
+    while node in parent:
+        node = parent[node]
+        if not compiled.boxed[node]:
+            return node
+    return None
 
 
 def check_goals_off_the_edge(compiled: CompiledTree, low: ArrayLike, high: ArrayLike) -> None:

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from specguard.extend import Context, Node
-from specguard.reference import FLOAT_MAX, _call
+from specguard.reference import FLOAT_MAX, call_definition
 
 if TYPE_CHECKING:
     from specguard.compiled import CompiledTree
@@ -223,12 +223,12 @@ class _GeneralNode:
         node, path = self.node, self.path
         if self.stop > self.start:
             if init:
-                q0 = _call(path, "initial_state()", node.initial_state, Context(s, (), inside))
+                q0 = call_definition(path, "initial_state()", node.initial_state, Context(s, (), inside))
                 z[self.start : self.stop] = [float(v) for v in q0]
             q = tuple(z[self.start : self.stop])
         else:
             q = ()
-        return bool(_call(path, "contains()", node.contains, Context(s, q, inside)))
+        return bool(call_definition(path, "contains()", node.contains, Context(s, q, inside)))
 
     def step(
         self, s: Any, a: Any, s2: Any, z: list[float], inside: tuple[bool, ...], inside2: tuple[bool, ...]
@@ -270,7 +270,7 @@ class _GeneralNode:
         return member, reward
 
     def _checked(self, what: str, fn: Callable[..., Any], *args: Any) -> Any:
-        return _call(self.path, what, fn, *args)
+        return call_definition(self.path, what, fn, *args)
 
     def _step(
         self,
@@ -308,7 +308,7 @@ class _GeneralNode:
 
     def end(self, ended: tuple[bool, ...]) -> bool:
         """Termination in the state of the last :meth:`step`, given the children's."""
-        return bool(_call(self.path, "terminates()", self.node.terminates, self.after, ended))
+        return bool(call_definition(self.path, "terminates()", self.node.terminates, self.after, ended))
 
 
 _context = tuple.__new__  # builds a Context from a tuple without NamedTuple.__new__'s argument handling
@@ -322,19 +322,19 @@ class _GeneralAnnotation:
         self.start, self.stop = start, start + size
 
     def initial(self, s: Any, z: list[float]) -> None:
-        q0 = _call(self.key, "initial_state()", self.a.initial_state, s)
+        q0 = call_definition(self.key, "initial_state()", self.a.initial_state, s)
         z[self.start : self.stop] = [float(v) for v in q0]
 
     def step(self, s: Any, act: Any, s2: Any, z: list[float]) -> tuple[float, bool]:
         a, key = self.a, self.key
         q = tuple(z[self.start : self.stop])
-        q2 = tuple(float(v) for v in _call(key, "next_state()", a.next_state, s, q, act, s2)) if q else q
+        q2 = tuple(float(v) for v in call_definition(key, "next_state()", a.next_state, s, q, act, s2)) if q else q
         z[self.start : self.stop] = q2
-        reward = float(_call(key, "reward()", a.reward, s, q, act, s2, q2))
-        return reward, bool(_call(key, "terminates()", a.terminates, q2))
+        reward = float(call_definition(key, "reward()", a.reward, s, q, act, s2, q2))
+        return reward, bool(call_definition(key, "terminates()", a.terminates, q2))
 
     def safe(self, z: list[float]) -> bool:
-        return int(_call(self.key, "violations()", self.a.violations, tuple(z[self.start : self.stop]))) == 0
+        return int(call_definition(self.key, "violations()", self.a.violations, tuple(z[self.start : self.stop]))) == 0
 
 
 def build_namespace(tree: CompiledTree, make: Callable[..., Any]) -> dict[str, Any]:

@@ -24,7 +24,15 @@ from specguard.extend import Annotation, Context, Node, Slot, annotation_key, co
 from specguard.initial_env import state_type
 from specguard.validation import PATH_SEPARATOR
 
-__all__ = ["ExtendedState", "ReferenceEvaluator", "Requirements", "check_distance", "distance_value", "process"]
+__all__ = [
+    "ExtendedState",
+    "ReferenceEvaluator",
+    "Requirements",
+    "call_definition",
+    "check_distance",
+    "distance_value",
+    "process",
+]
 
 FLOAT_MAX = sys.float_info.max
 """``0.0 <= d <= FLOAT_MAX`` holds exactly for the finite ``d >= 0`` (NaN fails every comparison)."""
@@ -87,7 +95,7 @@ def check_distance(key: str, d: float, s: Any) -> float:
     return d
 
 
-def _call(key: str, what: str, fn: Callable[..., Any], *args: Any) -> Any:
+def call_definition(key: str, what: str, fn: Callable[..., Any], *args: Any) -> Any:
     """Call one protocol method; an exception becomes an :class:`EvaluationError` naming the node or annotation."""
     try:
         return fn(*args)
@@ -110,19 +118,19 @@ def _operator(path: str, node: Node, kids: Sequence[Requirements]) -> Requiremen
         return Context(x.s, x.states.get(path, ()), inside(x))
 
     def goal(x: ExtendedState) -> bool:
-        return bool(_call(path, "contains()", node.contains, ctx(x)))
+        return bool(call_definition(path, "contains()", node.contains, ctx(x)))
 
     def reward(x: ExtendedState, a: Any, x2: ExtendedState) -> Terms:
         out: Terms = {}
         for w, k in zip(weights, kids):  # each child's components, weighted by their role
             out.update({key: w.of(k.roles[key]) * v for key, v in k.reward(x, a, x2).items()})
         if node.own_reward:
-            out[path] = float(_call(path, "reward()", node.reward, ctx(x), a, ctx(x2)))
+            out[path] = float(call_definition(path, "reward()", node.reward, ctx(x), a, ctx(x2)))
         return out
 
     def terminal(x: ExtendedState) -> bool:  # T = union of T_i, plus the node's own
         ended = tuple(k.terminal(x) for k in kids)
-        return bool(_call(path, "terminates()", node.terminates, ctx(x), ended))
+        return bool(call_definition(path, "terminates()", node.terminates, ctx(x), ended))
 
     def initial(s: Any) -> dict[str, tuple[float, ...]]:
         states: dict[str, tuple[float, ...]] = {}
@@ -130,7 +138,7 @@ def _operator(path: str, node: Node, kids: Sequence[Requirements]) -> Requiremen
             states.update(k.initial(s))
         if node.state_slots():
             x = ExtendedState(s, states)
-            q0 = _call(path, "initial_state()", node.initial_state, Context(s, (), inside(x)))
+            q0 = call_definition(path, "initial_state()", node.initial_state, Context(s, (), inside(x)))
             states[path] = tuple(float(v) for v in q0)
         return states
 
@@ -140,7 +148,7 @@ def _operator(path: str, node: Node, kids: Sequence[Requirements]) -> Requiremen
             states.update(k.transition(x, a, s2))
         if node.state_slots():
             inside2 = inside(ExtendedState(s2, states))
-            q2 = _call(path, "next_state()", node.next_state, ctx(x), a, s2, inside2)
+            q2 = call_definition(path, "next_state()", node.next_state, ctx(x), a, s2, inside2)
             states[path] = tuple(float(v) for v in q2)
         return states
 
@@ -165,22 +173,24 @@ def _annotation(key: str, w: float, a: Annotation, req: Requirements) -> Require
 
     def reward(x: ExtendedState, act: Any, x2: ExtendedState) -> Terms:
         out = req.reward(x, act, x2)
-        out[key] = w * float(_call(key, "reward()", a.reward, x.s, q(x), act, x2.s, q(x2)))
+        out[key] = w * float(call_definition(key, "reward()", a.reward, x.s, q(x), act, x2.s, q(x2)))
         return out
 
     def terminal(x: ExtendedState) -> bool:
-        return req.terminal(x) or bool(_call(key, "terminates()", a.terminates, q(x)))
+        return req.terminal(x) or bool(call_definition(key, "terminates()", a.terminates, q(x)))
 
     def initial(s: Any) -> dict[str, tuple[float, ...]]:
         states = req.initial(s)
         if has_state:
-            states[key] = tuple(float(v) for v in _call(key, "initial_state()", a.initial_state, s))
+            states[key] = tuple(float(v) for v in call_definition(key, "initial_state()", a.initial_state, s))
         return states
 
     def transition(x: ExtendedState, act: Any, s2: Any) -> dict[str, tuple[float, ...]]:
         states = req.transition(x, act, s2)
         if has_state:
-            states[key] = tuple(float(v) for v in _call(key, "next_state()", a.next_state, x.s, q(x), act, s2))
+            states[key] = tuple(
+                float(v) for v in call_definition(key, "next_state()", a.next_state, x.s, q(x), act, s2)
+            )
         return states
 
     slots = req.slots + tuple((key, slot) for slot in a.state_slots())

@@ -83,3 +83,15 @@ def test_an_exact_value_at_a_bound_is_deliberate_and_does_not_warn():
         warnings.simplefilter("error")
         check_goals_off_the_edge(compiled, (0.0,), (1.0,))
         check_goals_reachable(compiled, (0.0,), (1.0,))
+
+
+def test_an_unreachable_alternative_of_an_or_warns_instead_of_refusing_the_spec():
+    from example_specs.at_least import AtLeast
+
+    cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+    tree = AtLeast(1, sg.Goal("far", x=(10, None)), sg.Goal("left", x=(None, -1)), name="any")
+    with pytest.warns(UserWarning, match=r"any/far: goal box x in \[10, inf\] lies outside .*; any is not a box"):
+        env = sg.make_env(cartpole, tree)
+    env.close()
+    with pytest.raises(sg.UnreachableGoal, match=r"any/far"):  # the same alternative under an All: the root never holds
+        sg.make_env(cartpole, sg.All(sg.Goal("far", x=(10, None)), sg.Goal("left", x=(None, -1)), name="any"))
