@@ -218,8 +218,9 @@ class GoalInfo(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         if not math.isfinite(reward):
             raise EvaluationError(f"{self.tree.name}: the initial env returned a non-finite reward {reward!r}")
         f = _features(obs, self._state, self.features, self.tree.name)
-        # The goals' own state (stages, counters) follows the episode; the spec's reward and termination do not apply.
-        members = self.evaluator.step(action, f)[2]
+        # Own state (stages, counters) follows the episode, though the spec's reward and termination do not
+        # apply; without own state, membership of one state is all there is (no rewards computed for nothing).
+        members = self.evaluator.step(action, f)[2] if self.evaluator.slots else self.evaluator.members(f)
         return obs, reward, terminated, truncated, self._info(info, members)
 
 
