@@ -5,11 +5,16 @@ Budgets are what make CI affordable. Pick ``timesteps`` from a run you trust
 ``min_seeds`` at 2 for a pull-request check (two runs in parallel on a 2-core
 machine), and raise ``max_seeds`` where a quorum should be judged over more
 runs. ``eval_episodes`` sets how narrow a run's interval gets: with 30
-episodes and 30 successes the 95% interval is ``[0.884, 1]``.
+episodes and 30 successes the 95% interval is ``[0.884, 1]``. ``checkpoints``
+makes ``timesteps`` a ceiling: a run is judged at every ``checkpoints``-th of
+it and stops training once every threshold is met (:mod:`specguard.anytime`).
 
 Example:
-    >>> Budget(timesteps=50_000, min_seeds=2, max_seeds=4)
-    Budget(timesteps=50000, min_seeds=2, max_seeds=4, eval_episodes=30, max_eval_episodes=120, wall_clock_s=None)
+    >>> Budget(timesteps=50_000, min_seeds=2, max_seeds=4)  # doctest: +NORMALIZE_WHITESPACE
+    Budget(timesteps=50000, min_seeds=2, max_seeds=4, eval_episodes=30, max_eval_episodes=120,
+           wall_clock_s=None, checkpoints=1)
+    >>> Budget(timesteps=50_000, checkpoints=10).looks
+    12
 """
 
 from __future__ import annotations
@@ -45,6 +50,11 @@ class Budget:
         max_eval_episodes: evaluation episodes an undecided run may get in
             total before it is called (default: 4x ``eval_episodes``).
         wall_clock_s: optional cap in seconds on one run's training.
+        checkpoints: evaluation checkpoints of a run. 1: judged once, after
+            its whole budget. ``C > 1``: also judged after every ``C``-th of
+            the budget, and training stops at the first checkpoint where every
+            threshold is met (anytime verdicts); the verdicts' confidence is
+            corrected for the extra looks (:mod:`specguard.anytime`).
     """
 
     timesteps: int
@@ -53,6 +63,7 @@ class Budget:
     eval_episodes: int = 30
     max_eval_episodes: int | None = None
     wall_clock_s: float | None = None
+    checkpoints: int = 1
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "timesteps", _positive_int("timesteps", self.timesteps))
@@ -81,9 +92,28 @@ class Budget:
             if isinstance(w, bool) or not isinstance(w, Real) or not math.isfinite(w) or w <= 0:
                 raise InvalidSpec("Budget.wall_clock_s", f"expected a number of seconds > 0 or None, got {w!r}")
             object.__setattr__(self, "wall_clock_s", float(w))
+        object.__setattr__(self, "checkpoints", _positive_int("checkpoints", self.checkpoints))
 
-    def scaled(self, factor: float) -> Budget:
-        """This budget with ``timesteps`` multiplied by ``factor`` (at least 1 step), e.g. 0.25 for a quick check."""
+    @property
+    def evaluation_stages(self) -> list[int]:
+        """Episodes evaluated after each stage of a run's final evaluation (:mod:`specguard.anytime`)."""
+        from specguard.anytime import evaluation_stages
+
+        assert self.max_eval_episodes is not None
+        return evaluation_stages(self.eval_episodes, self.max_eval_episodes)
+
+    @property
+    def looks(self) -> int:
+        """How many times a run may be judged: interim checkpoints plus final evaluation stages."""
+        from specguard.anytime import looks
+
+        return looks(self.checkpoints, len(self.evaluation_stages))
+
+    def scaled(self, factor: float, *, checkpoints: int | None = None) -> Budget:
+        """This budget with ``timesteps`` multiplied by ``factor`` (at least 1 step), e.g. 0.25 for a quick check.
+
+        ``checkpoints``, if given, replaces the budget's own.
+        """
         if isinstance(factor, bool) or not isinstance(factor, Real) or not math.isfinite(factor) or factor <= 0:
             raise InvalidSpec("budget scale", f"expected a number > 0, got {factor!r}")
         return Budget(
@@ -93,6 +123,7 @@ class Budget:
             eval_episodes=self.eval_episodes,
             max_eval_episodes=self.max_eval_episodes,
             wall_clock_s=self.wall_clock_s,
+            checkpoints=self.checkpoints if checkpoints is None else checkpoints,
         )
 
 

@@ -56,7 +56,7 @@ __all__ = [
 ]
 
 SECRET_ENV = "SPECGUARD_CACHE_KEY"
-FORMAT = 2
+FORMAT = 3  # 3: runs record met_early (anytime verdicts)
 MODEL = "model.zip"
 NORMALIZER = "vecnormalize.pkl"
 RESULT = "result.json"
@@ -131,7 +131,17 @@ def _is_int(v: Any) -> bool:
 def _check_result(result: Any, seed: int, paths: Collection[str]) -> None:
     if not isinstance(result, dict):
         raise ValueError("result is not an object")
-    expected = {"spec", "seed", "timesteps", "episodes", "successes", "train_seconds", "stopped_early", "curve"}
+    expected = {
+        "spec",
+        "seed",
+        "timesteps",
+        "episodes",
+        "successes",
+        "train_seconds",
+        "stopped_early",
+        "curve",
+        "met_early",
+    }
     if set(result) != expected:
         raise ValueError(f"result fields {sorted(result)} are not {sorted(expected)}")
     if result["seed"] != seed or not _is_int(result["seed"]):
@@ -156,8 +166,9 @@ def _check_result(result: Any, seed: int, paths: Collection[str]) -> None:
             raise ValueError(f"successes[{path!r}] = {k!r} is not an integer in [0, episodes={episodes}]")
     if not isinstance(result["train_seconds"], (int, float)) or isinstance(result["train_seconds"], bool):
         raise ValueError("train_seconds is not a number")
-    if not isinstance(result["stopped_early"], bool):
-        raise ValueError("stopped_early is not a boolean")
+    for flag in ("stopped_early", "met_early"):
+        if not isinstance(result[flag], bool):
+            raise ValueError(f"{flag} is not a boolean")
     if not isinstance(result["curve"], list) or not all(isinstance(p, dict) for p in result["curve"]):
         raise ValueError("curve is not a list of points")
 

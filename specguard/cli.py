@@ -128,7 +128,7 @@ def _run_all(args: argparse.Namespace, specs: dict[str, Any], executor: Any) -> 
     results = {}
     failed = False
     for name, spec in specs.items():
-        spec = spec.scaled(args.budget_scale)
+        spec = spec.scaled(args.budget_scale, checkpoints=args.checkpoints)
         result = run_spec(
             spec,
             executor=executor,
@@ -162,6 +162,15 @@ def _executor(text: str) -> str:
         raise argparse.ArgumentTypeError(str(e).removeprefix("executor: ")) from None
 
 
+def _checkpoints(text: str) -> int:
+    from specguard.anytime import parse_checkpoints
+
+    try:
+        return parse_checkpoints(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
 def _scale(text: str) -> float:
     try:
         value = float(text)
@@ -192,6 +201,14 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--cache-dir", default=".specguard/cache", help="run cache (default: .specguard/cache)")
     run.add_argument("--no-cache", action="store_true", help="neither read nor write the cache")
     run.add_argument("--budget-scale", type=_scale, default=1.0, help="multiply training timesteps, e.g. 0.25")
+    run.add_argument(
+        "--checkpoints",
+        type=_checkpoints,
+        default=None,
+        metavar="N",
+        help="judge each run at N checkpoints and stop its training once every threshold is met "
+        "(anytime verdicts; default: the spec's budget, 1 unless set: the whole budget)",
+    )
     run.add_argument("--json", metavar="FILE", help="also write the results as JSON (missing directories are created)")
     run.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     run.add_argument(

@@ -216,7 +216,7 @@ def _judge(spec: Spec, runs: list[RunResult], failed_seeds: int) -> dict[str, Go
     assert spec.budget.max_seeds is not None
     goals = {}
     for path, threshold in spec.thresholds.items():
-        verdicts = [run_verdict(r.successes[path], r.episodes, threshold, spec.confidence) for r in runs]
+        verdicts = [run_verdict(r.successes[path], r.episodes, threshold, spec.verdict_confidence) for r in runs]
         counted = [RunVerdict.MET if (v is RunVerdict.UNDECIDED and spec.undecided == "pass") else v for v in verdicts]
         counted += [RunVerdict.MISSED] * failed_seeds  # a run that crashed met nothing
         verdict = quorum_verdict(counted, spec.required_runs, spec.budget.max_seeds)
@@ -370,7 +370,7 @@ class _Runs:
                 elapsed_s=run.train_seconds,
                 success=None if root is None or not run.episodes else root / run.episodes,
                 episodes=run.episodes,
-                message=message,
+                message=("thresholds met at a checkpoint | " if run.met_early else "") + message,
             )
         )
 

@@ -34,6 +34,7 @@ class GoalMissed(AssertionError):
 class _Options:
     enabled: bool
     budget_scale: float
+    checkpoints: int
     workers: int | str
     cache_dir: str | None
     undecided: str
@@ -65,6 +66,14 @@ _SETTINGS: list[tuple[str, str, str, Any, str]] = [
         "string",
         "1",
         "multiply training timesteps (0.25: quick PR check)",
+    ),
+    (
+        "--goal-specs-checkpoints",
+        "goal_specs_checkpoints",
+        "string",
+        "10",
+        "judge runs at this many checkpoints and stop training once every threshold is met "
+        "(anytime verdicts); 1: train every run's whole budget",
     ),
     (
         "--goal-specs-workers",
@@ -153,7 +162,13 @@ def _parse_options(config: pytest.Config) -> _Options:
         raise pytest.UsageError(
             f"--goal-specs-budget-scale: expected a number > 0, got {get('--goal-specs-budget-scale')!r}"
         ) from None
+    from specguard.anytime import parse_checkpoints
     from specguard.workers import resolve_workers
+
+    try:
+        checkpoints = parse_checkpoints(get("--goal-specs-checkpoints"))
+    except ValueError as e:
+        raise pytest.UsageError(f"--goal-specs-checkpoints: {e}") from None
 
     workerinput = getattr(config, "workerinput", None)
     try:  # under xdist, "auto" shares the cores among its workers
@@ -167,6 +182,7 @@ def _parse_options(config: pytest.Config) -> _Options:
     return _Options(
         enabled=bool(config.getoption("goal_specs") or config.getini("goal_specs")),
         budget_scale=scale,
+        checkpoints=checkpoints,
         workers=workers,
         cache_dir=None if config.getoption("goal_specs_no_cache") else get("--goal-specs-cache-dir"),
         undecided=undecided,
@@ -294,7 +310,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
 
 def _scaled(state: _Session, spec: Any) -> Any:
-    return spec.scaled(state.options.budget_scale)
+    """The spec as this session trains it: its budget scaled, judged at the session's checkpoints."""
+    return spec.scaled(state.options.budget_scale, checkpoints=state.options.checkpoints)
 
 
 def _terminal_progress(config: pytest.Config) -> Callable[[Any], None]:

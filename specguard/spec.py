@@ -114,14 +114,29 @@ class Spec:
     def label(self) -> str:
         return self.name or str(getattr(self.tree, "name", "?"))
 
-    def scaled(self, factor: float) -> Spec:
+    def scaled(self, factor: float, *, checkpoints: int | None = None) -> Spec:
         """This spec with its training budget multiplied by ``factor`` (the one place budgets are scaled).
 
-        ``factor`` 1 returns the spec itself, so its identity (and cache key) is unchanged.
+        ``checkpoints``, if given, replaces the budget's own (1 trains every
+        run's whole budget; more makes it a ceiling, :mod:`specguard.anytime`).
+        Nothing to change returns the spec itself, so its identity (and cache key) is unchanged.
         """
-        if factor == 1:
+        if factor == 1 and checkpoints in (None, self.budget.checkpoints):
             return self
-        return dataclasses.replace(self, budget=self.budget.scaled(factor))
+        return dataclasses.replace(self, budget=self.budget.scaled(factor, checkpoints=checkpoints))
+
+    @property
+    def verdict_confidence(self) -> float:
+        """The confidence each look at a run judges at: ``confidence`` corrected for ``budget.looks`` looks.
+
+        Intervals shown in tables stay at ``confidence``; run verdicts (met,
+        missed, undecided) use this one, so that a run whose true success is
+        its threshold is called met (or missed) with probability at most
+        ``(1 - confidence) / 2`` over all its looks (:mod:`specguard.anytime`).
+        """
+        from specguard.anytime import look_confidence
+
+        return look_confidence(self.confidence, self.budget.looks)
 
     @property
     def thresholds(self) -> dict[str, float]:

@@ -30,6 +30,7 @@ Example:
 from __future__ import annotations
 
 import enum
+import functools
 from collections.abc import Sequence
 
 __all__ = ["Outcome", "QuorumVerdict", "RunVerdict", "quorum_verdict", "run_verdict", "success_interval"]
@@ -66,8 +67,11 @@ def _check_counts(successes: int, episodes: int) -> None:
         raise ValueError(f"expected 0 <= successes <= episodes, got successes={successes}, episodes={episodes}")
 
 
+@functools.lru_cache(maxsize=65536)
 def success_interval(successes: int, episodes: int, confidence: float = 0.95) -> tuple[float, float]:
     """The Clopper-Pearson interval of a success rate of ``successes`` out of ``episodes``.
+
+    Cached: verdicts ask for the same few counts again and again (:mod:`specguard.anytime`).
 
     Raises:
         ValueError: counts out of range, or ``confidence`` outside (0, 1).

@@ -17,6 +17,7 @@ verdicts, intervals, caches and baselines treat both alike.
 
 from __future__ import annotations
 
+import sys
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
@@ -24,11 +25,11 @@ from typing import Any
 
 import gymnasium as gym
 
+from specguard.anytime import checkpoint_steps, final_evaluation, interim_look
 from specguard.env import make_baseline_env, make_env
 from specguard.error import InvalidSpec, SpecError
 from specguard.progress import decode_update, encode_update, format_event
 from specguard.spec import ALGORITHMS, Spec
-from specguard.stats import RunVerdict, run_verdict
 from specguard.workers import Report
 
 __all__ = [
@@ -67,7 +68,13 @@ class RunResult:
         stopped_early: training hit the budget's wall-clock cap.
         curve: success per goal (and safety rate per safety key) over training
             episodes (stochastic policy),
-            ``[{"timesteps": t, "episodes": n, "success": {key: rate}}, ...]``.
+            ``[{"timesteps": t, "episodes": n, "success": {key: rate}}, ...]``;
+            a point where the policy was evaluated (an interim checkpoint, or
+            the end) also has ``"evaluation": {key: rate}`` and
+            ``"evaluation_episodes"``.
+        met_early: every threshold was met at an interim checkpoint, so
+            training stopped there (``timesteps`` is that step) and that
+            checkpoint's evaluation is the run's result (:mod:`specguard.anytime`).
     """
 
     spec: str
@@ -78,9 +85,7 @@ class RunResult:
     train_seconds: float
     stopped_early: bool = False
     curve: list[dict[str, Any]] = field(default_factory=list)
-
-    def verdicts(self, thresholds: Mapping[str, float], confidence: float = 0.95) -> dict[str, RunVerdict]:
-        return {p: run_verdict(self.successes[p], self.episodes, t, confidence) for p, t in thresholds.items()}
+    met_early: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -127,13 +132,32 @@ def make_single_env(spec: Spec) -> gym.Env:
 TICKS = 100  # step reports per run (cheap; they tell where a run was when it died)
 
 
-class _GoalCurve:
-    """An SB3 callback body: success per goal (and safety rate) over finished training episodes, and the cap."""
+Look = Callable[[int], bool]
+"""An interim checkpoint: evaluates the policy at a training step; True when every threshold is met."""
 
-    def __init__(self, every: int, wall_clock_s: float | None, total: int, report: Report | None) -> None:
+
+class _GoalCurve:
+    """An SB3 callback body: success per goal over finished training episodes, checkpoints, and the cap.
+
+    A curve point is made at every tenth of the budget and at every interim
+    checkpoint (:mod:`specguard.anytime`); a checkpoint's evaluation is stored
+    in its point under ``"evaluation"``, and a met one stops training.
+    """
+
+    def __init__(
+        self,
+        every: int,
+        wall_clock_s: float | None,
+        total: int,
+        report: Report | None,
+        checkpoints: list[int] | None = None,
+        look: Look | None = None,
+    ) -> None:
         self.every = max(1, every)
         self.total = total
         self.report = report
+        self.checkpoints = list(checkpoints or [])
+        self.look = look
         self._tick = max(1, total // TICKS)
         self._next_tick = self._tick
         self.start = time.perf_counter()
@@ -143,6 +167,7 @@ class _GoalCurve:
         self._episodes = 0
         self._next = self.every
         self.stopped_early = False
+        self.met_early = False
 
     def on_step(self, num_timesteps: int, dones: Any, infos: list[dict[str, Any]]) -> bool:
         for done, info in zip(dones, infos):
@@ -152,21 +177,39 @@ class _GoalCurve:
         if self.report is not None and num_timesteps >= self._next_tick:
             self._next_tick = num_timesteps + self._tick
             self.report("train", num_timesteps, None)
-        if num_timesteps >= self._next:
-            self._next += self.every
-            if self._episodes:
-                rates = {p: c / self._episodes for p, c in self._counts.items()}
-                self.points.append({"timesteps": num_timesteps, "episodes": self._episodes, "success": rates})
-            if self.report is not None:  # numbers, as JSON: the parent makes the event (specguard.progress)
-                root = next(iter(rates.values())) if self._episodes else None  # goals come first, the root first
-                elapsed = time.perf_counter() - self.start
-                line = encode_update(num_timesteps, self.total, elapsed, root, self._episodes)
-                self.report("train", num_timesteps, line)
-            self._counts, self._episodes = {}, 0
+        looking = bool(self.checkpoints) and num_timesteps >= self.checkpoints[0]
+        if num_timesteps >= self._next or looking:
+            while self._next <= num_timesteps:
+                self._next += self.every
+            self._point(num_timesteps)
+        if looking:
+            while self.checkpoints and self.checkpoints[0] <= num_timesteps:
+                self.checkpoints.pop(0)
+            assert self.look is not None
+            if self.look(num_timesteps):
+                self.met_early = True
+                return False
         if self.deadline is not None and time.perf_counter() > self.deadline:
             self.stopped_early = True
             return False
         return True
+
+    def _point(self, num_timesteps: int) -> None:
+        rates = {p: c / self._episodes for p, c in self._counts.items()} if self._episodes else {}
+        self.points.append({"timesteps": num_timesteps, "episodes": self._episodes, "success": rates})
+        if self.report is not None:  # numbers, as JSON: the parent makes the event (specguard.progress)
+            root = next(iter(rates.values())) if rates else None  # goals come first, the root first
+            elapsed = time.perf_counter() - self.start
+            line = encode_update(num_timesteps, self.total, elapsed, root, self._episodes)
+            self.report("train", num_timesteps, line)
+        self._counts, self._episodes = {}, 0
+
+    def evaluated(self, num_timesteps: int, counts: Mapping[str, int], episodes: int) -> None:
+        """Record an evaluation at ``num_timesteps`` in the curve (a point of its own if none is there)."""
+        if not self.points or self.points[-1]["timesteps"] != num_timesteps:
+            self.points.append({"timesteps": num_timesteps, "episodes": 0, "success": {}})
+        self.points[-1]["evaluation"] = {p: c / episodes for p, c in counts.items()}
+        self.points[-1]["evaluation_episodes"] = episodes
 
 
 def train_run(
@@ -232,7 +275,33 @@ def train_run(
         raise InvalidSpec(f"{label}.hyperparameters", f"{spec.algorithm} rejected them: {e}") from e
 
     budget = spec.budget
-    curve = _GoalCurve(budget.timesteps // CURVE_POINTS, budget.wall_clock_s, budget.timesteps, emit)
+    confidence = spec.verdict_confidence  # corrected for every look (specguard.anytime)
+    eval_env = make_single_env(spec)
+    seeds = range(EVAL_SEED_BASE + seed * EVAL_SEED_STRIDE, EVAL_SEED_BASE + (seed + 1) * EVAL_SEED_STRIDE)
+    normalizer = venv if isinstance(venv, VecNormalize) else None
+
+    def policy(obs: Any) -> Any:
+        if normalizer is not None:
+            obs = normalizer.normalize_obs(obs)
+        return model.predict(obs, deterministic=spec.deterministic)[0]
+
+    at = {"episode": 0}  # where an evaluation was, for an error's message
+
+    def episodes_of(start: int, count: int) -> dict[str, int]:
+        at["episode"] = start
+        return evaluate(policy, eval_env, count, seeds[start : start + count])
+
+    looked: dict[str, Any] = {}
+
+    def look(step: int) -> bool:
+        counts, episodes, ok = interim_look(episodes_of, budget.eval_episodes, spec.thresholds, confidence)
+        curve.evaluated(step, counts, episodes)
+        if ok:
+            looked.update(counts=counts, episodes=episodes)
+        return ok
+
+    checkpoints = checkpoint_steps(budget.timesteps, budget.checkpoints) if spec.thresholds else []
+    curve = _GoalCurve(budget.timesteps // CURVE_POINTS, budget.wall_clock_s, budget.timesteps, emit, checkpoints, look)
 
     class Callback(BaseCallback):  # type: ignore[misc]
         def _on_step(self) -> bool:
@@ -248,44 +317,27 @@ def train_run(
         raise TrainingError(
             f"{label}, seed {seed}, training step {model.num_timesteps}: the environment raised {type(e).__name__}: {e}"
         ) from e
+    finally:
+        if sys.exc_info()[0] is not None:
+            eval_env.close()
     train_seconds = time.perf_counter() - start
 
-    normalizer = venv if isinstance(venv, VecNormalize) else None
     if normalizer is not None:
         normalizer.training = False
 
-    def policy(obs: Any) -> Any:
-        if normalizer is not None:
-            obs = normalizer.normalize_obs(obs)
-        return model.predict(obs, deterministic=spec.deterministic)[0]
-
-    eval_env = make_single_env(spec)
-    seeds = range(EVAL_SEED_BASE + seed * EVAL_SEED_STRIDE, EVAL_SEED_BASE + (seed + 1) * EVAL_SEED_STRIDE)
-    counts: dict[str, int] = {}
-    episodes = 0
-    chunk = budget.eval_episodes
-    assert budget.max_eval_episodes is not None
     emit("evaluate", 0, None)
     try:
-        while True:
-            more = evaluate(policy, eval_env, chunk, seeds[episodes : episodes + chunk])
-            emit("evaluate", episodes + chunk, None)
-            counts = {p: counts.get(p, 0) + c for p, c in more.items()}
-            episodes += chunk
-            undecided = [
-                p
-                for p, t in spec.thresholds.items()
-                if run_verdict(counts[p], episodes, t, spec.confidence) is RunVerdict.UNDECIDED
-            ]
-            # An undecided run first gets more (cheap) evaluation episodes before it is called.
-            chunk = min(episodes, budget.max_eval_episodes - episodes)
-            if not undecided or chunk <= 0:
-                break
+        if curve.met_early:
+            counts, episodes = looked["counts"], looked["episodes"]
+        else:
+            counts, episodes = final_evaluation(episodes_of, budget.evaluation_stages, spec.thresholds, confidence)
+            curve.evaluated(int(model.num_timesteps), counts, episodes)
+        emit("evaluate", episodes, None)
     except SpecError as e:
-        raise TrainingError(f"{label}, seed {seed}, evaluation episode {episodes}: {e}") from e
+        raise TrainingError(f"{label}, seed {seed}, evaluation episode {at['episode']}: {e}") from e
     except Exception as e:
         raise TrainingError(
-            f"{label}, seed {seed}, evaluation episode {episodes}: the environment raised {type(e).__name__}: {e}"
+            f"{label}, seed {seed}, evaluation episode {at['episode']}: the environment raised {type(e).__name__}: {e}"
         ) from e
     finally:
         eval_env.close()
@@ -298,5 +350,6 @@ def train_run(
         train_seconds=train_seconds,
         stopped_early=curve.stopped_early,
         curve=curve.points,
+        met_early=curve.met_early,
     )
     return result, model

@@ -124,7 +124,7 @@ def test_safety_thresholds_are_items_rows_and_junit_properties(pytester):
             return tree.annotate(never, always)
 
 
-        @sg.goal_spec(expect={"stabilization": 0.0, "never": 0.3, "pendulum:always": 0.3})
+        @sg.goal_spec(expect={"stabilization": 0.0, "never": 0.5, "pendulum:always": 0.5})
         def test_safe(pendulum, guarded):
             return tiny(pendulum, guarded)
         """,
@@ -136,7 +136,7 @@ def test_safety_thresholds_are_items_rows_and_junit_properties(pytester):
     result.stdout.fnmatch_lines(
         [
             "*safety rate 'pendulum:always' of spec 'pendulum' missed its threshold",
-            "*safe (no violation) in 0% (0/16), interval [[]0.00, 0.21[]], threshold >= 0.3",
+            "*safe (no violation) in 0% (0/16), interval [[]0.00, 0.21[]], threshold >= 0.5",
             "*per seed: seed 0: 0/16 (missed)",
             "*hint: 'pendulum:always' was violated in 100% of evaluation episodes; in every episode of 1/1 seeds*",
         ]
@@ -146,8 +146,8 @@ def test_safety_thresholds_are_items_rows_and_junit_properties(pytester):
             "*= specguard goal specs =*",
             "spec*goal*success*interval*threshold*runs met*per seed*verdict*training",
             "test_specs.py::test_safe*pendulum/stabilization *>= 0 *1/1*passed*",
-            "test_specs.py::test_safe*pendulum:never (safe) *100% (16/16)*>= 0.3*1/1*16/16*passed*",
-            "test_specs.py::test_safe*pendulum:always (safe) *0% (0/16)*>= 0.3*0/1*0/16*failed*",
+            "test_specs.py::test_safe*pendulum:never (safe) *100% (16/16)*>= 0.5*1/1*16/16*passed*",
+            "test_specs.py::test_safe*pendulum:always (safe) *0% (0/16)*>= 0.5*0/1*0/16*failed*",
         ]
     )
     props = {
@@ -158,7 +158,7 @@ def test_safety_thresholds_are_items_rows_and_junit_properties(pytester):
     }
     assert props["specguard.pendulum:always.kind"] == "safety"
     assert props["specguard.pendulum:always.success"] == "0.0"
-    assert props["specguard.pendulum:always.threshold"] == "0.3"
+    assert props["specguard.pendulum:always.threshold"] == "0.5"
     rows = json.loads((report / "goal-specs.json").read_text())["goals"]
     assert {r["goal"]: r["kind"] for r in rows} == {
         "pendulum/stabilization": "goal",
@@ -381,6 +381,25 @@ def test_a_malformed_decorator_fails_its_item_and_the_other_specs_still_run(pyte
     run(pytester).assert_outcomes(skipped=2)
 
 
+def test_checkpoints_make_the_budget_a_ceiling(pytester):
+    # A threshold of 0 is met at once: judged at the first of 10 checkpoints (step 13 of 128), training stops.
+    write(
+        pytester,
+        """
+        @sg.goal_spec(expect={"stabilization": 0.0})
+        def test_tiny(pendulum, tree):
+            return tiny(pendulum, tree)
+        """,
+    )
+    anytime = run(pytester, "--goal-specs")
+    anytime.assert_outcomes(passed=1)
+    anytime.stdout.fnmatch_lines(["*seed 0: done, 13/128 steps*thresholds met at a checkpoint*"])
+    full = run(pytester, "--goal-specs", "--goal-specs-checkpoints=1")  # another spec identity: trained again
+    full.assert_outcomes(passed=1)
+    full.stdout.fnmatch_lines(["*seed 0: done, 128/128 steps*"])
+    assert "thresholds met" not in full.stdout.str()
+
+
 @pytest.mark.parametrize(
     ("option", "message"),
     [
@@ -389,6 +408,11 @@ def test_a_malformed_decorator_fails_its_item_and_the_other_specs_still_run(pyte
             "--goal-specs-undecided: expected one of fail, xfail, pass, got 'maybe'",
         ),
         ("--goal-specs-budget-scale=0", "--goal-specs-budget-scale: expected a number > 0, got '0'"),
+        (
+            "--goal-specs-checkpoints=0",
+            "--goal-specs-checkpoints: expected an integer >= 1 (1: train every run's whole budget), got '0'",
+        ),
+        ("--goal-specs-checkpoints=2.5", "--goal-specs-checkpoints: expected an integer >= 1*got '2.5'"),
         ("--goal-specs-workers=none", "--goal-specs-workers: expected an integer >= 1 or 'auto', got 'none'"),
         ("--goal-specs-compare=nosuch", "--goal-specs-compare: baseline '*nosuch.json' does not exist*"),
     ],

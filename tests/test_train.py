@@ -9,6 +9,7 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
+from specguard.anytime import min_successes_to_meet
 from specguard.testing import ReplayEnv
 from specguard.train import EVAL_SEED_BASE, TrainingError, evaluate, train_run
 
@@ -146,3 +147,40 @@ def test_runs_measure_the_safety_rate_of_every_constraint(baseline):
     result, _ = train_run(spec, seed=0)
     assert set(result.successes) == {"pendulum", "pendulum/position", "pendulum/stabilization", "pendulum:fast"}
     assert 0 <= result.successes["pendulum:fast"] <= result.episodes
+
+
+# -- anytime verdicts: judged at checkpoints, stopped once every threshold is met ------------------------------
+
+
+def reached_initial():
+    """Every episode ends in x = 1 whatever the policy does: a goal on x >= 0.5 is met from the first checkpoint."""
+    return sg.InitialEnv(lambda: ReplayEnv([[0.0], [1.0], [1.0]]), features=("x",))
+
+
+def test_a_run_whose_thresholds_are_met_stops_at_the_first_checkpoint():
+    budget = sg.Budget(timesteps=4096, eval_episodes=30, checkpoints=4)
+    spec = sg.Spec(reached_initial(), sg.Goal("up", x=(0.5, None)), budget=budget, hyperparameters=TINY, expect=0.8)
+    result, _ = train_run(spec, seed=0)
+    assert result.met_early and result.timesteps == 1024  # judged at the first quarter, stopped there
+    assert (result.successes, result.episodes) == ({"up": 30}, 30)
+    assert result.curve[-1]["timesteps"] == 1024 and result.curve[-1]["evaluation"] == {"up": 1.0}
+
+
+def test_a_run_whose_thresholds_are_not_met_trains_its_whole_budget():
+    budget = sg.Budget(timesteps=4096, eval_episodes=30, checkpoints=4)
+    spec = sg.Spec(reached_initial(), sg.Goal("far", x=(5.0, None)), budget=budget, hyperparameters=TINY, expect=0.5)
+    result, _ = train_run(spec, seed=0)
+    assert not result.met_early and result.timesteps == 4096
+    evaluated = [p for p in result.curve if "evaluation" in p]
+    assert [p["timesteps"] for p in evaluated] == [1024, 2048, 3072, 4096]  # 3 checkpoints, then the end
+    # Each look stopped once a pass was out of reach: after 30 - need + 1 misses in a row.
+    need = min_successes_to_meet(30, 0.5, spec.verdict_confidence)
+    assert [p["evaluation_episodes"] for p in evaluated[:3]] == [30 - need + 1] * 3
+    assert result.episodes == 30
+
+
+def test_one_checkpoint_trains_the_whole_budget_even_when_met():
+    budget = sg.Budget(timesteps=4096, eval_episodes=30)
+    spec = sg.Spec(reached_initial(), sg.Goal("up", x=(0.5, None)), budget=budget, hyperparameters=TINY, expect=0.8)
+    result, _ = train_run(spec, seed=0)
+    assert not result.met_early and result.timesteps == 4096
