@@ -44,27 +44,41 @@ def height_distance(s):  # type: ignore[no-untyped-def]
     return abs(s.height - 1.5)
 
 
-height = sg.Goal("height", height=(1.0, 3.0))
-
-# One goal, so there is no refined (b) tree.
-trees: dict[str, sg.Node] = {
-    "a": height,
-    "c": height.annotate(sg.Distance(height_distance, scale=3.5)),
-}
-
-ppo_kwargs: dict[str, object] = {}  # SB3 defaults (paper, Table 1)
-
-# rl-zoo's PPO at 150k steps; a plain implementation reached (SPEC.md section 5):
-# baseline 100%, (a) one seed 100% one 0%, (c) 100%.
+# -- the specs, one refinement at a time (the paper's Figure 4 row; SPEC.md section 5) -----------------------
+#
+# Budget: rl-zoo's PPO for Acrobot (16 envs), at most 150k steps per run; under anytime verdicts a run
+# stops at the first tenth of its budget where every threshold is met. Measured figures are 2 seeds x 30
+# deterministic evaluation episodes on the 2-core development machine.
 ZOO_PPO: dict[str, object] = {"n_steps": 256, "gae_lambda": 0.94, "n_epochs": 4, "ent_coef": 0.0}
 BUDGET = sg.Budget(timesteps=150_000, min_seeds=2, eval_episodes=30)
-
-EXPECT = {"a": 0.8, "c": 0.8, "baseline": 0.8}
 COMMON: dict[str, Any] = dict(budget=BUDGET, hyperparameters=ZOO_PPO, n_envs=16)
 
-specs: dict[str, sg.Spec] = {
-    key: sg.Spec(initial_env, tree, expect=EXPECT[key], name=f"acrobot-{key}", **COMMON) for key, tree in trees.items()
-}
-specs["baseline"] = sg.Spec(
-    initial_env, trees["c"], expect=EXPECT["baseline"], baseline=True, name="acrobot-baseline", **COMMON
+height = sg.Goal("height", height=(1.0, 3.0))
+trees: dict[str, sg.Node] = {}
+specs: dict[str, sg.Spec] = {}
+
+# (a) One leaf: the tip above the bar, rewarded only when entered (Acrobot has one goal: no (b)).
+# Paper: found in about 6 of 10 runs. Measured: one seed 100%, one 0% at 150k.
+trees["a"] = height
+specs["a"] = sg.Spec(
+    initial_env,
+    trees["a"],
+    expect={"height": 0.8},
+    xfail={"height": "paper: the sparse goal is found in about 6 of 10 runs"},
+    name="acrobot-a",
+    **COMMON,
 )
+
+# (c) (a) with a distance to the middle of the goal band: shaping upwards.
+# Paper: about the baseline. Measured: 100% in both seeds at 150k.
+trees["c"] = height.annotate(sg.Distance(height_distance, scale=3.5))
+specs["c"] = sg.Spec(initial_env, trees["c"], expect={"height": 0.8}, name="acrobot-c", **COMMON)
+
+# The baseline: Acrobot-v1's own reward (-1 per step until the tip is up), judged by the same goal.
+# Paper: about 100%. Measured: 100% in both seeds at 150k.
+specs["baseline"] = sg.Spec(
+    initial_env, trees["c"], expect={"height": 0.8}, baseline=True, name="acrobot-baseline", **COMMON
+)
+
+# The paper's reported results, beside ours in docs/reproduction.md.
+PAPER = {"a": "about 6/10 runs", "c": "about the baseline", "baseline": "about 100%"}

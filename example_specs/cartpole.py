@@ -56,13 +56,15 @@ ZOO_PPO: dict[str, Any] = {
 BUDGET = sg.Budget(timesteps=50_000, min_seeds=2, eval_episodes=30)
 COMMON: dict[str, Any] = dict(budget=BUDGET, hyperparameters=ZOO_PPO, n_envs=8)
 
-spec = sg.Spec(
-    initial_env,
-    tree,
-    expect={"lean_and_catch": 0.8, "lean_and_catch:fallen": 0.8, "lean_and_catch:edges": 0.8},
-    name="cartpole",
-    **COMMON,
-)
+specs: dict[str, sg.Spec] = {
+    "lean_and_catch": sg.Spec(
+        initial_env,
+        tree,
+        expect={"lean_and_catch": 0.8, "lean_and_catch:fallen": 0.8, "lean_and_catch:edges": 0.8},
+        name="cartpole",
+        **COMMON,
+    )
+}
 
 
 if __name__ == "__main__":

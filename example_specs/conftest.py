@@ -1,34 +1,20 @@
-"""Fixtures of the case studies: initial envs and goal trees, one per refinement step."""
+"""The ``paper`` marker: the paper's negative results (full budgets) run only when ``-m`` asks for them."""
 
 from __future__ import annotations
 
 import pytest
 
-import specguard as sg
-from example_specs import acrobot, lunar_lander, mountain_car, pendulum
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line(
+        "markers", "paper: a spec the main job leaves out (it trains its whole budget); opt in with -m paper"
+    )
 
 
-@pytest.fixture
-def pendulum_env() -> sg.InitialEnv:
-    return pendulum.initial_env
-
-
-@pytest.fixture
-def pendulum_trees() -> dict[str, sg.Node]:
-    """(a) one leaf, (b) refined by All, (c) with a distance, (w) with the paper's weights."""
-    return pendulum.trees
-
-
-@pytest.fixture
-def acrobot_env() -> sg.InitialEnv:
-    return acrobot.initial_env
-
-
-@pytest.fixture
-def mountain_car_env() -> sg.InitialEnv:
-    return mountain_car.initial_env
-
-
-@pytest.fixture
-def lunar_lander_env() -> sg.InitialEnv:
-    return lunar_lander.initial_env
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    if "paper" in (config.getoption("markexpr") or ""):
+        return  # -m names the marker: pytest's own selection decides
+    left_out = [item for item in items if item.get_closest_marker("paper")]
+    if left_out:
+        config.hook.pytest_deselected(items=left_out)
+        items[:] = [item for item in items if not item.get_closest_marker("paper")]

@@ -17,25 +17,59 @@ def velocity_distance(s):  # type: ignore[no-untyped-def]
     return abs(s.vel - 0.07)
 
 
-trees: dict[str, sg.Node] = {
-    "a": sg.Goal("mountain_car", x=(0.45, 1.0), vel=(-0.03, 0.07)),
-    "b": sg.All(position, velocity, name="mountain_car"),
-    "c": sg.All(position, velocity.annotate(sg.Distance(velocity_distance, scale=0.14)), name="mountain_car"),
-}
-
-ppo_kwargs: dict[str, object] = {"use_sde": True}  # paper, Table 1
-
-# PPO with use_sde at 50k steps; a plain implementation reached (SPEC.md
-# section 5): baseline 100%, (a) 100%, (b) 0%, (c) one seed 100% one 0%.
+# -- the specs, one refinement at a time (the paper's Figure 4 row; SPEC.md section 5) -----------------------
+#
+# Budget: PPO with use_sde (paper, Table 1), at most 50k steps per run; under anytime verdicts a run stops
+# at the first tenth of its budget where every threshold is met. Measured figures are 2 seeds x 30
+# deterministic evaluation episodes on the 2-core development machine.
+ppo_kwargs: dict[str, object] = {"use_sde": True}
 BUDGET = sg.Budget(timesteps=50_000, min_seeds=2, eval_episodes=30)
-
-EXPECT = {"a": 0.8, "b": 0.8, "c": 0.8, "baseline": 0.8}
 COMMON: dict[str, Any] = dict(budget=BUDGET, hyperparameters=ppo_kwargs)
 
-specs: dict[str, sg.Spec] = {
-    key: sg.Spec(initial_env, tree, expect=EXPECT[key], name=f"mountain_car-{key}", **COMMON)
-    for key, tree in trees.items()
-}
-specs["baseline"] = sg.Spec(
-    initial_env, trees["c"], expect=EXPECT["baseline"], baseline=True, name="mountain_car-baseline", **COMMON
+trees: dict[str, sg.Node] = {}
+specs: dict[str, sg.Spec] = {}
+
+# (a) One leaf: at the flag, slowly.
+# Paper: exploration fails in most runs of every spec. Measured: 46% at 50k.
+trees["a"] = sg.Goal("mountain_car", x=(0.45, 1.0), vel=(-0.03, 0.07))
+specs["a"] = sg.Spec(
+    initial_env,
+    trees["a"],
+    expect={"mountain_car": 0.8},
+    xfail={"mountain_car": "paper: exploration fails in most runs of every spec"},
+    name="mountain_car-a",
+    **COMMON,
 )
+
+# (b) (a) refined by All into position and velocity.
+# Measured: 0% in both seeds at 50k.
+trees["b"] = sg.All(position, velocity, name="mountain_car")
+specs["b"] = sg.Spec(
+    initial_env,
+    trees["b"],
+    expect={"mountain_car": 0.8},
+    xfail={"mountain_car": "measured 0% at 50k steps"},
+    name="mountain_car-b",
+    **COMMON,
+)
+
+# (c) (b) with a distance to the top speed: shaping towards building momentum.
+# Paper: reached in about 6 of 10 runs. Measured: one seed 100%, one 0% at 50k.
+trees["c"] = sg.All(position, velocity.annotate(sg.Distance(velocity_distance, scale=0.14)), name="mountain_car")
+specs["c"] = sg.Spec(
+    initial_env,
+    trees["c"],
+    expect={"mountain_car": 0.8},
+    xfail={"mountain_car": "paper: reached in about 6 of 10 runs"},
+    name="mountain_car-c",
+    **COMMON,
+)
+
+# The baseline: MountainCarContinuous-v0's own reward (+100 at the flag, minus the energy spent).
+# Paper: 4 of 10 runs. Measured: 100% in both seeds at 50k.
+specs["baseline"] = sg.Spec(
+    initial_env, trees["c"], expect={"mountain_car": 0.8}, baseline=True, name="mountain_car-baseline", **COMMON
+)
+
+# The paper's reported results, beside ours in docs/reproduction.md.
+PAPER = {"a": "fails in most runs", "b": "fails in most runs", "c": "6/10 runs", "baseline": "4/10 runs"}

@@ -26,19 +26,12 @@ def position_distance(s):  # type: ignore[no-untyped-def]
 
 near_position = position.annotate(sg.Distance(position_distance, scale=2.0))
 
-trees: dict[str, sg.Node] = {
-    "a": sg.Goal("pendulum", x=(0.966, 1.0), y=(-0.259, 0.259), omega=(-0.25, 0.25)),
-    "b": sg.All(position, stabilization, name="pendulum"),
-    "c": sg.All(near_position, stabilization, name="pendulum"),
-    "w": sg.All(near_position, stabilization, name="pendulum", weights=(0.8, 0.2)),
-}
 
-ppo_kwargs: dict[str, object] = {}  # SB3 defaults (paper, Table 1)
-
-# Budgets and thresholds: rl-zoo's tuned PPO at 100k steps, where a plain
-# implementation reached (SPEC.md section 5, 2 seeds x 30 episodes): baseline
-# 100%, (a) 100%, (b) 17% and 43%, (c) 83% and 87%, (w) 100%. (b) is expected to
-# miss: its agents stabilise without reaching the position (the paper's finding).
+# -- the specs, one refinement at a time (the paper's Figure 4 row; SPEC.md section 5) -----------------------
+#
+# Budget: rl-zoo's tuned PPO for Pendulum (4 envs), at most 100k steps per run. Under anytime verdicts
+# (pytest --goal-specs) a run stops at the first tenth of its budget where every threshold is met.
+# Measured figures are 2 seeds x 30 deterministic evaluation episodes on the 2-core development machine.
 ZOO_PPO: dict[str, object] = {
     "n_steps": 1024,
     "gamma": 0.9,
@@ -47,16 +40,59 @@ ZOO_PPO: dict[str, object] = {
     "sde_sample_freq": 4,
 }
 BUDGET = sg.Budget(timesteps=100_000, min_seeds=2, eval_episodes=30)
-
-EXPECT = {"a": 0.8, "b": 0.8, "c": 0.6, "w": 0.8, "baseline": 0.8}
 COMMON: dict[str, Any] = dict(budget=BUDGET, hyperparameters=ZOO_PPO, n_envs=4)
 
-specs: dict[str, sg.Spec] = {
-    key: sg.Spec(initial_env, tree, expect=EXPECT[key], name=f"pendulum-{key}", **COMMON) for key, tree in trees.items()
-}
-specs["baseline"] = sg.Spec(
-    initial_env, trees["w"], expect=EXPECT["baseline"], baseline=True, name="pendulum-baseline", **COMMON
+trees: dict[str, sg.Node] = {}
+specs: dict[str, sg.Spec] = {}
+
+# (a) One leaf: the intersection of both goals, rewarded only when entered.
+# Paper: 8 of 10 runs. Measured: 100% in both seeds at 100k.
+trees["a"] = sg.Goal("pendulum", x=(0.966, 1.0), y=(-0.259, 0.259), omega=(-0.25, 0.25))
+specs["a"] = sg.Spec(initial_env, trees["a"], expect={"pendulum": 0.8}, name="pendulum-a", **COMMON)
+
+# (b) (a) refined by All into its two goals, each rewarded on its own (weights 1/2).
+# Paper: half the runs stabilise without reaching the position. Measured: 17% and 43% at 100k.
+trees["b"] = sg.All(position, stabilization, name="pendulum")
+specs["b"] = sg.Spec(
+    initial_env,
+    trees["b"],
+    expect={"pendulum": 0.8, "stabilization": 0.8},
+    xfail={"pendulum": "paper: half the runs stabilise without reaching the position"},
+    name="pendulum-b",
+    **COMMON,
 )
+
+# (c) (b) with a distance to the position: shaping towards the top.
+# Paper: helps, but only the weights resolve the conflict. Measured: 83% and 87% at 100k.
+trees["c"] = sg.All(near_position, stabilization, name="pendulum")
+specs["c"] = sg.Spec(
+    initial_env,
+    trees["c"],
+    expect={"pendulum": 0.6},
+    xfail={"pendulum": "paper: the distance helps, only the weights resolve the conflict"},
+    name="pendulum-c",
+    **COMMON,
+)
+
+# (w) (c) with the paper's manual weights, position 0.8 and stabilization 0.2.
+# Paper: more precise than the baseline. Measured: 100% in both seeds at 100k.
+trees["w"] = sg.All(near_position, stabilization, name="pendulum", weights=(0.8, 0.2))
+specs["w"] = sg.Spec(initial_env, trees["w"], expect={"pendulum": 0.8, "position": 0.8}, name="pendulum-w", **COMMON)
+
+# The baseline: Pendulum-v1's own reward, judged by the same goals.
+# Paper: consistent. Measured: 100% in both seeds at 100k.
+specs["baseline"] = sg.Spec(
+    initial_env, trees["w"], expect={"pendulum": 0.8}, baseline=True, name="pendulum-baseline", **COMMON
+)
+
+# The paper's reported results, beside ours in docs/reproduction.md.
+PAPER = {
+    "a": "8/10 runs",
+    "b": "position in half the runs",
+    "c": "distance helps; weights needed",
+    "w": "more precise than baseline",
+    "baseline": "consistent",
+}
 
 
 def main(steps: int = 10, seed: int = 0) -> None:

@@ -59,6 +59,7 @@ _EXPORTS = {
     "compile_tree": "specguard.compiled",
     "formula": "specguard.reward_formula",
     "goal_spec": "specguard.declare",
+    "goal_specs": "specguard.declare",
     "make_baseline_env": "specguard.env",
     "make_env": "specguard.env",
     "run_spec": "specguard.engine",
@@ -92,6 +93,7 @@ __all__ = [
     "compile_tree",
     "formula",
     "goal_spec",
+    "goal_specs",
     "make_baseline_env",
     "make_env",
     "run_spec",
@@ -123,7 +125,7 @@ if TYPE_CHECKING:
     from specguard.budget import Budget
     from specguard.cache import Cache
     from specguard.compiled import CompiledTree, compile_tree
-    from specguard.declare import goal_spec
+    from specguard.declare import goal_spec, goal_specs
     from specguard.engine import GoalVerdict, SpecResult, run_spec
     from specguard.env import GoalInfo, SpecEnv, make_baseline_env, make_env
     from specguard.error import (

@@ -17,13 +17,14 @@ Example:
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from numbers import Real
 from typing import Any, TypeVar
 
 from specguard.error import InvalidSpec
 from specguard.goals import ROOT, check_threshold
 
-__all__ = ["GOAL_FIXTURE", "goal_spec"]
+__all__ = ["GOAL_FIXTURE", "Case", "goal_spec", "goal_specs"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -104,3 +105,62 @@ def _check_declaration(where: str, expect: object, xfail: object) -> tuple[dict[
         if unknown:
             raise InvalidSpec(where, f"xfail names goals {unknown} that expect does not list: {list(thresholds)}")
     return thresholds, reasons
+
+
+@dataclass(frozen=True)
+class Case:
+    """One item of :func:`goal_specs`: a spec (by its key) and the goal the item asserts."""
+
+    spec: str
+    goal: str
+    xfail: str | None = None  # the spec's reason when it expects this goal to miss
+
+    @property
+    def id(self) -> str:
+        return f"{self.spec}-{self.goal}"
+
+
+def goal_specs(specs: Mapping[str, Any], *, marks: Mapping[str, Any] | None = None) -> Callable[..., Any]:
+    """A pytest test asserting every spec of ``specs`` by its own thresholds, one item per spec and goal.
+
+    Assign it to a ``test_*`` name in a test module; the specs are declared once
+    (their ``expect`` and ``xfail``), where ``specguard run``/``show`` and
+    ``specguard reproduce`` find them too.
+
+    Args:
+        specs: ``{key: Spec}``; items are named ``test_x[key-goal/path]``.
+        marks: ``{key: mark or list of marks}`` for some specs' items, e.g. an
+            opt-in marker for specs that need their whole budget.
+
+    Example:
+        >>> import specguard as sg
+        >>> from example_specs import pendulum
+        >>> test_pendulum = sg.goal_specs({"w": pendulum.specs["w"]})
+        >>> [m.name for m in test_pendulum.pytestmark]
+        ['usefixtures', 'goal_spec']
+    """
+    import pytest
+
+    from specguard.spec import Spec
+
+    cases: list[Any] = []
+    for key, spec in specs.items():
+        where = f"goal_specs[{key!r}]"
+        if not isinstance(spec, Spec):
+            raise InvalidSpec(where, f"expected a specguard.Spec, got {type(spec).__name__}")
+        if not spec.thresholds:
+            raise InvalidSpec(where, "expected a spec with thresholds (expect=...): there is nothing to assert")
+        extra = (marks or {}).get(key, ())
+        extra = list(extra) if isinstance(extra, (list, tuple)) else [extra]
+        for goal in spec.thresholds:
+            case = Case(key, goal, spec.xfail.get(goal))
+            cases.append(pytest.param(case, id=case.id, marks=extra))
+    unknown = sorted(set(marks or {}) - set(specs))
+    if unknown:
+        raise InvalidSpec("goal_specs(marks=...)", f"names specs {unknown} that are not among {list(specs)}")
+
+    def test(specguard_goal: Case) -> Any:
+        return specs[specguard_goal.spec]
+
+    marked = pytest.mark.usefixtures(GOAL_FIXTURE)(test)
+    return pytest.mark.goal_spec(expect=None, xfail={}, cases=cases)(marked)  # type: ignore[no-any-return]

@@ -64,7 +64,7 @@ PROBE_STEPS = 256
 
 # Spec fields that change how many runs are trained or how they are counted, not what one run does:
 # they are part of the spec's identity (shared results, baselines) but not of a run's cache key.
-_SPEC_ONLY_FIELDS = frozenset({"quorum", "undecided", "name"})
+_SPEC_ONLY_FIELDS = frozenset({"quorum", "undecided", "name", "xfail"})
 _BUDGET_SPEC_ONLY_FIELDS = frozenset({"min_seeds", "max_seeds"})
 _VERSIONED = ("gymnasium", "stable-baselines3", "torch", "numpy", "scipy", "cloudpickle")
 

@@ -222,7 +222,9 @@ def with_thresholds(spec: Spec, expect: dict[Any, float] | None, goal: object) -
 
     where = f"Spec {spec.label!r}"
     if expect:
-        spec = dataclasses.replace(spec, expect={resolve_goal(spec.tree, g, where): t for g, t in expect.items()})
+        thresholds = {resolve_goal(spec.tree, g, where): t for g, t in expect.items()}
+        xfail = {g: r for g, r in spec.xfail.items() if g in thresholds}  # the decorator's own xfail marks items
+        spec = dataclasses.replace(spec, expect=thresholds, xfail=xfail)
     if not spec.thresholds:
         raise SpecError(f"{where}: no thresholds to check; give expect= to the Spec or to @goal_spec")
     return spec, [resolve_goal(spec.tree, goal, where)] if goal is not None else list(spec.thresholds)

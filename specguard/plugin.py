@@ -18,7 +18,7 @@ from typing import Any
 
 import pytest
 
-from specguard.declare import GOAL_FIXTURE
+from specguard.declare import GOAL_FIXTURE, Case
 
 MARKER = "goal_spec"
 PROPERTY = "specguard"
@@ -273,6 +273,9 @@ def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
     marker = metafunc.definition.get_closest_marker(MARKER)
     if marker is None or GOAL_FIXTURE not in metafunc.fixturenames:
         return
+    if marker.kwargs.get("cases"):  # sg.goal_specs: one item per spec and goal, with the spec's own marks
+        metafunc.parametrize(GOAL_FIXTURE, marker.kwargs["cases"], indirect=True)
+        return
     expect = marker.kwargs.get("expect")
     goals = list(expect) if expect else [None]
     metafunc.parametrize(GOAL_FIXTURE, goals, ids=["spec" if g is None else str(g) for g in goals], indirect=True)
@@ -282,6 +285,9 @@ def _group(item: pytest.Item) -> str:
     """The item's spec: its test without the goal parameter (one training for all its goals)."""
     assert isinstance(item, pytest.Function)
     callspec = getattr(item, "callspec", None)
+    case = callspec.params.get(GOAL_FIXTURE) if callspec is not None else None
+    if isinstance(case, Case):
+        return f"{item.path.name}::{item.originalname}[{case.spec}]"
     ids = list(getattr(callspec, "_idlist", []))
     params = list(callspec.params) if callspec is not None else []
     if callspec is not None and GOAL_FIXTURE in params and len(ids) == len(params):
@@ -300,8 +306,11 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(pytest.mark.skip(reason=SKIP_REASON))
             continue
         item.add_marker(pytest.mark.xdist_group(name=_group(item)))
-        goal = item.callspec.params.get(GOAL_FIXTURE) if hasattr(item, "callspec") else None
-        reasons = marker.kwargs.get("xfail") or {}
+        param = item.callspec.params.get(GOAL_FIXTURE) if hasattr(item, "callspec") else None
+        reasons: dict[Any, str] = marker.kwargs.get("xfail") or {}
+        goal = param
+        if isinstance(param, Case):  # sg.goal_specs: the spec's own xfail
+            goal, reasons = param.goal, ({param.goal: param.xfail} if param.xfail else {})
         if goal is not None and goal in reasons:
             item.add_marker(pytest.mark.xfail(reason=reasons[goal], raises=GoalMissed, strict=False))
 
@@ -383,6 +392,8 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     if not isinstance(spec, Spec):
         pytest.fail(f"{where}: a goal spec must return a specguard.Spec, got {type(spec).__name__}", pytrace=False)
     goal = pyfuncitem.funcargs.get(GOAL_FIXTURE)
+    if isinstance(goal, Case):  # sg.goal_specs: the spec's own thresholds, this item's goal
+        goal = goal.goal
     error: str | None = None
     try:
         spec, paths = with_thresholds(spec, marker.kwargs.get("expect"), goal)

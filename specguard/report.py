@@ -205,7 +205,8 @@ def curves_figure(rows: Sequence[Row]) -> Figure | None:
             if steps:
                 mean = [sum(by_step[s]) / len(by_step[s]) for s in steps]
                 ax.plot(steps, mean, color=colour, linewidth=2.2, label=label(goal), gid=f"{goal}:mean")
-            ax.axhline(thresholds[goal], color=colour, linestyle="--", linewidth=1.0, gid=f"{goal}:threshold")
+            if thresholds[goal] is not None:  # a goal plotted without a threshold (specguard reproduce)
+                ax.axhline(thresholds[goal], color=colour, linestyle="--", linewidth=1.0, gid=f"{goal}:threshold")
             if evals:
                 evaluated = True
                 xs = sorted(evals)

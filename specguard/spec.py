@@ -64,6 +64,11 @@ class Spec:
         baseline: train on the initial env's own reward, termination and
             observation, and evaluate the same goals (the paper's baseline).
         name: a label for reports; defaults to the root's name.
+        xfail: ``{goal: reason}`` for thresholded goals the spec is expected
+            to miss (e.g. a negative result of the paper): pytest reports them
+            XFAIL (XPASS once they pass), ``specguard run`` does not count
+            their miss as a failure. Under anytime verdicts their runs are
+            never cut short: a goal not met keeps its run training.
     """
 
     initial_env: InitialEnv
@@ -80,6 +85,7 @@ class Spec:
     undecided: str = "fail"
     baseline: bool = False
     name: str | None = None
+    xfail: Mapping[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         label = f"Spec {self.label!r}"
@@ -109,6 +115,7 @@ class Spec:
         if self.undecided not in UNDECIDED_OUTCOMES:
             raise InvalidSpec(f"{label}.undecided", f"expected one of {UNDECIDED_OUTCOMES}, got {self.undecided!r}")
         object.__setattr__(self, "expect", self._resolve_thresholds(label))
+        object.__setattr__(self, "xfail", self._resolve_xfail(label))
 
     @property
     def label(self) -> str:
@@ -149,6 +156,20 @@ class Spec:
         """Runs that must meet each threshold."""
         assert self.budget.max_seeds is not None
         return self.quorum if self.quorum is not None else self.budget.max_seeds
+
+    def _resolve_xfail(self, label: str) -> dict[str, str]:
+        if not isinstance(self.xfail, Mapping):
+            raise InvalidSpec(f"{label}.xfail", f"expected {{goal: reason}}, got {self.xfail!r}")
+        resolved: dict[str, str] = {}
+        for key, reason in self.xfail.items():
+            where = f"{label}.xfail[{key!r}]"
+            path = resolve_goal(self.tree, key, where)
+            if path not in self.thresholds:
+                raise InvalidSpec(where, f"expected a goal that expect gives a threshold to: {list(self.thresholds)}")
+            if not isinstance(reason, str) or not reason.strip():
+                raise InvalidSpec(where, f"expected the reason as text, got {reason!r}")
+            resolved[path] = reason
+        return resolved
 
     def _resolve_thresholds(self, label: str) -> dict[str, float]:
         expect: Any = self.expect

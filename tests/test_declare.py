@@ -47,3 +47,52 @@ def test_bad_declarations(kwargs, message):
 
 def _a_test():
     """A function for @goal_spec to decorate (pytest marks only functions that look like tests)."""
+
+
+# -- sg.goal_specs: specs declared once, gated by their own thresholds -------------------------------------------
+
+
+def tiny_specs():
+    from example_specs import pendulum
+
+    budget = sg.Budget(timesteps=10)
+    return {
+        "w": sg.Spec(
+            pendulum.initial_env, pendulum.trees["w"], budget=budget, expect={"pendulum": 0.8, "position": 0.9}
+        ),
+        "b": sg.Spec(
+            pendulum.initial_env,
+            pendulum.trees["b"],
+            budget=budget,
+            expect={"pendulum": 0.8},
+            xfail={"pendulum": "the paper's local optimum"},
+        ),
+    }
+
+
+def test_goal_specs_has_one_case_per_spec_and_goal_with_the_specs_xfail_and_marks():
+    test_x = sg.goal_specs(tiny_specs(), marks={"b": pytest.mark.filterwarnings("ignore")})
+    cases = test_x.pytestmark[-1].kwargs["cases"]
+    assert [c.id for c in cases] == ["w-pendulum", "w-pendulum/position", "b-pendulum"]
+    assert [c.values[0].xfail for c in cases] == [None, None, "the paper's local optimum"]
+    assert [[m.name for m in c.marks] for c in cases] == [[], [], ["filterwarnings"]]
+
+
+@pytest.mark.parametrize(
+    ("specs", "marks", "message"),
+    [
+        ({"x": 3}, None, r"goal_specs\['x'\]: expected a specguard.Spec, got int"),
+        ({}, {"y": pytest.mark.filterwarnings("ignore")}, r"names specs \['y'\] that are not among \[\]"),
+    ],
+)
+def test_goal_specs_rejects_what_it_cannot_gate(specs, marks, message):
+    with pytest.raises(sg.InvalidSpec, match=message):
+        sg.goal_specs(specs, marks=marks)
+
+
+def test_goal_specs_needs_thresholds():
+    from example_specs import pendulum
+
+    spec = sg.Spec(pendulum.initial_env, pendulum.trees["w"], budget=sg.Budget(timesteps=10))
+    with pytest.raises(sg.InvalidSpec, match=r"goal_specs\['w'\]: expected a spec with thresholds"):
+        sg.goal_specs({"w": spec})

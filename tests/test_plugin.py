@@ -381,6 +381,33 @@ def test_a_malformed_decorator_fails_its_item_and_the_other_specs_still_run(pyte
     run(pytester).assert_outcomes(skipped=2)
 
 
+def test_goal_specs_gates_specs_declared_once_by_their_own_thresholds(pytester):
+    write(
+        pytester,
+        """
+        def make():
+            env = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
+            tree = sg.All(sg.Goal("position", x=(0.966, 1.0)), sg.Goal("stabilization", omega=(-0.25, 0.25)), name="p")
+            budget = sg.Budget(timesteps=128, min_seeds=1, eval_episodes=4)
+            return {
+                "tiny": sg.Spec(
+                    env, tree, budget=budget, hyperparameters=TINY, expect={"stabilization": 0.0, "position": 0.95},
+                    xfail={"position": "never within 128 steps"},
+                ),
+            }
+
+
+        test_declared = sg.goal_specs(make())
+        """,
+    )
+    result = run(pytester, "--goal-specs", "--goal-specs-checkpoints=1", "-v")
+    result.assert_outcomes(passed=1, xfailed=1)
+    result.stdout.fnmatch_lines(
+        ["*test_declared?tiny-p/stabilization? PASSED*", "*test_declared?tiny-p/position? XFAIL*never within*"]
+    )
+    assert result.stdout.str().count("seed 0: done") == 1  # both items share one training
+
+
 def test_checkpoints_make_the_budget_a_ceiling(pytester):
     # A threshold of 0 is met at once: judged at the first of 10 checkpoints (step 13 of 128), training stops.
     write(

@@ -71,3 +71,28 @@ def test_scaled_multiplies_the_training_budget_only():
     assert s.scaled(1) is s
     half = s.scaled(0.5)
     assert half.budget.timesteps == 500 and half.budget.min_seeds == 3 and half.tree is s.tree
+
+
+def test_xfail_names_thresholded_goals_and_resolves_them():
+    spec = sg.Spec(
+        pendulum.initial_env,
+        pendulum.trees["b"],
+        budget=sg.Budget(timesteps=10),
+        expect={"pendulum": 0.8, "position": 0.5},
+        xfail={"position": "the paper's local optimum"},
+    )
+    assert spec.xfail == {"pendulum/position": "the paper's local optimum"}
+    with pytest.raises(
+        sg.InvalidSpec, match=r"xfail\['stabilization'\]: expected a goal that expect gives a threshold"
+    ):
+        sg.Spec(
+            pendulum.initial_env,
+            pendulum.trees["b"],
+            budget=sg.Budget(timesteps=10),
+            expect=0.5,
+            xfail={"stabilization": "x"},
+        )
+    with pytest.raises(sg.InvalidSpec, match=r"xfail\['pendulum'\]: expected the reason as text, got 3"):
+        sg.Spec(
+            pendulum.initial_env, pendulum.trees["b"], budget=sg.Budget(timesteps=10), expect=0.5, xfail={"pendulum": 3}
+        )

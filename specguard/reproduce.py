@@ -1,0 +1,234 @@
+"""``specguard reproduce``: every case and variant at a chosen size, a table beside the paper's figures, plots.
+
+Each file given is a case study (e.g. ``example_specs/pendulum.py``): its
+specs are its module-level ``Spec`` objects and dicts of specs (as for
+``specguard run``), and its optional ``PAPER`` dict gives the paper's reported
+figure per spec key. Every spec is trained on ``seeds`` seeds at its whole
+budget times ``budget_scale`` (no anytime verdicts: learning curves need the
+whole budget), through the run cache, so an interrupted reproduction resumes
+where it stopped. Specs train side by side, one process each, ``workers`` at
+a time, so every core given is busy.
+
+The Markdown table has, per case and variant: the root goal's mean success
+over the seeds' evaluation episodes with its interval, the runs whose root
+success reached the spec's threshold out of the seeds, the paper's figure, and
+the budget trained. The plots follow the paper's Figures 4 and 5: one PNG per
+case, one panel per spec, success per goal over training (each seed thin,
+their mean bold), thresholds as dashed lines.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import platform
+import threading
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from specguard.budget import Budget
+from specguard.engine import SpecResult, run_spec
+from specguard.error import SpecError
+from specguard.progress import ProgressEvent
+from specguard.spec import Spec
+from specguard.stats import success_interval
+
+__all__ = ["Case", "Reproduction", "load_case", "reproduce", "write_markdown", "write_plots"]
+
+
+@dataclass(frozen=True)
+class Case:
+    """A case study: its specs by key and the paper's figure per key."""
+
+    name: str
+    specs: dict[str, Spec]
+    paper: dict[str, str]
+
+
+@dataclass
+class Reproduction:
+    """What a reproduction measured: per case, per spec key, the result."""
+
+    cases: list[Case]
+    results: dict[str, dict[str, SpecResult]]
+    seeds: int
+    budget_scale: float
+    command: str
+    date: str
+    machine: str
+
+
+def load_case(path: str) -> Case:
+    """The case study a file defines: its specs (``specguard run``'s rule) and its ``PAPER`` figures.
+
+    Raises:
+        SpecError: the file cannot be imported or defines no specs.
+    """
+    from specguard.cli import import_file, load_objects
+
+    specs = load_objects(path)
+    paper = getattr(import_file(Path(path)), "PAPER", {})
+    if not isinstance(paper, Mapping):
+        raise SpecError(f"{path}: PAPER must be a dict {{spec key: the paper's figure}}, got {type(paper).__name__}")
+    return Case(Path(path).stem, dict(specs), {str(k): str(v) for k, v in paper.items()})
+
+
+def sized(spec: Spec, seeds: int, budget_scale: float) -> Spec:
+    """The spec at the reproduction's size: ``seeds`` runs, the whole (scaled) budget, no quorum to meet early."""
+    scaled = spec.scaled(budget_scale, checkpoints=1)
+    budget = dataclasses.replace(scaled.budget, min_seeds=seeds, max_seeds=seeds)
+    assert isinstance(budget, Budget)
+    return dataclasses.replace(scaled, budget=budget, quorum=None)
+
+
+def reproduce(
+    cases: Sequence[Case],
+    *,
+    seeds: int = 5,
+    budget_scale: float = 1.0,
+    workers: int = 2,
+    cache_dir: str | Path | None = ".specguard/cache",
+    progress: Callable[[ProgressEvent], None] | None = None,
+    command: str = "",
+) -> Reproduction:
+    """Train every spec of every case at ``seeds`` seeds, ``workers`` specs at a time.
+
+    Every spec runs (no stop at the first miss); a spec whose seeds fail keeps
+    its errors in its result.
+    """
+    say = progress or (lambda event: None)
+    lock = threading.Lock()
+
+    def tell(event: ProgressEvent) -> None:
+        with lock:
+            say(event)
+
+    jobs = [(case, key, sized(spec, seeds, budget_scale)) for case in cases for key, spec in case.specs.items()]
+    results: dict[str, dict[str, SpecResult]] = {case.name: {} for case in cases}
+    with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
+        futures = {
+            (case.name, key): pool.submit(run_spec, spec, workers=1, cache_dir=cache_dir, progress=tell)
+            for case, key, spec in jobs
+        }
+        for (name, key), future in futures.items():
+            results[name][key] = future.result()
+    return Reproduction(
+        cases=list(cases),
+        results=results,
+        seeds=seeds,
+        budget_scale=budget_scale,
+        command=command,
+        date=datetime.date.today().isoformat(),
+        machine=machine(workers),
+    )
+
+
+def machine(workers: int) -> str:
+    """The machine in words: CPU, cores, and the workers used."""
+    import os
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return f"{cpu}, {cores} cores, {workers} training processes, {platform.system()} {platform.release()}"
+
+
+def _steps(n: int) -> str:
+    """``128``, ``30k``, ``1.016M``: steps as read in a table."""
+    if n >= 1_000_000:
+        return f"{n / 1_000_000:g}M"
+    return f"{n / 1000:g}k" if n >= 1000 else str(n)
+
+
+def _root_row(case: Case, key: str, result: SpecResult, seeds: int) -> tuple[str, ...]:
+    spec = case.specs[key]
+    path = next(iter(spec.tree.walk()))[0]  # the root comes first
+    k, n = result.success(path) if result.runs else (0, 0)
+    mean = f"{k / n:.0%} ({k}/{n})" if n else "-"
+    interval = "[{:.2f}, {:.2f}]".format(*success_interval(k, n, spec.confidence)) if n else "-"
+    threshold = spec.thresholds.get(path)
+    reached = "-"
+    if threshold is not None:
+        met = sum(1 for r in result.runs if r.successes[path] >= threshold * r.episodes)
+        reached = f"{met}/{seeds} (>= {threshold:g})"
+    if result.errors:
+        reached += f"; {len(result.errors)} seeds failed"
+    budget = "/".join(_steps(s) for s in sorted({r.timesteps for r in result.runs})) or "-"
+    return (key, mean, interval, reached, case.paper.get(key, "-"), budget)
+
+
+def markdown(reproduction: Reproduction, images: Mapping[str, str]) -> str:
+    """``docs/reproduction.md``: the command, machine and date, then a table and a plot per case."""
+    r = reproduction
+    lines = [
+        "# Reproducing the paper's case studies",
+        "",
+        f"Made with `{r.command}` on {r.date}, on {r.machine}.",
+        f"Every spec trained on {r.seeds} seeds at {r.budget_scale:g}x its budget (the whole budget: no anytime "
+        "verdicts), each seed evaluated on its own deterministic episodes (seeds disjoint from training).",
+        "",
+        "Columns: the root goal's success pooled over every seed's evaluation episodes, with its 95% interval; "
+        "the runs whose own root-goal success reached the spec's threshold; the paper's reported figure "
+        "(10 runs at its budgets); the steps each run trained.",
+        "",
+    ]
+    header = ("spec", "root success", "95% interval", "runs reaching the threshold", "paper", "steps per run")
+    for case in r.cases:
+        lines += [f"## {case.name}", ""]
+        rows = [_root_row(case, key, r.results[case.name][key], r.seeds) for key in case.specs]
+        lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+        lines += ["| " + " | ".join(row) + " |" for row in rows]
+        if case.name in images:
+            lines += ["", f"![{case.name}: success per goal over training]({images[case.name]})"]
+        lines.append("")
+    return "\n".join(lines)
+
+
+def rows_for_plots(case: Case, results: Mapping[str, SpecResult]) -> list[dict[str, Any]]:
+    """Report rows (:mod:`specguard.report`) of every goal of every spec of a case, with their curves."""
+    rows = []
+    for key, spec in case.specs.items():
+        result = results[key]
+        if not result.runs:
+            continue
+        for path in result.runs[0].successes:
+            rows.append(
+                {
+                    "group": f"{case.name} ({key})",
+                    "goal": path,
+                    "threshold": spec.thresholds.get(path),
+                    "curves": [run.curve for run in result.runs],
+                    "per_seed": [{"seed": run.seed} for run in result.runs],
+                }
+            )
+    return rows
+
+
+def write_plots(reproduction: Reproduction, folder: Path) -> dict[str, str]:
+    """One PNG per case in ``folder``; returns each case's image path relative to ``folder.parent``."""
+    from specguard.report import plot_curves
+
+    folder.mkdir(parents=True, exist_ok=True)
+    images = {}
+    for case in reproduction.cases:
+        png = folder / f"reproduction-{case.name}.png"
+        if plot_curves(rows_for_plots(case, reproduction.results[case.name]), png):
+            images[case.name] = f"{folder.name}/{png.name}"
+    return images
+
+
+def write_markdown(reproduction: Reproduction, out: Path) -> Path:
+    """Write the plots beside ``out`` (in ``images/``) and the Markdown table to ``out``."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    images = write_plots(reproduction, out.parent / "images")
+    out.write_text(markdown(reproduction, images))
+    return out

@@ -1,0 +1,55 @@
+"""``specguard reproduce``: every spec of case-study files on N seeds, a table beside the paper, plots."""
+
+from __future__ import annotations
+
+import textwrap
+
+import specguard as sg
+from example_specs import pendulum
+from specguard.cli import main
+from specguard.reproduce import sized
+
+CASE = """
+import specguard as sg
+
+initial_env = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
+TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
+budget = sg.Budget(timesteps=128, eval_episodes=4, checkpoints=10)
+tree = sg.All(sg.Goal("position", x=(0.966, 1.0)), sg.Goal("stabilization", omega=(-0.25, 0.25)), name="p")
+specs = {
+    "b": sg.Spec(initial_env, tree, budget=budget, hyperparameters=TINY, expect={"stabilization": 0.0}),
+    "baseline": sg.Spec(initial_env, tree, budget=budget, hyperparameters=TINY, expect=0.5, baseline=True),
+}
+PAPER = {"b": "half the runs"}
+"""
+
+
+def test_sized_trains_every_seed_its_whole_scaled_budget():
+    spec = sg.Spec(
+        pendulum.initial_env, pendulum.trees["w"], budget=sg.Budget(timesteps=1000, checkpoints=10), quorum=1
+    )
+    out = sized(spec, seeds=5, budget_scale=0.5)
+    assert (out.budget.timesteps, out.budget.checkpoints) == (500, 1)
+    assert (out.budget.min_seeds, out.budget.max_seeds, out.required_runs) == (5, 5, 5)
+
+
+def test_reproduce_writes_a_table_beside_the_paper_and_a_plot_per_case(tmp_path, capsys):
+    case = tmp_path / "tiny_case.py"
+    case.write_text(textwrap.dedent(CASE))
+    out = tmp_path / "docs" / "reproduction.md"
+    argv = ["reproduce", str(case), "--seeds", "2", "--workers", "2", "--quiet"]
+    argv += ["--cache-dir", str(tmp_path / "cache"), "--out", str(out)]
+    assert main(argv) == 0
+    text = out.read_text()
+    assert f"Made with `specguard {' '.join(argv)}`" in text
+    assert "| spec | root success | 95% interval | runs reaching the threshold | paper | steps per run |" in text
+    b_row = next(line for line in text.splitlines() if line.startswith("| b |"))
+    # 8 episodes pooled; the root has no threshold in b; 128 steps: the whole budget, no checkpoint stopped it.
+    assert "/8)" in b_row and b_row.endswith("| - | half the runs | 128 |")
+    baseline_row = next(line for line in text.splitlines() if line.startswith("| baseline |"))
+    assert "/2 (>= 0.5)" in baseline_row and baseline_row.split(" | ")[4] == "-"
+    assert (tmp_path / "docs" / "images" / "reproduction-tiny_case.png").stat().st_size > 0
+    assert "![tiny_case: success per goal over training](images/reproduction-tiny_case.png)" in text
+    # Resumable: a second call trains nothing, every run comes from the cache.
+    assert main(argv) == 0
+    assert out.read_text().splitlines()[4:] == text.splitlines()[4:]
