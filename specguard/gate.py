@@ -178,7 +178,15 @@ def check_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalChe
     """The figures and outcome of goal (or safety key) ``path``, which must have a threshold in ``spec``."""
     verdict = result.goals[path]
     per_seed = [
-        {"seed": r.seed, "successes": r.successes[path], "episodes": r.episodes, "verdict": v.value}
+        {
+            "seed": r.seed,
+            "successes": r.successes[path],
+            "episodes": r.episodes,
+            "verdict": v.value,
+            "timesteps": r.timesteps,
+            "met_early": r.met_early,
+            "evaluated": sum(p.get("evaluation_episodes", 0) for p in r.curve) or r.episodes,
+        }
         for r, v in zip(result.runs, verdict.runs)
     ]
     if verdict.verdict is QuorumVerdict.PASSED:

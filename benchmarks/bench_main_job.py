@@ -1,0 +1,87 @@
+"""The main job, measured: ``pytest --goal-specs example_specs`` cold, then warm, on this machine.
+
+Runs README's main job twice in a subprocess with a fresh cache directory:
+cold (every run trained) and warm (every run from the cache). Prints, per spec,
+the steps trained per seed (and whether training stopped at a checkpoint with
+every threshold met), the evaluation episodes spent (interim checkpoints plus
+the final evaluation) and the training time; then the totals against the
+targets: at most 3 million environment steps trained in all, at most 15
+minutes cold on 2 cores, under 10 s warm.
+
+Exits with the main job's own exit status when it fails (so CI sees a failing
+main job); time and step figures are printed, never asserted (machines are
+shared and noisy).
+
+Usage:
+    python benchmarks/bench_main_job.py [-- extra pytest arguments]
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parent.parent
+STEPS_TARGET = 3_000_000
+COLD_TARGET_S = 15 * 60
+WARM_TARGET_S = 10.0
+
+
+def main_job(tmp: Path, name: str, extra: list[str]) -> tuple[int, float, list[dict[str, Any]]]:
+    """Run the main job; returns its exit status, wall time and report rows."""
+    report = tmp / name
+    command = [sys.executable, "-m", "pytest", "--goal-specs", "example_specs", "-p", "no:cacheprovider", "-q"]
+    command += [f"--goal-specs-cache-dir={tmp / 'cache'}", f"--goal-specs-report={report}", *extra]
+    start = time.perf_counter()
+    status = subprocess.run(command, cwd=ROOT, env={**os.environ, "PYTHONHASHSEED": "0"}).returncode
+    wall = time.perf_counter() - start
+    data = report / "goal-specs.json"
+    rows = json.loads(data.read_text())["goals"] if data.exists() else []
+    return status, wall, rows
+
+
+def per_spec(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Per spec (its first row: every goal row of a spec carries the same runs)."""
+    specs: dict[str, dict[str, Any]] = {}
+    for row in rows:
+        specs.setdefault(row["group"], row)
+    return specs
+
+
+def main() -> int:
+    extra = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
+    with tempfile.TemporaryDirectory() as tmp:
+        cold_status, cold, rows = main_job(Path(tmp), "cold", extra)
+        warm_status, warm, _ = main_job(Path(tmp), "warm", extra)
+    specs = per_spec(rows)
+    print(f"\nmain job on {os.cpu_count()} cores: cold {cold:.0f} s (exit {cold_status}), warm {warm:.1f} s")
+    print(f"{'spec':<55} {'steps per seed':<28} {'eval episodes':>13} {'training':>9}")
+    totals: dict[str, float] = defaultdict(float)
+    for group, row in specs.items():
+        seeds = row["per_seed"]
+        steps = ", ".join(f"{s['timesteps']}{'*' if s['met_early'] else ''}" for s in seeds)
+        evaluated = sum(s["evaluated"] for s in seeds)
+        totals["steps"] += sum(s["timesteps"] for s in seeds)
+        totals["evaluated"] += evaluated
+        totals["train"] += row["train_seconds"]
+        print(f"{group.split('::', 1)[-1]:<55} {steps:<28} {evaluated:>13} {row['train_seconds']:>8.0f}s")
+    print("(* training stopped at a checkpoint: every threshold met)")
+    print(
+        f"total: {totals['steps'] / 1e6:.2f}M steps trained (target <= {STEPS_TARGET / 1e6:g}M: "
+        f"{totals['steps'] / STEPS_TARGET:.2f}x), {totals['evaluated']:.0f} evaluation episodes, "
+        f"{totals['train']:.0f} s of training over all seeds"
+    )
+    print(f"cold wall time {cold:.0f} s (target <= {COLD_TARGET_S} s on 2 cores: {cold / COLD_TARGET_S:.2f}x)")
+    print(f"warm wall time {warm:.1f} s (target < {WARM_TARGET_S:g} s: {warm / WARM_TARGET_S:.2f}x)")
+    return cold_status or warm_status
+
+
+if __name__ == "__main__":
+    sys.exit(main())
