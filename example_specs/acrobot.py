@@ -46,12 +46,15 @@ def height_distance(s):  # type: ignore[no-untyped-def]
 
 # -- the specs, one refinement at a time (the paper's Figure 4 row; SPEC.md section 5) -----------------------
 #
-# Budget: rl-zoo's PPO for Acrobot (16 envs), at most 150k steps per run; under anytime verdicts a run
-# stops at the first tenth of its budget where every threshold is met. Measured figures are 2 seeds x 30
-# deterministic evaluation episodes on the 2-core development machine.
+# Budget: rl-zoo's PPO for Acrobot (16 envs, observations and rewards normalised by VecNormalize), at
+# most 150k steps per run; under anytime verdicts a run stops at the first tenth of its budget where every
+# threshold is met. Measured figures are 2 seeds x 30 deterministic evaluation episodes on the 2-core
+# development machine. Without rl-zoo's normalisation, (c) reached only 105/120 (88%) in seed 0 at 150k:
+# too close to its threshold of 0.8 to be judged met once every look is counted; with it both seeds
+# reach the goal in 30/30 episodes at 15k and 30k steps.
 ZOO_PPO: dict[str, object] = {"n_steps": 256, "gae_lambda": 0.94, "n_epochs": 4, "ent_coef": 0.0}
 BUDGET = sg.Budget(timesteps=150_000, min_seeds=2, eval_episodes=30)
-COMMON: dict[str, Any] = dict(budget=BUDGET, hyperparameters=ZOO_PPO, n_envs=16)
+COMMON: dict[str, Any] = dict(budget=BUDGET, hyperparameters=ZOO_PPO, n_envs=16, normalize=True)
 
 height = sg.Goal("height", height=(1.0, 3.0))
 trees: dict[str, sg.Node] = {}

@@ -54,16 +54,11 @@ specs["b"] = sg.Spec(
 )
 
 # (c) (b) with a distance to the top speed: shaping towards building momentum.
-# Paper: reached in about 6 of 10 runs. Measured: one seed 100%, one 0% at 50k.
+# Paper: reached in about 6 of 10 runs. Measured: at the end of 50k steps one seed 100%, one 0% (its
+# policy reaches the flag early, then unlearns it); judged at checkpoints (anytime verdicts) both seeds
+# meet the goal in 30/30 episodes, at 30k and 5k steps, where their training stops.
 trees["c"] = sg.All(position, velocity.annotate(sg.Distance(velocity_distance, scale=0.14)), name="mountain_car")
-specs["c"] = sg.Spec(
-    initial_env,
-    trees["c"],
-    expect={"mountain_car": 0.8},
-    xfail={"mountain_car": "paper: reached in about 6 of 10 runs"},
-    name="mountain_car-c",
-    **COMMON,
-)
+specs["c"] = sg.Spec(initial_env, trees["c"], expect={"mountain_car": 0.8}, name="mountain_car-c", **COMMON)
 
 # The baseline: MountainCarContinuous-v0's own reward (+100 at the flag, minus the energy spent).
 # Paper: 4 of 10 runs. Measured: 100% in both seeds at 50k.

@@ -382,6 +382,23 @@ class _Runs:
         )
 
 
+def _refuse_in_spawned_import() -> None:
+    """Fail fast when a worker process re-imports the user's script and reaches its ``run_spec`` call.
+
+    Workers are spawned: each imports the main script again (as ``__mp_main__``).
+    A script calling ``run_spec`` outside ``if __name__ == "__main__":`` would
+    have every worker start its own run and wait on the parent's cache lock forever.
+    """
+    import multiprocessing
+
+    # The flag multiprocessing's own check for this mistake reads (spawn._check_not_importing_main).
+    if getattr(multiprocessing.current_process(), "_inheriting", False):
+        raise SpecError(
+            "run_spec was called while a worker process imported your script",
+            hint='call it under `if __name__ == "__main__":` (worker processes import the script again)',
+        )
+
+
 def run_spec(
     spec: Spec,
     *,
@@ -419,6 +436,7 @@ def run_spec(
         SpecError: the spec is invalid (also when a worker finds it so, e.g.
             rejected hyperparameters), or cannot be fingerprinted for the cache.
     """
+    _refuse_in_spawned_import()
     say = progress or (lambda event: None)
     n_workers = resolve_workers(workers)
     cache = Cache(Path(cache_dir)) if cache_dir is not None else None

@@ -325,3 +325,27 @@ def test_a_safety_threshold_is_asserted_end_to_end(tmp_path):
     assert result.passed and result.goals["pendulum:never"].runs == ["met", "met"]
     assert result.success("pendulum:never") == (8, 8)
     assert result.table().splitlines()[-1].split()[:4] == ["pendulum:never", "(safe)", "100%", "(8/8)"]
+
+
+def test_a_script_without_a_main_guard_fails_fast_instead_of_hanging(tmp_path):
+    import subprocess
+    import sys
+    import textwrap
+
+    script = tmp_path / "no_guard.py"
+    script.write_text(
+        textwrap.dedent(
+            f"""
+            import specguard as sg
+            env = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
+            budget = sg.Budget(timesteps=64, min_seeds=1, eval_episodes=1)
+            tiny = {{"n_steps": 64, "batch_size": 32, "n_epochs": 1}}
+            spec = sg.Spec(env, sg.Goal("up", x=(0.9, 1.0)), budget=budget, hyperparameters=tiny, expect=0.5)
+            result = sg.run_spec(spec, workers=1, cache_dir={str(tmp_path / "cache")!r}, progress=None)
+            print("errors:", result.errors)
+            """
+        )
+    )
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    assert 'if __name__ == "__main__":' in done.stderr
+    assert "errors: {0:" in done.stdout  # the run failed its seed, reported; nothing waited forever
