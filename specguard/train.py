@@ -17,7 +17,6 @@ verdicts, intervals, caches and baselines treat both alike.
 
 from __future__ import annotations
 
-import sys
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
@@ -312,14 +311,13 @@ def train_run(
     try:
         model.learn(total_timesteps=budget.timesteps, callback=Callback())
     except SpecError as e:
+        eval_env.close()
         raise TrainingError(f"{label}, seed {seed}, training step {model.num_timesteps}: {e}") from e
     except Exception as e:
+        eval_env.close()
         raise TrainingError(
             f"{label}, seed {seed}, training step {model.num_timesteps}: the environment raised {type(e).__name__}: {e}"
         ) from e
-    finally:
-        if sys.exc_info()[0] is not None:
-            eval_env.close()
     train_seconds = time.perf_counter() - start
 
     if normalizer is not None:

@@ -369,3 +369,14 @@ def test_a_user_operator_dataclass_is_keyed_by_its_description_and_its_code():
 
     changed = Changed(1, sg.Goal("p", x=(0, 1)), sg.Goal("q", y=(0, 1)), name="r")
     assert digest(changed) != digest(tree(1))  # same description, other code
+
+
+def test_anytime_checkpoints_and_thresholds_are_part_of_a_runs_key_but_xfail_is_not():
+    # Under anytime verdicts a run's result depends on its checkpoints and on its thresholds (it stops once met).
+    spec = sg.Spec(pendulum.initial_env, pendulum.trees["w"], budget=sg.Budget(timesteps=1000), expect=0.5)
+    anytime = spec.scaled(1, checkpoints=10)
+    stricter = dataclasses.replace(anytime, expect={"pendulum": 0.6})
+    expected_miss = dataclasses.replace(anytime, xfail={"pendulum": "why"})
+    keys = [fingerprint_spec(s) for s in (spec, anytime, stricter, expected_miss)]
+    assert len({k.run_key(0) for k in keys[:3]}) == 3
+    assert keys[3].run_key(0) == keys[1].run_key(0) and keys[3].spec_key != keys[1].spec_key
