@@ -243,6 +243,14 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--seeds", type=_positive, default=5, help="seeds per spec (default: 5)")
     rep.add_argument("--budget-scale", type=_scale, default=1.0, help="multiply training timesteps, e.g. 0.5")
     rep.add_argument(
+        "--case-scale",
+        type=_case_scale,
+        action="append",
+        default=[],
+        metavar="CASE=X",
+        help="another budget scale for one case (its file's stem), e.g. lunar_lander=0.5; repeatable",
+    )
+    rep.add_argument(
         "--workers", type=_workers, default="auto", help="specs trained at once, one process each (default: auto)"
     )
     rep.add_argument("--cache-dir", default=".specguard/cache", help="run cache, to resume (default: .specguard/cache)")
@@ -261,6 +269,13 @@ def _positive(text: str) -> int:
     return value
 
 
+def _case_scale(text: str) -> tuple[str, float]:
+    name, sep, value = text.partition("=")
+    if not sep or not name:
+        raise argparse.ArgumentTypeError(f"expected CASE=X, e.g. lunar_lander=0.5, got {text!r}")
+    return name, _scale(value)
+
+
 def _reproduce(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from specguard.engine import resolve_workers
     from specguard.progress import print_event
@@ -272,6 +287,7 @@ def _reproduce(args: argparse.Namespace, argv: Sequence[str]) -> int:
         cases,
         seeds=args.seeds,
         budget_scale=args.budget_scale,
+        case_scales=dict(args.case_scale),
         workers=resolve_workers(args.workers),
         cache_dir=args.cache_dir,
         progress=None if args.quiet else print_event,

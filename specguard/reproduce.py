@@ -55,7 +55,7 @@ class Reproduction:
     cases: list[Case]
     results: dict[str, dict[str, SpecResult]]
     seeds: int
-    budget_scale: float
+    scales: dict[str, float]  # per case: the factor its budgets were trained at
     command: str
     date: str
     machine: str
@@ -89,6 +89,7 @@ def reproduce(
     *,
     seeds: int = 5,
     budget_scale: float = 1.0,
+    case_scales: Mapping[str, float] | None = None,
     workers: int = 2,
     cache_dir: str | Path | None = ".specguard/cache",
     progress: Callable[[ProgressEvent], None] | None = None,
@@ -96,9 +97,18 @@ def reproduce(
 ) -> Reproduction:
     """Train every spec of every case at ``seeds`` seeds, ``workers`` specs at a time.
 
-    Every spec runs (no stop at the first miss); a spec whose seeds fail keeps
-    its errors in its result.
+    ``case_scales`` (``{case name: factor}``) replaces ``budget_scale`` for
+    some cases, e.g. a long case at half its budget. Every spec runs (no stop
+    at the first miss); a spec whose seeds fail keeps its errors in its result.
+
+    Raises:
+        SpecError: ``case_scales`` names a case that is not given.
     """
+    names = [case.name for case in cases]
+    unknown = sorted(set(case_scales or {}) - set(names))
+    if unknown:
+        raise SpecError(f"case scale: no case named {', '.join(map(repr, unknown))}; the cases are {names}")
+    scales = {name: float((case_scales or {}).get(name, budget_scale)) for name in names}
     say = progress or (lambda event: None)
     lock = threading.Lock()
 
@@ -106,7 +116,7 @@ def reproduce(
         with lock:
             say(event)
 
-    jobs = [(case, key, sized(spec, seeds, budget_scale)) for case in cases for key, spec in case.specs.items()]
+    jobs = [(case, key, sized(spec, seeds, scales[case.name])) for case in cases for key, spec in case.specs.items()]
     results: dict[str, dict[str, SpecResult]] = {case.name: {} for case in cases}
     with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
         futures = {
@@ -119,7 +129,7 @@ def reproduce(
         cases=list(cases),
         results=results,
         seeds=seeds,
-        budget_scale=budget_scale,
+        scales=scales,
         command=command,
         date=datetime.date.today().isoformat(),
         machine=machine(workers),
@@ -173,8 +183,9 @@ def markdown(reproduction: Reproduction, images: Mapping[str, str]) -> str:
         "# Reproducing the paper's case studies",
         "",
         f"Made with `{r.command}` on {r.date}, on {r.machine}.",
-        f"Every spec trained on {r.seeds} seeds at {r.budget_scale:g}x its budget (the whole budget: no anytime "
-        "verdicts), each seed evaluated on its own deterministic episodes (seeds disjoint from training).",
+        f"Every spec trained on {r.seeds} seeds at its whole budget (no anytime verdicts: the curves need every "
+        "step), times its case's budget scale, each seed evaluated on its own deterministic episodes (seeds "
+        "disjoint from training).",
         "",
         "Columns: the root goal's success pooled over every seed's evaluation episodes, with its 95% interval; "
         "the runs whose own root-goal success reached the spec's threshold; the paper's reported figure "
@@ -183,7 +194,7 @@ def markdown(reproduction: Reproduction, images: Mapping[str, str]) -> str:
     ]
     header = ("spec", "root success", "95% interval", "runs reaching the threshold", "paper", "steps per run")
     for case in r.cases:
-        lines += [f"## {case.name}", ""]
+        lines += [f"## {case.name}", "", f"Budget scale {r.scales[case.name]:g}x.", ""]
         rows = [_root_row(case, key, r.results[case.name][key], r.seeds) for key in case.specs]
         lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
         lines += ["| " + " | ".join(row) + " |" for row in rows]

@@ -50,6 +50,25 @@ def test_reproduce_writes_a_table_beside_the_paper_and_a_plot_per_case(tmp_path,
     assert "/2 (>= 0.5)" in baseline_row and baseline_row.split(" | ")[4] == "-"
     assert (tmp_path / "docs" / "images" / "reproduction-tiny_case.png").stat().st_size > 0
     assert "![tiny_case: success per goal over training](images/reproduction-tiny_case.png)" in text
+    assert "Budget scale 1x." in text
     # Resumable: a second call trains nothing, every run comes from the cache.
     assert main(argv) == 0
     assert out.read_text().splitlines()[4:] == text.splitlines()[4:]
+
+
+def test_a_case_scale_names_a_given_case(tmp_path, capsys):
+    case = tmp_path / "tiny_case.py"
+    case.write_text(textwrap.dedent(CASE))
+    argv = ["reproduce", str(case), "--case-scale", "lunar=0.5", "--out", str(tmp_path / "r.md")]
+    assert main(argv) == 2
+    assert "case scale: no case named 'lunar'; the cases are ['tiny_case']" in capsys.readouterr().err
+
+
+def test_a_case_scale_replaces_the_budget_scale_for_its_case(tmp_path):
+    case = tmp_path / "tiny_case.py"
+    case.write_text(textwrap.dedent(CASE))
+    out = tmp_path / "r.md"
+    argv = ["reproduce", str(case), "--seeds", "1", "--case-scale", "tiny_case=0.5", "--quiet", "--out", str(out)]
+    assert main([*argv, "--cache-dir", str(tmp_path / "cache")]) == 0
+    text = out.read_text()
+    assert "Budget scale 0.5x." in text and text.count("| 64 |") == 2  # 128 steps halved, for both specs
