@@ -68,7 +68,12 @@ def _budget(spec: Spec) -> str:
         )
     seeds = f"{b.min_seeds} seeds" + (f" (up to {b.max_seeds})" if b.max_seeds != b.min_seeds else "")
     cap = f", wall clock <= {b.wall_clock_s:g}s" if b.wall_clock_s is not None else ""
-    return f"budget: {steps}, {seeds}, {b.eval_episodes} eval episodes (up to {b.max_eval_episodes}){cap}"
+    anytime = (
+        f"; judged at {b.checkpoints} checkpoints, training stops once every threshold is met"
+        if b.checkpoints > 1
+        else ""
+    )
+    return f"budget: {steps}, {seeds}, {b.eval_episodes} eval episodes (up to {b.max_eval_episodes}){cap}{anytime}"
 
 
 def render_spec(spec: Spec, name: str | None = None) -> str:

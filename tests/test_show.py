@@ -44,7 +44,7 @@ EXPECTED = [
     "  theta                            [-0.418879, 0.418879]",
     "  counter balance/upright:no_spin  [0, 3]",
     "budget: 2048 timesteps per seed (512 asked, rounded up to whole PPO rollouts of 2048 = 2048 steps x 1 env), "
-    "2 seeds, 30 eval episodes (up to 120)",
+    "2 seeds, 30 eval episodes (up to 120); judged at 10 checkpoints, training stops once every threshold is met",
     "expect: balance >= 0.8, balance/upright >= 0.9",
 ]
 
@@ -102,8 +102,11 @@ def test_render_spec_is_the_one_rendering():
     spec = sg.Spec(cartpole, sg.Goal("centre", x=(-0.5, 0.5)), budget=sg.Budget(timesteps=4096), n_envs=2)
     text = render_spec(spec, "mine")
     assert text.splitlines()[0] == "== mine"
-    assert "budget: 4096 timesteps per seed (2 envs), 2 seeds" in text
+    assert "budget: 4096 timesteps per seed (2 envs), 2 seeds, 30 eval episodes (up to 120)" in text.splitlines()
     assert "observation: 4 components" in text
+    anytime = render_spec(spec.scaled(1, checkpoints=4))
+    budget = next(line for line in anytime.splitlines() if line.startswith("budget:"))
+    assert budget.endswith("; judged at 4 checkpoints, training stops once every threshold is met")
 
 
 @pytest.mark.parametrize(
