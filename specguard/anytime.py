@@ -75,13 +75,9 @@ def parse_checkpoints(text: str | int) -> int:
     Raises:
         ValueError: anything else, saying what was expected.
     """
-    try:
-        value = int(str(text).strip())
-    except ValueError:
-        value = 0
-    if value < 1 or str(text).strip() != str(value):
-        raise ValueError(f"expected an integer >= 1 (1: train every run's whole budget), got {str(text)!r}")
-    return value
+    from specguard.validation import parse_count
+
+    return parse_count(text, "1: train every run's whole budget")
 
 
 def evaluation_stages(eval_episodes: int, max_eval_episodes: int) -> list[int]:

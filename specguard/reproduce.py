@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
+import os
 import platform
 import threading
 from collections.abc import Callable, Mapping, Sequence
@@ -138,8 +139,6 @@ def reproduce(
 
 def machine(workers: int) -> str:
     """The machine in words: CPU, cores, and the workers used."""
-    import os
-
     cpu = platform.processor() or platform.machine()
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():

@@ -84,6 +84,21 @@ def check_positive(where: str, argument: str, value: object, meaning: str = "") 
     return float(value)
 
 
+def parse_count(text: str | int, meaning: str = "") -> int:
+    """An integer ``>= 1`` from an option's text; ``meaning`` says what it is for in the message.
+
+    Raises:
+        ValueError: anything else, saying what was expected.
+    """
+    try:
+        value = int(str(text).strip())
+    except ValueError:
+        value = 0
+    if value < 1 or str(text).strip() != str(value):
+        raise ValueError(f"expected an integer >= 1{f' ({meaning})' if meaning else ''}, got {str(text)!r}")
+    return value
+
+
 def check_budget(where: str, budget: object) -> int:
     """An integer ``>= 1``: the violations allowed per episode."""
     if isinstance(budget, bool) or not isinstance(budget, Integral) or budget < 1:
