@@ -28,9 +28,11 @@ waits and then reads its entry.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import hmac
 import json
+import math
 import os
 import shutil
 import tempfile
@@ -56,7 +58,7 @@ __all__ = [
 ]
 
 SECRET_ENV = "SPECGUARD_CACHE_KEY"
-FORMAT = 3  # 3: runs record met_early (anytime verdicts)
+FORMAT = 4  # 3: runs record met_early (anytime verdicts); 4: adapted weights
 MODEL = "model.zip"
 NORMALIZER = "vecnormalize.pkl"
 RESULT = "result.json"
@@ -131,17 +133,7 @@ def _is_int(v: Any) -> bool:
 def _check_result(result: Any, seed: int, paths: Collection[str]) -> None:
     if not isinstance(result, dict):
         raise ValueError("result is not an object")
-    expected = {
-        "spec",
-        "seed",
-        "timesteps",
-        "episodes",
-        "successes",
-        "train_seconds",
-        "stopped_early",
-        "curve",
-        "met_early",
-    }
+    expected = {f.name for f in dataclasses.fields(RunResult)}
     if set(result) != expected:
         raise ValueError(f"result fields {sorted(result)} are not {sorted(expected)}")
     if result["seed"] != seed or not _is_int(result["seed"]):
@@ -153,6 +145,11 @@ def _check_result(result: Any, seed: int, paths: Collection[str]) -> None:
     episodes = result["episodes"]
     if not _is_int(episodes) or episodes < 1:
         raise ValueError(f"episodes {episodes!r} is not an integer >= 1")
+    weights = result["weights"]
+    if not isinstance(weights, dict) or not all(
+        isinstance(ws, list) and all(isinstance(w, float) and math.isfinite(w) for w in ws) for ws in weights.values()
+    ):
+        raise ValueError("weights is not an object of lists of finite numbers")
     successes = result["successes"]
     if not isinstance(successes, dict):
         raise ValueError("successes is not an object")

@@ -28,7 +28,7 @@ generated Python functions (:attr:`CompiledTree.source`, see
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, NoReturn
 
@@ -293,14 +293,25 @@ def _is_fast(node: Node, box: Box | None) -> bool:
     )
 
 
-def compile_tree(tree: Node, features: Sequence[str]) -> CompiledTree:
+def compile_tree(
+    tree: Node, features: Sequence[str], *, weights: Mapping[str, Sequence[float]] | None = None
+) -> CompiledTree:
     """Validate ``tree`` against ``features`` and flatten it.
+
+    Args:
+        tree: the goal tree.
+        features: the feature names.
+        weights: per path of a node that adapts its weights
+            (:attr:`Node.adapts_weights`), one weight per child replacing the
+            node's own (:mod:`specguard.auto_weights`).
 
     Raises:
         UnknownFeature: a goal names a feature not in ``features``.
-        InvalidSpec: a weight or scale makes a coefficient overflow.
+        InvalidSpec: a weight or scale makes a coefficient overflow, or
+            ``weights`` names a path that does not adapt its weights.
     """
     features = tuple(features)
+    overrides = _check_overrides(tree, weights or {})
     index = {f: i for i, f in enumerate(features)}
     paths: list[str] = []
     nodes: list[Node] = []
@@ -323,7 +334,8 @@ def compile_tree(tree: Node, features: Sequence[str]) -> CompiledTree:
         slot_start.append(-1)
         core_w, ann_w = component_weights(node)
         kid_boxes = []
-        for child, w in zip(node.children, node.child_weights()):
+        kid_weights = overrides[path] if path in overrides else node.child_weights()
+        for child, w in zip(node.children, kid_weights):
             # A child's term of role r is scaled by this node's core weight and the child's weight for r.
             passed = ChildWeights(*(c * core_w * x for c, x in zip((coef.core, coef.shaping, coef.safety), w)))
             k, child_box = visit(child, f"{path}{PATH_SEPARATOR}{child.name}", passed)
@@ -366,6 +378,29 @@ def compile_tree(tree: Node, features: Sequence[str]) -> CompiledTree:
         tuple(slots),
         tuple(slot_start),
     )
+
+
+def _check_overrides(tree: Node, weights: Mapping[str, Sequence[float]]) -> dict[str, tuple[ChildWeights, ...]]:
+    """``weights`` as each adapting node's :class:`ChildWeights`, checked against the tree."""
+    nodes = dict(tree.walk())
+    out = {}
+    for path, ws in weights.items():
+        node = nodes.get(path)
+        if node is None or not node.adapts_weights:
+            adapting = [p for p, n in nodes.items() if n.adapts_weights]
+            raise InvalidSpec(
+                f"weights[{path!r}]",
+                f"expected the path of a node with weights='auto', got {path!r}; "
+                f"such nodes: {', '.join(map(repr, adapting)) or 'none'}",
+            )
+        values = tuple(float(w) for w in ws)
+        if len(values) != len(node.children) or not all(math.isfinite(w) and w >= 0 for w in values):
+            raise InvalidSpec(
+                f"weights[{path!r}]",
+                f"expected {len(node.children)} finite weights >= 0 (one per child), got {values!r}",
+            )
+        out[path] = tuple(ChildWeights.same(w) for w in values)
+    return out
 
 
 def _annotation_term(key: str, a: Annotation, coef: float, slots: list[tuple[str, Slot]], owner: int) -> _Term:

@@ -23,7 +23,7 @@ Example:
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, Literal, SupportsFloat
 
 import gymnasium as gym
@@ -143,6 +143,30 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
             self.action_space = action_space
         # The base observation can be handed on untouched when nothing is added or converted.
         self._passthrough = state is None and not slots and base_space.dtype == np.float32
+        self._evaluator_name = evaluator
+        self._pending: Any = None  # (weights, CompiledTree) adapted, in force from the next reset
+        self.adapted_weights: dict[str, tuple[float, ...]] = {}
+        """The adapted weights in force this episode (:meth:`set_weights`); empty while the tree's own."""
+
+    def set_weights(self, weights: Mapping[str, Sequence[float]]) -> None:
+        """Adapt the weights of the ``All(weights="auto")`` nodes, from the next episode on.
+
+        Args:
+            weights: per path of a node with ``weights="auto"``, one weight per
+                child (:mod:`specguard.auto_weights`).
+
+        Raises:
+            InvalidSpec: a path without ``weights="auto"``, a wrong count of
+                weights, or the ``"reference"`` evaluator (its weights are the tree's).
+        """
+        if self._evaluator_name != "flat":
+            raise InvalidSpec(
+                "evaluator", "adapted weights need the 'flat' evaluator; 'reference' is the tree as written"
+            )
+        # Compiled now, so a bad path fails at the call; swapped in at reset, as shaping telescopes
+        # and enter/exit rewards cancel only under weights constant over an episode (SPEC.md section 6).
+        adapted = {path: tuple(float(w) for w in ws) for path, ws in weights.items()}
+        self._pending = adapted, compile_tree(self.tree, self.features, weights=adapted)
 
     # -- mapping ---------------------------------------------------------------
 
@@ -156,6 +180,9 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
+        if self._pending is not None:
+            (self.adapted_weights, self.compiled), self._pending = self._pending, None
+            self.evaluator = self.compiled.evaluator()
         obs, info = self.env.reset(seed=seed, options=options)
         f = _features(obs, self._state, self.features, self.tree.name)
         members = self.evaluator.reset(f)

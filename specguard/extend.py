@@ -255,6 +255,16 @@ class Node:
         n = len(self.children)
         return (ChildWeights.same(1.0 / n),) * n if n else ()
 
+    @property
+    def adapts_weights(self) -> bool:
+        """Whether training may replace :meth:`child_weights` by one adapted weight per child.
+
+        ``All(weights="auto")`` does (:mod:`specguard.auto_weights`); the tree
+        as declared keeps its own weights, so an env built from it alone is
+        unchanged.
+        """
+        return False
+
     # -- goal ----------------------------------------------------------------
 
     def box(self, child_boxes: Sequence[Box | None]) -> Box | None:

@@ -186,6 +186,7 @@ def check_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalChe
             "timesteps": r.timesteps,
             "met_early": r.met_early,
             "evaluated": sum(p.get("evaluation_episodes", 0) for p in r.curve) or r.episodes,
+            **({"weights": r.weights} if r.weights else {}),
         }
         for r, v in zip(result.runs, verdict.runs)
     ]

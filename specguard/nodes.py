@@ -23,7 +23,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from numbers import Real
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, ClassVar, Literal
 
 from specguard.annotations import Constraint, Distance
 from specguard.error import InvalidSpec
@@ -36,6 +36,8 @@ if TYPE_CHECKING:
 __all__ = ["All", "Annotation", "Constraint", "Distance", "Goal", "Node", "component_weights"]
 
 # Re-exported: modules written before the extension API import these from here.
+AUTO: Literal["auto"] = "auto"  # All(weights=AUTO): adapted during training (specguard.auto_weights)
+
 _REEXPORTED = (ANNOTATION_SEPARATOR, PATH_SEPARATOR, Annotation, Constraint, Distance, component_weights)
 
 
@@ -169,27 +171,43 @@ class All(Node):
     are given (they need not sum to 1); its termination is the union of the
     children's (SPEC.md section 2).
 
+    ``weights="auto"`` starts at ``1/N`` and lets training adapt the weights
+    to the children's observed success (:mod:`specguard.auto_weights`): the
+    env built from the tree alone, as evaluation uses it, keeps ``1/N``.
+
     Args:
         *children: the subgoal nodes, at least one, with distinct names.
         name: the node's name.
-        weights: one weight ``>= 0`` per child, or ``None`` for ``1/N``.
+        weights: one weight ``>= 0`` per child, ``None`` for ``1/N``, or
+            ``"auto"`` to adapt them during training.
+
+    Example:
+        >>> a, b = Goal("a", x=(0, 1)), Goal("b", y=(0, 1))
+        >>> All(a, b, name="ab", weights="auto").weights_in_force()
+        (0.5, 0.5)
     """
 
     kind: ClassVar[str] = "All"
     own_reward: ClassVar[bool] = False
     name: str
     nodes: tuple[Node, ...]
-    weights: tuple[float, ...] | None
+    weights: tuple[float, ...] | Literal["auto"] | None
     annotations: tuple[Annotation, ...]
 
-    def __init__(self, *children: Node, name: str, weights: Sequence[float] | None = None) -> None:
+    def __init__(self, *children: Node, name: str, weights: Sequence[float] | Literal["auto"] | None = None) -> None:
         name = check_name("All", name)
         where = f"All {name!r}"
         children = check_children("All", name, children)
-        parsed: tuple[float, ...] | None = None
-        if weights is not None:
+        parsed: tuple[float, ...] | Literal["auto"] | None = None
+        if isinstance(weights, str) and weights == AUTO:
+            parsed = AUTO
+        elif weights is not None:
             if isinstance(weights, (str, bytes)) or not isinstance(weights, Sequence):
-                raise InvalidSpec(where, f"expected weights to be a sequence of numbers, got {weights!r}")
+                raise InvalidSpec(
+                    where,
+                    f"expected weights to be a sequence of numbers, None or 'auto', got {weights!r}",
+                    hint="weights='auto' adapts them during training; omit weights= for 1/N each",
+                )
             if len(weights) != len(children):
                 raise InvalidSpec(
                     where,
@@ -215,10 +233,14 @@ class All(Node):
     def children(self) -> tuple[Node, ...]:
         return self.nodes
 
+    @property
+    def adapts_weights(self) -> bool:
+        return self.weights == AUTO
+
     def weights_in_force(self) -> tuple[float, ...]:
-        """The weights in force: the user's, or ``1/N`` each."""
+        """The weights in force: the user's, or ``1/N`` each (also where ``"auto"`` starts)."""
         n = len(self.nodes)
-        return self.weights if self.weights is not None else (1.0 / n,) * n
+        return self.weights if isinstance(self.weights, tuple) else (1.0 / n,) * n
 
     # -- the extension protocol (SPEC.md "AND-operator") ----------------------
 
@@ -258,8 +280,9 @@ class All(Node):
         return refinements(leaf) if isinstance(leaf, Goal) else None
 
     def describe(self) -> str:
-        weights = "" if self.weights is None else f" weights=({', '.join(_fmt(w) for w in self.weights)})"
-        return f"All {self.name!r}{weights}"
+        if isinstance(self.weights, tuple):
+            return f"All {self.name!r} weights=({', '.join(_fmt(w) for w in self.weights)})"
+        return f"All {self.name!r}" + (" weights=auto" if self.adapts_weights else "")
 
     def __repr__(self) -> str:
         kids = ", ".join(map(repr, self.nodes))

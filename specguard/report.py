@@ -119,6 +119,10 @@ def markdown(rows: Sequence[Row], *, plot: str | None = None, gifs: Mapping[str,
         for r in failing:
             safe = " (safety rate)" if is_safety_key(r["goal"]) else ""
             lines.append(f"- `{r['group']}` / `{r['goal']}`{safe}" + (f": {r['hint']}" if r.get("hint") else ""))
+    adapted = _adapted_weights(rows)
+    if adapted:
+        lines += ["", "### Adapted weights", "", 'Weights of `All(weights="auto")` nodes when training ended:', ""]
+        lines += [f"- `{group}`: {text}" for group, text in adapted.items()]
     if plot or gifs:
         lines += ["", "### Figures", ""]
     if plot:
@@ -135,6 +139,18 @@ def markdown(rows: Sequence[Row], *, plot: str | None = None, gifs: Mapping[str,
         else:
             lines += [f"**`{group}`**: {gif.text}", ""]
     return "\n".join(lines).rstrip("\n") + "\n"
+
+
+def _adapted_weights(rows: Sequence[Row]) -> dict[str, str]:
+    """Per spec (group) with adapted weights, each seed's, as text (:func:`specguard.auto_weights.weights_text`)."""
+    from specguard.auto_weights import weights_text
+
+    out: dict[str, str] = {}
+    for r in _ordered(rows):
+        seeds = [s for s in r.get("per_seed") or [] if s.get("weights")]
+        if seeds and r["group"] not in out:
+            out[r["group"]] = ", ".join(f"seed {s['seed']} {weights_text(s['weights'])}" for s in seeds)
+    return out
 
 
 def _goals(rows: Sequence[Row]) -> dict[str, dict[str, Any]]:

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from specguard.auto_weights import weights_text
 from specguard.budget import Budget
 from specguard.engine import SpecResult, run_spec
 from specguard.error import SpecError
@@ -197,6 +198,11 @@ def markdown(reproduction: Reproduction, images: Mapping[str, str]) -> str:
         rows = [_root_row(case, key, r.results[case.name][key], r.seeds) for key in case.specs]
         lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
         lines += ["| " + " | ".join(row) + " |" for row in rows]
+        for key in case.specs:
+            runs = [run for run in r.results[case.name][key].runs if run.weights]
+            if runs:
+                seeds = ", ".join(f"seed {run.seed} {weights_text(run.weights)}" for run in runs)
+                lines += ["", f"Adapted weights of ({key}) when training ended: {seeds}."]
         if case.name in images:
             lines += ["", f"![{case.name}: success per goal over training]({images[case.name]})"]
         lines.append("")

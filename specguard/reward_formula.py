@@ -83,4 +83,8 @@ def formula(tree: Node) -> str:
                 out.append(_weighted(weight, e))
         return out
 
-    return f"R = {expr(tree, tree.name, frozenset(_ROLES)) or '0'}"
+    out = f"R = {expr(tree, tree.name, frozenset(_ROLES)) or '0'}"
+    adapting = [label(path, node) for path, node in paths if node.adapts_weights]
+    if adapting:  # the formula shows where they start (specguard.auto_weights)
+        out += f"\n  weights of {', '.join(adapting)}: 1/N at the start, adapted during training"
+    return out

@@ -18,13 +18,14 @@ verdicts, intervals, caches and baselines treat both alike.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import gymnasium as gym
 
 from specguard.anytime import checkpoint_steps, final_evaluation, interim_look
+from specguard.auto_weights import WeightAdapter
 from specguard.env import make_baseline_env, make_env
 from specguard.error import InvalidSpec, SpecError
 from specguard.progress import decode_update, encode_update, format_event
@@ -74,6 +75,10 @@ class RunResult:
         met_early: every threshold was met at an interim checkpoint, so
             training stopped there (``timesteps`` is that step) and that
             checkpoint's evaluation is the run's result (:mod:`specguard.anytime`).
+        weights: per node with ``weights="auto"``, the adapted weights in
+            force when training ended (:mod:`specguard.auto_weights`); each
+            curve point also has the ones in force then, under ``"weights"``.
+            Empty when no node adapts its weights.
     """
 
     spec: str
@@ -85,6 +90,7 @@ class RunResult:
     stopped_early: bool = False
     curve: list[dict[str, Any]] = field(default_factory=list)
     met_early: bool = False
+    weights: dict[str, list[float]] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -151,12 +157,14 @@ class _GoalCurve:
         report: Report | None,
         checkpoints: list[int] | None = None,
         look: Look | None = None,
+        weights: Callable[[], Mapping[str, Sequence[float]]] | None = None,
     ) -> None:
         self.every = max(1, every)
         self.total = total
         self.report = report
         self.checkpoints = list(checkpoints or [])
         self.look = look
+        self.weights = weights
         self._tick = max(1, total // TICKS)
         self._next_tick = self._tick
         self.start = time.perf_counter()
@@ -195,7 +203,7 @@ class _GoalCurve:
 
     def _point(self, num_timesteps: int) -> None:
         rates = {p: c / self._episodes for p, c in self._counts.items()} if self._episodes else {}
-        self.points.append({"timesteps": num_timesteps, "episodes": self._episodes, "success": rates})
+        self._append(num_timesteps, self._episodes, rates)
         if self.report is not None:  # numbers, as JSON: the parent makes the event (specguard.progress)
             root = next(iter(rates.values())) if rates else None  # goals come first, the root first
             elapsed = time.perf_counter() - self.start
@@ -203,10 +211,16 @@ class _GoalCurve:
             self.report("train", num_timesteps, line)
         self._counts, self._episodes = {}, 0
 
+    def _append(self, num_timesteps: int, episodes: int, rates: dict[str, float]) -> None:
+        point: dict[str, Any] = {"timesteps": num_timesteps, "episodes": episodes, "success": rates}
+        if self.weights is not None:
+            point["weights"] = {path: list(w) for path, w in self.weights().items()}
+        self.points.append(point)
+
     def evaluated(self, num_timesteps: int, counts: Mapping[str, int], episodes: int) -> None:
         """Record an evaluation at ``num_timesteps`` in the curve (a point of its own if none is there)."""
         if not self.points or self.points[-1]["timesteps"] != num_timesteps:
-            self.points.append({"timesteps": num_timesteps, "episodes": 0, "success": {}})
+            self._append(num_timesteps, 0, {})
         self.points[-1]["evaluation"] = {p: c / episodes for p, c in counts.items()}
         self.points[-1]["evaluation_episodes"] = episodes
 
@@ -300,11 +314,31 @@ def train_run(
         return ok
 
     checkpoints = checkpoint_steps(budget.timesteps, budget.checkpoints) if spec.thresholds else []
-    curve = _GoalCurve(budget.timesteps // CURVE_POINTS, budget.wall_clock_s, budget.timesteps, emit, checkpoints, look)
+    # weights="auto" adapts on the constructed env's reward; a baseline trains on the initial env's own.
+    adapter = None if spec.baseline else WeightAdapter.of(spec.tree)
+    curve = _GoalCurve(
+        budget.timesteps // CURVE_POINTS,
+        budget.wall_clock_s,
+        budget.timesteps,
+        emit,
+        checkpoints,
+        look,
+        weights=None if adapter is None else lambda: adapter.in_force,
+    )
 
     class Callback(BaseCallback):  # type: ignore[misc]
         def _on_step(self) -> bool:
-            return curve.on_step(self.num_timesteps, self.locals["dones"], self.locals["infos"])
+            dones, infos = self.locals["dones"], self.locals["infos"]
+            if adapter is not None:
+                for done, info in zip(dones, infos):
+                    if done and "goals" in info:
+                        adapter.observe(info["goals"])
+            return curve.on_step(self.num_timesteps, dones, infos)
+
+        def _on_rollout_end(self) -> None:
+            # Between rollouts, so every env switches at its next reset (specguard.auto_weights).
+            if adapter is not None and adapter.update() is not None:
+                self.training_env.env_method("set_weights", adapter.in_force)
 
     emit("train", 0, None)
     start = time.perf_counter()
@@ -349,5 +383,6 @@ def train_run(
         stopped_early=curve.stopped_early,
         curve=curve.points,
         met_early=curve.met_early,
+        weights={} if adapter is None else {path: list(w) for path, w in adapter.in_force.items()},
     )
     return result, model

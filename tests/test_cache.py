@@ -90,6 +90,8 @@ DAMAGE = {
     "other seed": lambda f: _edit(f, lambda r: (r["result"].update(seed=7), _resign(r))),
     "other versions": lambda f: _edit(f, lambda r: (r["versions"].update(torch="0.0.1"), _resign(r))),
     "unknown field": lambda f: _edit(f, lambda r: (r["result"].update(extra=1), _resign(r))),
+    "missing weights": lambda f: _edit(f, lambda r: (r["result"].pop("weights"), _resign(r))),
+    "string weights": lambda f: _edit(f, lambda r: (r["result"].update(weights={"pendulum": ["0.5"]}), _resign(r))),
     "other fingerprint": lambda f: _edit(f, lambda r: (r.update(fingerprint="0" * 64), _resign(r))),
     "other format": lambda f: _edit(f, lambda r: (r.update(format=1), _resign(r))),
     "stray file recorded": lambda f: _edit(f, lambda r: (r["files"].update({"x.pkl": "0"}), _resign(r))),

@@ -251,3 +251,18 @@ def test_names_reach_generated_code_only_as_string_literals(names):
     assert ev.paths == (root, f"{root}/{p}", f"{root}/{q}")
     assert ev.own_state == [0.0] and ended
     assert r == pytest.approx(0.5 * (0.5 * (1.0 - 0.5) / 2.0 - 1.0))  # root weight 1/2: distance, penalty
+
+
+def test_adapted_weights_replace_an_auto_nodes_weights_only():
+    up, still = sg.Goal("up", x=(0.5, None)), sg.Goal("still", v=(-0.1, 0.1))
+    tree = sg.All(up, still, name="p", weights="auto")
+    plain = compile_tree(tree, ("x", "v"))
+    adapted = compile_tree(tree, ("x", "v"), weights={"p": (0.9, 0.1)})
+    assert [t.coef for t in plain.terms] == [0.5, 0.5]
+    assert [t.coef for t in adapted.terms] == [0.9, 0.1]
+    with pytest.raises(sg.InvalidSpec, match=r"weights\['p/up'\].*weights='auto'.*such nodes: 'p'"):
+        compile_tree(tree, ("x", "v"), weights={"p/up": (1.0,)})
+    with pytest.raises(sg.InvalidSpec, match=r"expected 2 finite weights >= 0 \(one per child\), got \(1.0,\)"):
+        compile_tree(tree, ("x", "v"), weights={"p": (1.0,)})
+    with pytest.raises(sg.InvalidSpec, match=r"such nodes: none"):
+        compile_tree(sg.All(up, still, name="p"), ("x", "v"), weights={"p": (0.9, 0.1)})

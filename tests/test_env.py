@@ -287,3 +287,28 @@ def test_goal_env_is_a_deprecated_name_of_spec_env():
     with pytest.warns(DeprecationWarning):
         from specguard.env import GoalEnv
     assert GoalEnv is sg.SpecEnv
+
+
+def _replay_auto_env(**kwargs):
+    initial = sg.InitialEnv(lambda: ReplayEnv([[0.0], [1.0], [0.0], [1.0]]), features=("x",))
+    tree = sg.All(sg.Goal("up", x=(0.5, None)), sg.Goal("low", x=(None, 0.7)), name="p", weights="auto")
+    return sg.make_env(initial, tree, **kwargs)
+
+
+def test_adapted_weights_apply_from_the_next_episode_on():
+    env = _replay_auto_env()
+    env.reset(seed=0)
+    assert env.step(0)[1] == pytest.approx(0.0)  # 0 -> 1: enters "up" (+1/2), leaves "low" (-1/2)
+    env.set_weights({"p": (0.9, 0.1)})
+    assert env.step(0)[1] == pytest.approx(0.0)  # mid-episode: the weights it started with
+    assert env.adapted_weights == {}
+    env.reset(seed=0)
+    assert env.adapted_weights == {"p": (0.9, 0.1)}
+    assert env.step(0)[1] == pytest.approx(0.9 - 0.1)
+    with pytest.raises(sg.InvalidSpec, match=r"weights\['p/up'\]"):
+        env.set_weights({"p/up": (1.0,)})
+
+
+def test_the_reference_evaluator_keeps_the_trees_weights():
+    with pytest.raises(sg.InvalidSpec, match=r"evaluator: adapted weights need the 'flat' evaluator"):
+        _replay_auto_env(evaluator="reference").set_weights({"p": (0.9, 0.1)})

@@ -103,6 +103,14 @@ def test_markdown_lists_failing_goals_and_comparisons():
     assert "- `t.py::test_w` / `pendulum/position`: consider a Distance" in text
 
 
+def test_markdown_lists_the_adapted_weights_of_each_seed():
+    seeds = [{**s, "weights": {"pendulum": [0.8, 0.2]}} for s in ROW["per_seed"]]
+    text = markdown([{**ROW, "per_seed": seeds}, CACHED])
+    assert "### Adapted weights" in text
+    assert "- `t.py::test_w`: seed 0 pendulum (0.80, 0.20), seed 1 pendulum (0.80, 0.20)" in text
+    assert "Adapted weights" not in markdown([ROW])
+
+
 def test_markdown_links_the_figures_beside_it():
     gifs = {
         "t.py::test_w": Gif(Path("/r/t.py__test_w.gif"), "pendulum, 200 steps; goals met at the end: pendulum", 40),

@@ -19,6 +19,13 @@ tree = sg.All(sg.Goal("position", x=(0.966, 1.0)), sg.Goal("stabilization", omeg
 specs = {
     "b": sg.Spec(initial_env, tree, budget=budget, hyperparameters=TINY, expect={"stabilization": 0.0}),
     "baseline": sg.Spec(initial_env, tree, budget=budget, hyperparameters=TINY, expect=0.5, baseline=True),
+    "auto": sg.Spec(
+        initial_env,
+        sg.All(*tree.children, name="p", weights="auto"),
+        budget=budget,
+        hyperparameters=TINY,
+        expect={"stabilization": 0.0},
+    ),
 }
 PAPER = {"b": "half the runs"}
 """
@@ -51,6 +58,8 @@ def test_reproduce_writes_a_table_beside_the_paper_and_a_plot_per_case(tmp_path,
     assert (tmp_path / "docs" / "images" / "reproduction-tiny_case.png").stat().st_size > 0
     assert "![tiny_case: success per goal over training](images/reproduction-tiny_case.png)" in text
     assert "Budget scale 1x." in text
+    # 128 steps finish no Pendulum episode, so the weights stay where "auto" starts.
+    assert "Adapted weights of (auto) when training ended: seed 0 p (0.50, 0.50), seed 1 p (0.50, 0.50)." in text
     # Resumable: a second call trains nothing, every run comes from the cache.
     assert main(argv) == 0
     assert out.read_text().splitlines()[4:] == text.splitlines()[4:]
@@ -71,4 +80,4 @@ def test_a_case_scale_replaces_the_budget_scale_for_its_case(tmp_path):
     argv = ["reproduce", str(case), "--seeds", "1", "--case-scale", "tiny_case=0.5", "--quiet", "--out", str(out)]
     assert main([*argv, "--cache-dir", str(tmp_path / "cache")]) == 0
     text = out.read_text()
-    assert "Budget scale 0.5x." in text and text.count("| 64 |") == 2  # 128 steps halved, for both specs
+    assert "Budget scale 0.5x." in text and text.count("| 64 |") == 3  # 128 steps halved, for every spec

@@ -31,3 +31,8 @@ def test_repeated_names_are_labelled_by_path():
 def test_named_and_weighted_annotations():
     g = sg.Goal("g", a=0).annotate(sg.Distance(abs, scale=1.0, weight=2.0, name="near"))
     assert sg.formula(g) == "R = 0.5*R[g] + 2*D[g:near]"
+
+
+def test_auto_weights_are_shown_where_they_start():
+    tree = sg.All(sg.Goal("up", x=(0.9, 1)), sg.Goal("still", v=(-0.1, 0.1)), name="p", weights="auto")
+    assert sg.formula(tree) == "R = 0.5*R[up] + 0.5*R[still]\n  weights of p: 1/N at the start, adapted during training"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import gymnasium as gym
@@ -184,3 +185,17 @@ def test_one_checkpoint_trains_the_whole_budget_even_when_met():
     spec = sg.Spec(reached_initial(), sg.Goal("up", x=(0.5, None)), budget=budget, hyperparameters=TINY, expect=0.8)
     result, _ = train_run(spec, seed=0)
     assert not result.met_early and result.timesteps == 4096
+
+
+def test_auto_weights_adapt_during_training_and_are_recorded():
+    initial = sg.InitialEnv(lambda: ReplayEnv([[0.0], [1.0], [0.0], [1.0]]), features=("x",))
+    tree = sg.All(sg.Goal("up", x=(0.5, None)), sg.Goal("low", x=(None, 0.7)), name="p", weights="auto")
+    spec = sg.Spec(initial, tree, budget=sg.Budget(timesteps=128, eval_episodes=2), hyperparameters=TINY)
+    result, model = train_run(spec, seed=0)
+    # Every episode ends at x = 1: in "up", not in "low", so "low" takes the weight.
+    assert result.weights == {"p": pytest.approx([0.1 / 1.2, 1.1 / 1.2])}
+    assert model.get_env().get_attr("adapted_weights") == [{"p": tuple(result.weights["p"])}]
+    assert result.curve[0]["weights"] == {"p": [0.5, 0.5]}  # before the first rollout ended
+    assert result.curve[-1]["weights"] == result.weights
+    baseline, _ = train_run(dataclasses.replace(spec, baseline=True), seed=0)
+    assert baseline.weights == {} and "weights" not in baseline.curve[0]
