@@ -60,6 +60,24 @@ specs["b"] = sg.Spec(
 trees["c"] = sg.All(position, velocity.annotate(sg.Distance(velocity_distance, scale=0.14)), name="mountain_car")
 specs["c"] = sg.Spec(initial_env, trees["c"], expect={"mountain_car": 0.8}, name="mountain_car-c", **COMMON)
 
+# (c+) (c) with exploration settings (beyond the paper): gSDE noise resampled every 64 steps instead of once
+# per rollout, so one episode tries several pushing patterns; a discount close to 1, so reaching the flag
+# late in a 999-step episode still counts; observations and rewards normalised (rl-zoo's MountainCar setting).
+# Measured: 10 of 10 seeds (0-9) reach the flag in 30/30 evaluation episodes at the end of 50k steps, where
+# (c) with the paper's settings reaches it in 1 of 5. Also tried on seeds 0-9 at 50k: 8 envs x 256 steps
+# with gSDE once per rollout 9/10 (seed 1 0/30); earlier, gamma 0.9999 alone 2/5, with normalisation 6/10,
+# with log_std_init 0.5 besides 5/10, no gSDE with ent_coef 0.01 0/10.
+EXPLORE: dict[str, object] = {"use_sde": True, "sde_sample_freq": 64, "gamma": 0.9999}
+specs["c+"] = sg.Spec(
+    initial_env,
+    trees["c"],
+    expect={"mountain_car": 0.8},
+    name="mountain_car-c+",
+    budget=BUDGET,
+    hyperparameters=EXPLORE,
+    normalize=True,
+)
+
 # The baseline: MountainCarContinuous-v0's own reward (+100 at the flag, minus the energy spent).
 # Paper: 4 of 10 runs. Measured: 100% in both seeds at 50k.
 specs["baseline"] = sg.Spec(
@@ -67,4 +85,10 @@ specs["baseline"] = sg.Spec(
 )
 
 # The paper's reported results, beside ours in docs/reproduction.md.
-PAPER = {"a": "fails in most runs", "b": "fails in most runs", "c": "6/10 runs", "baseline": "4/10 runs"}
+PAPER = {
+    "a": "fails in most runs",
+    "b": "fails in most runs",
+    "c": "6/10 runs",
+    "c+": "- (beyond the paper)",
+    "baseline": "4/10 runs",
+}

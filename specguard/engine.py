@@ -23,6 +23,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+from specguard.auto_weights import weights_text
 from specguard.cache import Cache, try_acquire, wait_for
 from specguard.error import SpecError
 from specguard.executors import LOCAL, Executor, make_executor
@@ -182,6 +183,9 @@ class SpecResult:
             threshold = "-" if g is None else f">= {g.threshold:g}"
             rows.append((label(p), rate, iv, threshold, met, "-" if g is None else g.verdict.value))
         lines = render_table(header, rows)
+        for run in self.runs:
+            if run.weights:
+                lines.append(f"seed {run.seed} adapted weights: {weights_text(run.weights)}")
         for seed, message in self.errors.items():
             lines.append(f"seed {seed} failed: {message}")
         return "\n".join(lines)

@@ -349,3 +349,10 @@ def test_a_script_without_a_main_guard_fails_fast_instead_of_hanging(tmp_path):
     done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
     assert 'if __name__ == "__main__":' in done.stderr
     assert "errors: {0:" in done.stdout  # the run failed its seed, reported; nothing waited forever
+
+
+def test_the_table_lists_each_seeds_adapted_weights():
+    result = _safety_result([30, 30], {"fast": 0.8})
+    result.runs[1].weights = {"pendulum": [0.75, 0.25]}
+    assert result.table().splitlines()[-1] == "seed 1 adapted weights: pendulum (0.75, 0.25)"
+    assert "adapted weights" not in _safety_result([30], {"fast": 0.8}).table()
