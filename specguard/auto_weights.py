@@ -42,9 +42,10 @@ Example:
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 
 from specguard.extend import Node
+from specguard.validation import PATH_SEPARATOR
 
 __all__ = [
     "FLOOR",
@@ -53,6 +54,7 @@ __all__ = [
     "WeightAdapter",
     "adapted_weights",
     "adapting_nodes",
+    "per_seed_text",
     "weights_text",
 ]
 
@@ -77,7 +79,11 @@ def adapted_weights(rates: Sequence[float]) -> tuple[float, ...]:
 
 def adapting_nodes(tree: Node) -> dict[str, tuple[str, ...]]:
     """Per path of a node that adapts its weights, its children's paths, in order."""
-    return {path: tuple(f"{path}/{c.name}" for c in node.children) for path, node in tree.walk() if node.adapts_weights}
+    return {
+        path: tuple(f"{path}{PATH_SEPARATOR}{c.name}" for c in node.children)
+        for path, node in tree.walk()
+        if node.adapts_weights
+    }
 
 
 def weights_text(weights: Mapping[str, Sequence[float]]) -> str:
@@ -88,6 +94,16 @@ def weights_text(weights: Mapping[str, Sequence[float]]) -> str:
         'pendulum (0.71, 0.29)'
     """
     return "; ".join(f"{path} ({', '.join(f'{w:.2f}' for w in ws)})" for path, ws in weights.items())
+
+
+def per_seed_text(seeds: Iterable[tuple[int, Mapping[str, Sequence[float]]]]) -> str:
+    """Each seed's adapted weights: ``seed 0 pendulum (0.71, 0.29), seed 1 ...`` (seeds without any left out).
+
+    Example:
+        >>> per_seed_text([(0, {"p": [0.75, 0.25]}), (1, {})])
+        'seed 0 p (0.75, 0.25)'
+    """
+    return ", ".join(f"seed {seed} {weights_text(weights)}" for seed, weights in seeds if weights)
 
 
 class WeightAdapter:
@@ -101,14 +117,12 @@ class WeightAdapter:
     def __init__(
         self,
         nodes: Mapping[str, Sequence[str]],
+        initial: Mapping[str, Sequence[float]],
         window: int = WINDOW,
-        initial: Mapping[str, Sequence[float]] | None = None,
     ) -> None:
         self.nodes = {path: tuple(children) for path, children in nodes.items()}
         # The weights before any adaptation (the node's own, 1/N for "auto"), and then the latest ones.
-        self.in_force: dict[str, tuple[float, ...]] = {
-            path: tuple(initial[path]) if initial else (1.0 / len(cs),) * len(cs) for path, cs in self.nodes.items()
-        }
+        self.in_force: dict[str, tuple[float, ...]] = {path: tuple(initial[path]) for path in self.nodes}
         self._children = tuple(dict.fromkeys(c for cs in self.nodes.values() for c in cs))
         self._episodes: deque[tuple[bool, ...]] = deque(maxlen=window)
 
@@ -116,16 +130,14 @@ class WeightAdapter:
     def of(cls, tree: Node, window: int = WINDOW) -> WeightAdapter | None:
         """The adapter of ``tree``, or ``None`` when no node of it adapts its weights."""
         nodes = adapting_nodes(tree)
+        if not nodes:
+            return None
         initial = {path: tuple(w.core for w in node.child_weights()) for path, node in tree.walk() if path in nodes}
-        return cls(nodes, window, initial) if nodes else None
+        return cls(nodes, initial, window)
 
     def observe(self, goals: Mapping[str, bool]) -> None:
         """Add one finished episode: ``info["goals"]`` of its last step."""
         self._episodes.append(tuple(bool(goals[c]) for c in self._children))
-
-    @property
-    def episodes(self) -> int:
-        return len(self._episodes)
 
     def rates(self) -> dict[str, float]:
         """Per child path, the share of the window's episodes that ended in its goal."""
@@ -138,6 +150,10 @@ class WeightAdapter:
             return None
         rates = self.rates()
         return {path: adapted_weights([rates[c] for c in children]) for path, children in self.nodes.items()}
+
+    def in_force_lists(self) -> dict[str, list[float]]:
+        """:attr:`in_force` as plain JSON data, as results and curve points record it."""
+        return {path: list(w) for path, w in self.in_force.items()}
 
     def update(self) -> dict[str, tuple[float, ...]] | None:
         """:meth:`weights`, which then become :attr:`in_force`; ``None`` (nothing changes) while too few episodes."""

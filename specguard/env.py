@@ -143,7 +143,6 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
             self.action_space = action_space
         # The base observation can be handed on untouched when nothing is added or converted.
         self._passthrough = state is None and not slots and base_space.dtype == np.float32
-        self._evaluator_name = evaluator
         self._pending: Any = None  # (weights, CompiledTree) adapted, in force from the next reset
         self.adapted_weights: dict[str, tuple[float, ...]] = {}
         """The adapted weights in force this episode (:meth:`set_weights`); empty while the tree's own."""
@@ -159,7 +158,7 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
             InvalidSpec: a path without ``weights="auto"``, a wrong count of
                 weights, or the ``"reference"`` evaluator (its weights are the tree's).
         """
-        if self._evaluator_name != "flat":
+        if isinstance(self.evaluator, ReferenceEvaluator):
             raise InvalidSpec(
                 "evaluator", "adapted weights need the 'flat' evaluator; 'reference' is the tree as written"
             )

@@ -142,14 +142,14 @@ def markdown(rows: Sequence[Row], *, plot: str | None = None, gifs: Mapping[str,
 
 
 def _adapted_weights(rows: Sequence[Row]) -> dict[str, str]:
-    """Per spec (group) with adapted weights, each seed's, as text (:func:`specguard.auto_weights.weights_text`)."""
-    from specguard.auto_weights import weights_text
+    """Per spec (group) with adapted weights, each seed's, as text (:func:`specguard.auto_weights.per_seed_text`)."""
+    from specguard.auto_weights import per_seed_text
 
     out: dict[str, str] = {}
     for r in _ordered(rows):
-        seeds = [s for s in r.get("per_seed") or [] if s.get("weights")]
-        if seeds and r["group"] not in out:
-            out[r["group"]] = ", ".join(f"seed {s['seed']} {weights_text(s['weights'])}" for s in seeds)
+        text = per_seed_text((s["seed"], s.get("weights") or {}) for s in r.get("per_seed") or [])
+        if text and r["group"] not in out:
+            out[r["group"]] = text
     return out
 
 

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from specguard.auto_weights import weights_text
+from specguard.auto_weights import per_seed_text
 from specguard.budget import Budget
 from specguard.engine import SpecResult, run_spec
 from specguard.error import SpecError
@@ -199,9 +199,8 @@ def markdown(reproduction: Reproduction, images: Mapping[str, str]) -> str:
         lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
         lines += ["| " + " | ".join(row) + " |" for row in rows]
         for key in case.specs:
-            runs = [run for run in r.results[case.name][key].runs if run.weights]
-            if runs:
-                seeds = ", ".join(f"seed {run.seed} {weights_text(run.weights)}" for run in runs)
+            seeds = per_seed_text((run.seed, run.weights) for run in r.results[case.name][key].runs)
+            if seeds:
                 lines += ["", f"Adapted weights of ({key}) when training ended: {seeds}."]
         if case.name in images:
             lines += ["", f"![{case.name}: success per goal over training]({images[case.name]})"]

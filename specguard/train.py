@@ -18,7 +18,7 @@ verdicts, intervals, caches and baselines treat both alike.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -146,7 +146,9 @@ class _GoalCurve:
 
     A curve point is made at every tenth of the budget and at every interim
     checkpoint (:mod:`specguard.anytime`); a checkpoint's evaluation is stored
-    in its point under ``"evaluation"``, and a met one stops training.
+    in its point under ``"evaluation"``, and a met one stops training. An
+    ``adapter`` (``weights="auto"``) sees every finished training episode, and
+    each point records the weights in force (:mod:`specguard.auto_weights`).
     """
 
     def __init__(
@@ -157,14 +159,14 @@ class _GoalCurve:
         report: Report | None,
         checkpoints: list[int] | None = None,
         look: Look | None = None,
-        weights: Callable[[], Mapping[str, Sequence[float]]] | None = None,
+        adapter: WeightAdapter | None = None,
     ) -> None:
         self.every = max(1, every)
         self.total = total
         self.report = report
         self.checkpoints = list(checkpoints or [])
         self.look = look
-        self.weights = weights
+        self.adapter = adapter
         self._tick = max(1, total // TICKS)
         self._next_tick = self._tick
         self.start = time.perf_counter()
@@ -181,6 +183,8 @@ class _GoalCurve:
             if done and "goals" in info:
                 self._episodes += 1
                 _count_episode(self._counts, info)
+                if self.adapter is not None:
+                    self.adapter.observe(info["goals"])
         if self.report is not None and num_timesteps >= self._next_tick:
             self._next_tick = num_timesteps + self._tick
             self.report("train", num_timesteps, None)
@@ -213,8 +217,8 @@ class _GoalCurve:
 
     def _append(self, num_timesteps: int, episodes: int, rates: dict[str, float]) -> None:
         point: dict[str, Any] = {"timesteps": num_timesteps, "episodes": episodes, "success": rates}
-        if self.weights is not None:
-            point["weights"] = {path: list(w) for path, w in self.weights().items()}
+        if self.adapter is not None:
+            point["weights"] = self.adapter.in_force_lists()
         self.points.append(point)
 
     def evaluated(self, num_timesteps: int, counts: Mapping[str, int], episodes: int) -> None:
@@ -323,17 +327,12 @@ def train_run(
         emit,
         checkpoints,
         look,
-        weights=None if adapter is None else lambda: adapter.in_force,
+        adapter=adapter,
     )
 
     class Callback(BaseCallback):  # type: ignore[misc]
         def _on_step(self) -> bool:
-            dones, infos = self.locals["dones"], self.locals["infos"]
-            if adapter is not None:
-                for done, info in zip(dones, infos):
-                    if done and "goals" in info:
-                        adapter.observe(info["goals"])
-            return curve.on_step(self.num_timesteps, dones, infos)
+            return curve.on_step(self.num_timesteps, self.locals["dones"], self.locals["infos"])
 
         def _on_rollout_end(self) -> None:
             # Between rollouts, so every env switches at its next reset (specguard.auto_weights).
@@ -383,6 +382,6 @@ def train_run(
         stopped_early=curve.stopped_early,
         curve=curve.points,
         met_early=curve.met_early,
-        weights={} if adapter is None else {path: list(w) for path, w in adapter.in_force.items()},
+        weights={} if adapter is None else adapter.in_force_lists(),
     )
     return result, model
