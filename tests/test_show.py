@@ -109,6 +109,25 @@ def test_render_spec_is_the_one_rendering():
     assert budget.endswith("; judged at 4 checkpoints, training stops once every threshold is met")
 
 
+def test_render_spec_names_each_expected_miss_with_its_reason():
+    cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+    tree = sg.All(sg.Goal("centre", x=(-0.5, 0.5)), sg.Goal("upright", theta=(-0.05, 0.05)), name="balance")
+    spec = sg.Spec(
+        cartpole,
+        tree,
+        budget=sg.Budget(timesteps=4096),
+        expect={"balance": 0.8, "upright": 0.9},
+        xfail={"upright": "paper: not learned"},
+    )
+    lines = render_spec(spec).splitlines()
+    assert lines[-2:] == [
+        "expect: balance >= 0.8, balance/upright >= 0.9",
+        "xfail: balance/upright may miss (paper: not learned)",
+    ]
+    plain = sg.Spec(cartpole, tree, budget=sg.Budget(timesteps=4096), expect={"balance": 0.8, "upright": 0.9})
+    assert not any(line.startswith("xfail:") for line in render_spec(plain).splitlines())
+
+
 @pytest.mark.parametrize(
     ("timesteps", "algorithm", "hyperparameters", "n_envs", "trained"),
     [
