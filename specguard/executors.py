@@ -29,7 +29,16 @@ from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
 from specguard.error import SpecError
-from specguard.workers import Failure, Outcome, SigtermGuard, Task, TaskRunner, outcome_of, run_tasks
+from specguard.workers import (
+    Failure,
+    Outcome,
+    SigtermGuard,
+    Task,
+    TaskRunner,
+    outcome_of,
+    raise_if_stopping,
+    run_tasks,
+)
 
 __all__ = ["LOCAL", "DaskExecutor", "Executor", "ExecutorError", "LocalExecutor", "check_address", "make_executor"]
 
@@ -178,6 +187,7 @@ class DaskExecutor:
                 finished = [f for f in pending if f.done()]
                 if not finished:
                     time.sleep(_POLL_S)  # seeds take minutes: polling costs nothing that matters
+                    raise_if_stopping()  # the finally below cancels what is pending
                 for future in finished:
                     pending.discard(future)
                     key = futures[future]

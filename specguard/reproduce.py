@@ -7,7 +7,9 @@ figure per spec key. Every spec is trained on ``seeds`` seeds at its whole
 budget times ``budget_scale`` (no anytime verdicts: learning curves need the
 whole budget), through the run cache, so an interrupted reproduction resumes
 where it stopped. Specs train side by side, one process each, ``workers`` at
-a time, so every core given is busy.
+a time, so every core given is busy. An interruption (Ctrl-C) drops the specs
+not started and stops the running ones at once: their unfinished seeds store
+nothing, every finished run stays cached.
 
 The Markdown table has, per case and variant: the root goal's mean success
 over the seeds' evaluation episodes with its interval, the runs whose root
@@ -37,6 +39,7 @@ from specguard.error import SpecError
 from specguard.progress import ProgressEvent
 from specguard.spec import Spec
 from specguard.stats import success_interval
+from specguard.workers import stopping_all_tasks
 
 __all__ = ["Case", "Reproduction", "load_case", "reproduce", "write_markdown", "write_plots"]
 
@@ -120,13 +123,22 @@ def reproduce(
 
     jobs = [(case, key, sized(spec, seeds, scales[case.name])) for case in cases for key, spec in case.specs.items()]
     results: dict[str, dict[str, SpecResult]] = {case.name: {} for case in cases}
-    with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
+    pool = ThreadPoolExecutor(max_workers=max(1, workers))
+    try:
         futures = {
             (case.name, key): pool.submit(run_spec, spec, workers=1, cache_dir=cache_dir, progress=tell)
             for case, key, spec in jobs
         }
         for (name, key), future in futures.items():
             results[name][key] = future.result()
+    except BaseException:
+        # Ctrl-C reaches only this thread: drop the specs not started, stop the running ones (their
+        # seeds' processes end and nothing partial is cached; finished runs are) and wait for them.
+        pool.shutdown(wait=False, cancel_futures=True)
+        with stopping_all_tasks():
+            pool.shutdown(wait=True)
+        raise
+    pool.shutdown(wait=True)
     return Reproduction(
         cases=list(cases),
         results=results,

@@ -62,8 +62,10 @@ __all__ = [
     "TaskRunner",
     "outcome_of",
     "parse_workers",
+    "raise_if_stopping",
     "resolve_workers",
     "run_tasks",
+    "stopping_all_tasks",
 ]
 
 Report = Callable[[str, int | None, str | None], None]
@@ -75,8 +77,37 @@ _STOP_GRACE_S = 2.0
 _EXIT_GRACE_S = 10.0
 """How long a child that has sent its outcome gets to exit on its own before it is terminated."""
 
+_STOP_POLL_S = 0.25
+"""How often a waiting :func:`run_tasks` looks whether :func:`stopping_all_tasks` asks it to stop."""
+
+_STOPPING = threading.Event()
+
 _MAX_MESSAGES_PER_WAKEUP = 64
 """Messages read from one live child before the others get their turn (a chatty task must not starve them)."""
+
+
+@contextlib.contextmanager
+def stopping_all_tasks() -> Iterator[None]:
+    """While inside, every :func:`run_tasks` of this process, on any thread, stops its children and raises.
+
+    A signal reaches only the main thread. A caller that runs :func:`run_tasks`
+    on threads of its own (``specguard reproduce`` trains several specs at once)
+    enters this block on its interruption and waits for its threads there: each
+    ``run_tasks`` notices within :data:`_STOP_POLL_S`, terminates and reaps its
+    children, stores nothing and raises ``KeyboardInterrupt``. Leaving the block
+    lets later calls run again.
+    """
+    _STOPPING.set()
+    try:
+        yield
+    finally:
+        _STOPPING.clear()
+
+
+def raise_if_stopping() -> None:
+    """Raise ``KeyboardInterrupt`` inside :func:`stopping_all_tasks`, for loops that wait on tasks."""
+    if _STOPPING.is_set():
+        raise KeyboardInterrupt("stopped: the process was interrupted")
 
 
 def parse_workers(value: object) -> int | str:
@@ -417,7 +448,8 @@ def run_tasks(
 
     A task that raises, or whose process dies, becomes a :class:`Failure`; the others keep running.
     On any exception in the parent (SIGTERM in the main thread arrives as ``KeyboardInterrupt``),
-    every child still running is terminated and reaped before the exception propagates.
+    every child still running is terminated and reaped before the exception propagates; so it is
+    inside :func:`stopping_all_tasks`, from any thread.
 
     Args:
         tasks: the tasks; their keys must be distinct.
@@ -432,7 +464,8 @@ def run_tasks(
     Raises:
         ValueError: ``max_workers`` < 1 or duplicate keys.
         TypeError, pickle.PicklingError: a task's ``fn`` or ``args`` cannot be pickled (before any process starts).
-        KeyboardInterrupt: SIGTERM or SIGINT received (after the children were stopped).
+        KeyboardInterrupt: SIGTERM or SIGINT received, or :func:`stopping_all_tasks` entered (after the
+            children were stopped).
     """
     if max_workers < 1:
         raise ValueError(f"max_workers must be >= 1, got {max_workers}")
@@ -455,10 +488,11 @@ def run_tasks(
                     children.append(_start(context, task, payloads[task.key]))
 
             deadlines = [c.deadline for c in children if c.deadline is not None]
-            timeout = None if not deadlines else max(0.0, min(deadlines) - time.monotonic())
+            timeout = min([_STOP_POLL_S, *(max(0.0, d - time.monotonic()) for d in deadlines)])
             waitables: list[Any] = [c.conn for c in children if not c.eof]
             waitables += [c.process.sentinel for c in children]
             ready = set(wait(waitables, timeout))
+            raise_if_stopping()  # the finally below stops and reaps the children
 
             for child in list(children):
                 dead = child.process.sentinel in ready

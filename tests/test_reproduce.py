@@ -2,12 +2,22 @@
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
+import sys
 import textwrap
+import time
+from pathlib import Path
+
+import pytest
 
 import specguard as sg
 from example_specs import pendulum
 from specguard.cli import main
 from specguard.reproduce import sized
+
+REPO = Path(__file__).resolve().parents[1]
 
 CASE = """
 import specguard as sg
@@ -81,3 +91,52 @@ def test_a_case_scale_replaces_the_budget_scale_for_its_case(tmp_path):
     assert main([*argv, "--cache-dir", str(tmp_path / "cache")]) == 0
     text = out.read_text()
     assert "Budget scale 0.5x." in text and text.count("| 64 |") == 3  # 128 steps halved, for every spec
+
+
+LONG_CASE = """
+import specguard as sg
+
+initial_env = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
+TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
+budget = sg.Budget(timesteps=200_000, eval_episodes=4)
+specs = {  # three different trees: identical specs would share one training run
+    name: sg.Spec(initial_env, sg.Goal(name, x=(low, 1.0)), budget=budget, hyperparameters=TINY, expect=0.0)
+    for name, low in (("first", 0.9), ("second", 0.95), ("third", 0.966))
+}
+"""
+
+
+def test_an_interruption_stops_the_running_specs_at_once_and_starts_no_other(tmp_path):
+    case = tmp_path / "long_case.py"
+    case.write_text(textwrap.dedent(LONG_CASE))
+    cache = tmp_path / "cache"
+    argv = ["reproduce", str(case), "--seeds", "1", "--workers", "2", "--cache-dir", str(cache)]
+    parent = subprocess.Popen(
+        [sys.executable, "-m", "specguard", *argv, "--out", str(tmp_path / "r.md")],
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    assert parent.stderr is not None
+    lines: list[str] = []
+    training: set[str] = set()
+    while len(training) < 2:  # both running specs have started their seed's process
+        line = parent.stderr.readline()
+        if not line:
+            pytest.fail("reproduce ended before both specs started: " + "".join(lines))
+        lines.append(line)
+        if ": training, " in line:
+            training.add(line.split()[1])
+    parent.send_signal(signal.SIGINT)  # to the parent alone, as a SIGTERM would come: the children go on unless stopped
+    start = time.monotonic()
+    try:
+        rest = parent.communicate(timeout=30)[1]  # 200k steps take minutes: only the stop ends it this soon
+    except subprocess.TimeoutExpired:
+        parent.kill()
+        pytest.fail("reproduce did not stop within 30 s of SIGINT")
+    assert time.monotonic() - start < 30
+    assert parent.returncode == 130, rest
+    assert "interrupted; finished runs are cached, unfinished ones were not stored" in rest
+    assert "third" not in "".join(lines) + rest  # it was still queued: it never started
+    assert not list(cache.rglob("*.json"))  # unfinished runs store nothing
+    assert not (tmp_path / "r.md").exists()

@@ -21,7 +21,17 @@ from typing import Any
 import cloudpickle
 import pytest
 
-from specguard.workers import Done, Failure, Outcome, Report, Task, parse_workers, resolve_workers, run_tasks
+from specguard.workers import (
+    Done,
+    Failure,
+    Outcome,
+    Report,
+    Task,
+    parse_workers,
+    resolve_workers,
+    run_tasks,
+    stopping_all_tasks,
+)
 
 cloudpickle.register_pickle_by_value(sys.modules[__name__])
 
@@ -295,6 +305,28 @@ def test_sigterm_handler_is_restored_and_non_main_threads_leave_signals_alone() 
     thread.start()
     thread.join(30)
     assert errors == [] and result == [{0: Done(0, 2)}]
+
+
+def test_stopping_all_tasks_stops_run_tasks_on_another_thread_and_then_lets_calls_run(tmp_path: Path) -> None:
+    pid_file, done_file = tmp_path / "pid", tmp_path / "done"
+    errors: list[BaseException] = []
+
+    def target() -> None:
+        try:
+            run_tasks([Task(0, write_pid_then_sleep, (str(pid_file), str(done_file)))], max_workers=1)
+        except BaseException as e:
+            errors.append(e)
+
+    thread = threading.Thread(target=target)
+    thread.start()
+    assert _wait_for(lambda: pid_file.exists() and pid_file.read_text() != "", 30), "the child never started"
+    with stopping_all_tasks():
+        thread.join(20)  # the child sleeps 30 s: only the stop ends the thread this soon
+    assert not thread.is_alive()
+    assert [type(e) for e in errors] == [KeyboardInterrupt]
+    assert _pid_gone(int(pid_file.read_text())) and not done_file.exists()
+    assert multiprocessing.active_children() == []
+    assert run_tasks([Task(0, sleep_then_return, (1, 0.0))], max_workers=1)[0].key == 0  # left: calls run again
 
 
 def test_invalid_arguments(tmp_path: Path) -> None:
