@@ -36,6 +36,7 @@ from specguard.auto_weights import per_seed_text
 from specguard.budget import Budget
 from specguard.engine import SpecResult, run_spec
 from specguard.error import SpecError
+from specguard.fingerprint import versions
 from specguard.progress import ProgressEvent
 from specguard.spec import Spec
 from specguard.stats import success_interval
@@ -64,6 +65,7 @@ class Reproduction:
     command: str
     date: str
     machine: str
+    version: str  # specguard's version and source digest (every run key holds it)
 
 
 def load_case(path: str) -> Case:
@@ -147,6 +149,7 @@ def reproduce(
         command=command,
         date=datetime.date.today().isoformat(),
         machine=machine(workers),
+        version=versions()["specguard"],
     )
 
 
@@ -188,36 +191,71 @@ def _root_row(case: Case, key: str, result: SpecResult, seeds: int) -> tuple[str
     return (key, mean, interval, reached, case.paper.get(key, "-"), budget)
 
 
-def markdown(reproduction: Reproduction, images: Mapping[str, str]) -> str:
-    """``docs/reproduction.md``: the command, machine and date, then a table and a plot per case."""
+TITLE = "# Reproducing the paper's case studies"
+INTRO = [
+    "Every spec trained on its section's number of seeds at its whole budget (no anytime verdicts: the curves "
+    "need every step), times its case's budget scale, each seed evaluated on its own deterministic episodes "
+    "(seeds disjoint from training). Each case names the command, machine, date and specguard version that "
+    "made it: `specguard reproduce` rewrites the sections of the cases it is given and keeps the others, so a "
+    "long case can be remade on its own.",
+    "",
+    "Columns: the root goal's success pooled over every seed's evaluation episodes, with its 95% interval; "
+    "the runs whose own root-goal success reached the spec's threshold; the paper's reported figure "
+    "(10 runs at its budgets); the steps each run trained.",
+]
+HEADER = ("spec", "root success", "95% interval", "runs reaching the threshold", "paper", "steps per run")
+
+
+def case_section(reproduction: Reproduction, case: Case, images: Mapping[str, str]) -> str:
+    """One case's section: how it was made, its table, its adapted weights and its plot."""
     r = reproduction
     lines = [
-        "# Reproducing the paper's case studies",
+        f"## {case.name}",
         "",
-        f"Made with `{r.command}` on {r.date}, on {r.machine}.",
-        f"Every spec trained on {r.seeds} seeds at its whole budget (no anytime verdicts: the curves need every "
-        "step), times its case's budget scale, each seed evaluated on its own deterministic episodes (seeds "
-        "disjoint from training).",
-        "",
-        "Columns: the root goal's success pooled over every seed's evaluation episodes, with its 95% interval; "
-        "the runs whose own root-goal success reached the spec's threshold; the paper's reported figure "
-        "(10 runs at its budgets); the steps each run trained.",
+        f"Made with `{r.command}` on {r.date}, on {r.machine}, specguard {r.version}. "
+        f"{r.seeds} seeds per spec, budget scale {r.scales[case.name]:g}x.",
         "",
     ]
-    header = ("spec", "root success", "95% interval", "runs reaching the threshold", "paper", "steps per run")
-    for case in r.cases:
-        lines += [f"## {case.name}", "", f"Budget scale {r.scales[case.name]:g}x.", ""]
-        rows = [_root_row(case, key, r.results[case.name][key], r.seeds) for key in case.specs]
-        lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-        lines += ["| " + " | ".join(row) + " |" for row in rows]
-        for key in case.specs:
-            seeds = per_seed_text((run.seed, run.weights) for run in r.results[case.name][key].runs)
-            if seeds:
-                lines += ["", f"Adapted weights of ({key}) when training ended: {seeds}."]
-        if case.name in images:
-            lines += ["", f"![{case.name}: success per goal over training]({images[case.name]})"]
-        lines.append("")
-    return "\n".join(lines)
+    rows = [_root_row(case, key, r.results[case.name][key], r.seeds) for key in case.specs]
+    lines += ["| " + " | ".join(HEADER) + " |", "|" + "---|" * len(HEADER)]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    for key in case.specs:
+        seeds = per_seed_text((run.seed, run.weights) for run in r.results[case.name][key].runs)
+        if seeds:
+            lines += ["", f"Adapted weights of ({key}) when training ended: {seeds}."]
+    if case.name in images:
+        lines += ["", f"![{case.name}: success per goal over training]({images[case.name]})"]
+    return "\n".join(lines) + "\n"
+
+
+def sections(text: str) -> dict[str, str]:
+    """The case sections of a reproduction document, by case name, in document order.
+
+    A section runs from its ``## name`` line to the next one (or the end).
+
+    Example:
+        >>> list(sections("# T\\n\\nintro\\n## a\\n\\nrow\\n## b\\n"))
+        ['a', 'b']
+    """
+    found: dict[str, list[str]] = {}
+    current: list[str] | None = None
+    for line in text.splitlines():
+        if line.startswith("## "):
+            current = found.setdefault(line[3:].strip(), [])
+        if current is not None:
+            current.append(line)
+    return {name: "\n".join(lines).rstrip("\n") + "\n" for name, lines in found.items()}
+
+
+def markdown(reproduction: Reproduction, images: Mapping[str, str], previous: str = "") -> str:
+    """The reproduction document: the reproduced cases' sections, and ``previous``'s sections of other cases.
+
+    A case keeps its place in ``previous``; cases new to it come after.
+    """
+    merged = sections(previous)
+    for case in reproduction.cases:
+        merged[case.name] = case_section(reproduction, case, images)
+    return "\n".join([TITLE, "", *INTRO, "", *merged.values()])
 
 
 def rows_for_plots(case: Case, results: Mapping[str, SpecResult]) -> list[dict[str, Any]]:
@@ -254,8 +292,12 @@ def write_plots(reproduction: Reproduction, folder: Path) -> dict[str, str]:
 
 
 def write_markdown(reproduction: Reproduction, out: Path) -> Path:
-    """Write the plots beside ``out`` (in ``images/``) and the Markdown table to ``out``."""
+    """Write the plots beside ``out`` (in ``images/``) and the Markdown tables to ``out``.
+
+    Sections of cases not reproduced this time, already in ``out``, are kept (:func:`markdown`).
+    """
     out.parent.mkdir(parents=True, exist_ok=True)
     images = write_plots(reproduction, out.parent / "images")
-    out.write_text(markdown(reproduction, images))
+    previous = out.read_text() if out.exists() else ""
+    out.write_text(markdown(reproduction, images, previous))
     return out

@@ -15,7 +15,8 @@ import pytest
 import specguard as sg
 from example_specs import pendulum
 from specguard.cli import main
-from specguard.reproduce import sized
+from specguard.fingerprint import versions
+from specguard.reproduce import TITLE, sections, sized
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -67,12 +68,28 @@ def test_reproduce_writes_a_table_beside_the_paper_and_a_plot_per_case(tmp_path,
     assert "/2 (>= 0.5)" in baseline_row and baseline_row.split(" | ")[4] == "-"
     assert (tmp_path / "docs" / "images" / "reproduction-tiny_case.png").stat().st_size > 0
     assert "![tiny_case: success per goal over training](images/reproduction-tiny_case.png)" in text
-    assert "Budget scale 1x." in text
+    assert "specguard " + versions()["specguard"] + ". 2 seeds per spec, budget scale 1x." in text
     # 128 steps finish no Pendulum episode, so the weights stay where "auto" starts.
     assert "Adapted weights of (auto) when training ended: seed 0 p (0.50, 0.50), seed 1 p (0.50, 0.50)." in text
     # Resumable: a second call trains nothing, every run comes from the cache.
     assert main(argv) == 0
-    assert out.read_text().splitlines()[4:] == text.splitlines()[4:]
+    assert out.read_text() == text
+
+
+def test_a_reproduction_rewrites_its_own_cases_and_keeps_the_sections_of_others(tmp_path):
+    case = tmp_path / "tiny_case.py"
+    case.write_text(textwrap.dedent(CASE))
+    out = tmp_path / "reproduction.md"
+    before = "## first\n\nMade earlier.\n\n## tiny_case\n\nstale table\n\n## last\n\nMade later.\n"
+    out.write_text("# an older title\n\nolder intro\n\n" + before)
+    argv = ["reproduce", str(case), "--seeds", "1", "--quiet", "--out", str(out)]
+    assert main([*argv, "--cache-dir", str(tmp_path / "cache")]) == 0
+    text = out.read_text()
+    assert text.startswith(TITLE) and "older" not in text and "stale table" not in text
+    assert [line for line in text.splitlines() if line.startswith("## ")] == ["## first", "## tiny_case", "## last"]
+    assert "## first\n\nMade earlier.\n\n## tiny_case\n\nMade with `specguard reproduce" in text
+    assert text.endswith("## last\n\nMade later.\n")
+    assert sections(text)["tiny_case"].count("| b |") == 1
 
 
 def test_a_case_scale_names_a_given_case(tmp_path, capsys):
@@ -90,7 +107,7 @@ def test_a_case_scale_replaces_the_budget_scale_for_its_case(tmp_path):
     argv = ["reproduce", str(case), "--seeds", "1", "--case-scale", "tiny_case=0.5", "--quiet", "--out", str(out)]
     assert main([*argv, "--cache-dir", str(tmp_path / "cache")]) == 0
     text = out.read_text()
-    assert "Budget scale 0.5x." in text and text.count("| 64 |") == 3  # 128 steps halved, for every spec
+    assert "budget scale 0.5x." in text and text.count("| 64 |") == 3  # 128 steps halved, for every spec
 
 
 LONG_CASE = """
