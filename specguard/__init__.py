@@ -56,6 +56,7 @@ _EXPORTS = {
     "StateMappingError": "specguard.error",
     "UnknownFeature": "specguard.error",
     "UnreachableGoal": "specguard.error",
+    "VersionMismatch": "specguard.error",
     "compile_tree": "specguard.compiled",
     "formula": "specguard.reward_formula",
     "goal_spec": "specguard.declare",
@@ -89,6 +90,7 @@ __all__ = [
     "StateMappingError",
     "UnknownFeature",
     "UnreachableGoal",
+    "VersionMismatch",
     "__version__",
     "compile_tree",
     "formula",
@@ -137,6 +139,7 @@ if TYPE_CHECKING:
         StateMappingError,
         UnknownFeature,
         UnreachableGoal,
+        VersionMismatch,
     )
     from specguard.extend import Annotation, Node
     from specguard.initial_env import InitialEnv

@@ -18,7 +18,7 @@ Example:
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -27,7 +27,7 @@ from specguard.auto_weights import weights_text
 from specguard.cache import Cache, try_acquire, wait_for
 from specguard.error import SpecError
 from specguard.executors import LOCAL, Executor, make_executor
-from specguard.fingerprint import fingerprint_spec
+from specguard.fingerprint import check_versions, fingerprint_spec, versions
 from specguard.goals import GOAL, kind, label, result_keys
 from specguard.progress import ProgressEvent, decode_update, print_event
 from specguard.spec import Spec
@@ -191,16 +191,21 @@ class SpecResult:
         return "\n".join(lines)
 
 
-def _train_task(spec: Spec, seed: int, with_model: bool, *, report: Report) -> dict[str, Any]:
+def _train_task(spec: Spec, seed: int, keyed_versions: Mapping[str, str] | None, *, report: Report) -> dict[str, Any]:
     """A worker's task (a local process or a cluster worker): train one seed, return its result and model bytes.
 
     The driver stores them in its cache: keys are computed only by the driver
     (functions unpickled in a worker are not the driver's), and cluster
-    workers need no shared filesystem.
+    workers need no shared filesystem. ``keyed_versions``, given when the
+    result is to be cached, are the versions the driver's key names: a worker
+    with other code refuses to train (:class:`~specguard.error.VersionMismatch`).
     """
     from specguard.cache import model_files
     from specguard.train import train_run
 
+    if keyed_versions is not None:
+        check_versions(keyed_versions, f"Spec {spec.label!r}, seed {seed}")
+    with_model = keyed_versions is not None
     result, model = train_run(spec, seed, report=report)
     files = model_files(model, normalize=spec.normalize) if with_model else {}
     return {"result": result.to_dict(), "files": files}
@@ -337,7 +342,8 @@ class _Runs:
         tasks = []
         for seed in seeds:
             self.say(ProgressEvent(self.spec.label, seed, "start", budget=self.spec.budget.timesteps))
-            tasks.append(Task(seed, _train_task, (self.spec, seed, self._key(seed) is not None)))
+            keyed = versions() if self._key(seed) is not None else None
+            tasks.append(Task(seed, _train_task, (self.spec, seed, keyed)))
         outcomes = self.executor.run(
             tasks,
             on_line=lambda seed, line: self.say(decode_update(self.spec.label, seed, line)),

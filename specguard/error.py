@@ -16,6 +16,7 @@ __all__ = [
     "StateMappingError",
     "UnknownFeature",
     "UnreachableGoal",
+    "VersionMismatch",
 ]
 
 
@@ -99,3 +100,18 @@ class EvaluationError(SpecError):
 
 class FingerprintError(InvalidSpec):
     """A value in a spec cannot be fingerprinted exactly, so its runs could not be cached safely."""
+
+
+class VersionMismatch(SpecError):
+    """The process that was to train a run has other code than the one that keyed it.
+
+    A run's cache key names the versions of specguard (its source digest) and
+    of the RL stack (:func:`specguard.fingerprint.versions`); a worker whose own
+    differ (specguard's sources edited while runs were queued, a cluster worker
+    with another library) would store a result under a key that does not
+    describe the code that made it, so it refuses to train.
+    """
+
+    default_hint = (
+        "finish editing first, then run again (a new key trains afresh); give cluster workers the same versions"
+    )

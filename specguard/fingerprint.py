@@ -48,17 +48,26 @@ import sys
 import sysconfig
 import types
 import warnings
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from specguard.error import FingerprintError
+from specguard.error import FingerprintError, VersionMismatch
 from specguard.extend import Annotation, Node
 
-__all__ = ["PROBE_STEPS", "SpecFingerprint", "canonical", "digest", "fingerprint_spec", "probe", "versions"]
+__all__ = [
+    "PROBE_STEPS",
+    "SpecFingerprint",
+    "canonical",
+    "check_versions",
+    "digest",
+    "fingerprint_spec",
+    "probe",
+    "versions",
+]
 
 PROBE_STEPS = 256
 
@@ -133,6 +142,23 @@ def versions() -> dict[str, str]:
         except metadata.PackageNotFoundError:
             found[name] = "absent"
     return found
+
+
+def check_versions(expected: Mapping[str, str], where: str) -> None:
+    """Refuse to go on in a process whose :func:`versions` differ from ``expected`` (the ones a key was made with).
+
+    Raises:
+        VersionMismatch: naming each version that differs, expected and found.
+    """
+    found = versions()
+    differing = [
+        f"{name} {expected.get(name, 'absent')!s} (keyed) != {found.get(name, 'absent')!s} (here)"
+        for name in sorted(set(expected) | set(found))
+        if expected.get(name) != found.get(name)
+    ]
+    if differing:
+        named = "; ".join(differing)
+        raise VersionMismatch(f"{where}: this process runs other code than the run's cache key names: {named}")
 
 
 # -- the canonical form ------------------------------------------------------------

@@ -356,3 +356,23 @@ def test_the_table_lists_each_seeds_adapted_weights():
     result.runs[1].weights = {"pendulum": [0.75, 0.25]}
     assert result.table().splitlines()[-1] == "seed 1 adapted weights: pendulum (0.75, 0.25)"
     assert "adapted weights" not in _safety_result([30], {"fast": 0.8}).table()
+
+
+def test_a_worker_running_other_code_than_the_key_names_refuses_to_train(tmp_path, monkeypatch):
+    # The driver keyed its runs with one specguard; the spawned workers import another (sources edited meanwhile).
+    from specguard import engine
+    from specguard.fingerprint import versions
+
+    keyed = {**versions(), "specguard": "0.0.0+edited"}
+    monkeypatch.setattr(engine, "versions", lambda: keyed)
+    with pytest.raises(sg.VersionMismatch, match=r"seed \d: .*specguard 0\.0\.0\+edited \(keyed\) != \S+ \(here\)"):
+        sg.run_spec(spec(), workers=2, cache_dir=tmp_path, progress=None)
+    assert not list(tmp_path.rglob("result.json"))  # nothing stored under a key that does not describe the code
+
+
+def test_a_worker_with_the_keyed_versions_trains():
+    from specguard.engine import _train_task
+    from specguard.fingerprint import versions
+
+    out = _train_task(spec(), 0, versions(), report=lambda phase, step=None, line=None: None)
+    assert out["result"]["timesteps"] == 128 and out["files"]
