@@ -1,4 +1,4 @@
-"""Automatic weights: ``All(weights="auto")`` adapted to its children's observed success during training.
+"""Automatic weights: ``All(weights="auto")`` adapted to its outcomes' observed success during training.
 
 The paper leaves an AND-node's weights to the user, who tunes them by hand
 when one subgoal crowds out another (Pendulum (w): position 0.8,
@@ -7,19 +7,32 @@ observes, by this rule (our choice, beyond SPEC.md):
 
     w_i = (1 - p_i + FLOOR) / sum_j (1 - p_j + FLOOR)
 
-where ``p_i`` is the share of the last :data:`WINDOW` finished training
-episodes whose last state lies in child ``i``'s goal: the very measure the
-gate judges, observed on the training policy. A child the agent already
-reaches loses weight to the ones it misses; :data:`FLOOR` keeps a reached
-child's weight above zero, so the agent is still paid for keeping it; when
-every child is reached (or none is) the weights are equal, ``1/N``.
+over the node's *outcomes*: each child, with ``p_i`` the share of the last
+:data:`WINDOW` finished training episodes whose last state lies in its goal,
+and each safety annotation of the node itself left at its default weight
+(``Constraint(fn)`` on the ``All``, not ``Constraint(fn, weight=...)``),
+with ``p_i`` the share of those episodes without a violation: the very
+measures the gate judges, observed on the training policy. An outcome the
+agent already reaches loses weight to the ones it misses; :data:`FLOOR` keeps
+a reached outcome's weight above zero, so the agent is still paid for keeping
+it; when every outcome is reached (or none is) the weights are equal.
+
+Why constraints take part: a penalty of fixed weight 1 beside goals whose
+weights sum to 1 can outweigh them all, and an agent that learns to be safe
+first (LunarLander: hovering is never a crash) then never risks the goal.
+Letting a constraint kept in nearly every episode hand its weight to the
+goals still missed is the Lagrangian idea of constrained RL (the penalty
+grows while the constraint is violated, shrinks while it holds), on the same
+bounded shares as the children. A constraint's budget still ends the episode
+at 0 whatever its weight.
 
 Why success rather than each component's reward scale: the conflict the
 weights resolve is one of *outcomes* (the pendulum hangs still, reaching
 stabilization and never the position), which success measures directly
 and scales do not; and success is bounded, so the rule needs no tuning of
-its own. The weights sum to 1 like the default ``1/N``, so the node's reward
-keeps its scale relative to its siblings and to constraints.
+its own. The weights sum to 1, so the node's reward keeps its scale relative
+to its siblings. Until :data:`MIN_EPISODES` episodes have finished, the
+node's own weights hold: ``1/N`` per child, 1 per constraint.
 
 Weights change only between episodes (the env applies new ones at its next
 ``reset``, :meth:`specguard.env.SpecEnv.set_weights`): within an episode
@@ -44,7 +57,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Iterable, Mapping, Sequence
 
-from specguard.extend import Node
+from specguard.extend import SAFETY, Annotation, Node, annotation_key, component_weights
 from specguard.validation import PATH_SEPARATOR
 
 __all__ = [
@@ -52,8 +65,10 @@ __all__ = [
     "MIN_EPISODES",
     "WINDOW",
     "WeightAdapter",
+    "adapted_annotations",
     "adapted_weights",
     "adapting_nodes",
+    "initial_weights",
     "per_seed_text",
     "weights_text",
 ]
@@ -64,7 +79,7 @@ FLOOR = 0.1  # a reached child keeps FLOOR / (sum) of the weight
 
 
 def adapted_weights(rates: Sequence[float]) -> tuple[float, ...]:
-    """The rule above: weights from the children's success shares ``rates`` (each in ``[0, 1]``).
+    """The rule above: weights from the outcomes' success shares ``rates`` (each in ``[0, 1]``).
 
     Example:
         >>> adapted_weights([0.0, 1.0])
@@ -77,13 +92,36 @@ def adapted_weights(rates: Sequence[float]) -> tuple[float, ...]:
     return tuple(r / total for r in raw)
 
 
+def adapted_annotations(node: Node) -> tuple[int, ...]:
+    """Indices in ``node.annotations`` of the ones whose weight a node that adapts its weights adapts.
+
+    Its safety annotations left at their default weight; a weight the user set is kept.
+    """
+    return tuple(i for i, a in enumerate(node.annotations) if _adapts(a))
+
+
+def _adapts(a: Annotation) -> bool:
+    return a.role == SAFETY and a.weight is None
+
+
 def adapting_nodes(tree: Node) -> dict[str, tuple[str, ...]]:
-    """Per path of a node that adapts its weights, its children's paths, in order."""
+    """Per path of a node that adapts its weights, its outcomes' keys, in order.
+
+    Its children's paths, then the keys (``path:name``) of its adapted safety
+    annotations (:func:`adapted_annotations`): the order of the weights.
+    """
     return {
         path: tuple(f"{path}{PATH_SEPARATOR}{c.name}" for c in node.children)
+        + tuple(annotation_key(path, node.annotations[i]) for i in adapted_annotations(node))
         for path, node in tree.walk()
         if node.adapts_weights
     }
+
+
+def initial_weights(node: Node) -> tuple[float, ...]:
+    """A node's own weights in :func:`adapting_nodes`'s order: its children's, then its adapted annotations'."""
+    annotation_weights = component_weights(node)[1]
+    return tuple(w.core for w in node.child_weights()) + tuple(annotation_weights[i] for i in adapted_annotations(node))
 
 
 def weights_text(weights: Mapping[str, Sequence[float]]) -> str:
@@ -107,10 +145,11 @@ def per_seed_text(seeds: Iterable[tuple[int, Mapping[str, Sequence[float]]]]) ->
 
 
 class WeightAdapter:
-    """Success shares of the children of every adapting node, over a window of finished episodes.
+    """Success shares of the outcomes of every adapting node, over a window of finished episodes.
 
     Args:
-        nodes: per adapting node's path, its children's paths (:func:`adapting_nodes`).
+        nodes: per adapting node's path, its outcomes' keys (:func:`adapting_nodes`).
+        initial: per adapting node's path, its weights before any adaptation (:func:`initial_weights`).
         window: how many of the latest finished episodes the shares are measured over.
     """
 
@@ -120,10 +159,10 @@ class WeightAdapter:
         initial: Mapping[str, Sequence[float]],
         window: int = WINDOW,
     ) -> None:
-        self.nodes = {path: tuple(children) for path, children in nodes.items()}
+        self.nodes = {path: tuple(outcomes) for path, outcomes in nodes.items()}
         # The weights before any adaptation (the node's own, 1/N for "auto"), and then the latest ones.
         self.in_force: dict[str, tuple[float, ...]] = {path: tuple(initial[path]) for path in self.nodes}
-        self._children = tuple(dict.fromkeys(c for cs in self.nodes.values() for c in cs))
+        self._outcomes = tuple(dict.fromkeys(c for cs in self.nodes.values() for c in cs))
         self._episodes: deque[tuple[bool, ...]] = deque(maxlen=window)
 
     @classmethod
@@ -132,24 +171,25 @@ class WeightAdapter:
         nodes = adapting_nodes(tree)
         if not nodes:
             return None
-        initial = {path: tuple(w.core for w in node.child_weights()) for path, node in tree.walk() if path in nodes}
+        initial = {path: initial_weights(node) for path, node in tree.walk() if path in nodes}
         return cls(nodes, initial, window)
 
-    def observe(self, goals: Mapping[str, bool]) -> None:
-        """Add one finished episode: ``info["goals"]`` of its last step."""
-        self._episodes.append(tuple(bool(goals[c]) for c in self._children))
+    def observe(self, goals: Mapping[str, bool], safe: Mapping[str, bool] | None = None) -> None:
+        """Add one finished episode: ``info["goals"]`` and ``info["safe"]`` of its last step."""
+        outcomes = {**goals, **(safe or {})}
+        self._episodes.append(tuple(bool(outcomes[c]) for c in self._outcomes))
 
     def rates(self) -> dict[str, float]:
-        """Per child path, the share of the window's episodes that ended in its goal."""
+        """Per outcome key, the share of the window's episodes that ended in its goal (or without a violation)."""
         n = len(self._episodes)
-        return {c: sum(e[i] for e in self._episodes) / n if n else 0.0 for i, c in enumerate(self._children)}
+        return {c: sum(e[i] for e in self._episodes) / n if n else 0.0 for i, c in enumerate(self._outcomes)}
 
     def weights(self) -> dict[str, tuple[float, ...]] | None:
         """The adapted weights per node, or ``None`` while fewer than :data:`MIN_EPISODES` episodes finished."""
         if len(self._episodes) < MIN_EPISODES:
             return None
         rates = self.rates()
-        return {path: adapted_weights([rates[c] for c in children]) for path, children in self.nodes.items()}
+        return {path: adapted_weights([rates[c] for c in outcomes]) for path, outcomes in self.nodes.items()}
 
     def in_force_lists(self) -> dict[str, list[float]]:
         """:attr:`in_force` as plain JSON data, as results and curve points record it."""

@@ -34,6 +34,7 @@ from typing import Any, NoReturn
 
 import numpy as np
 
+from specguard.auto_weights import adapted_annotations
 from specguard.codegen import build_namespace, source_of
 from specguard.error import EvaluationError, InvalidSpec, UnknownFeature
 from specguard.extend import (
@@ -302,8 +303,9 @@ def compile_tree(
         tree: the goal tree.
         features: the feature names.
         weights: per path of a node that adapts its weights
-            (:attr:`Node.adapts_weights`), one weight per child replacing the
-            node's own (:mod:`specguard.auto_weights`).
+            (:attr:`Node.adapts_weights`), one weight per child and then one
+            per adapted safety annotation of the node, replacing the node's
+            own (:mod:`specguard.auto_weights`).
 
     Raises:
         UnknownFeature: a goal names a feature not in ``features``.
@@ -334,7 +336,9 @@ def compile_tree(
         slot_start.append(-1)
         core_w, ann_w = component_weights(node)
         kid_boxes = []
-        kid_weights = overrides[path] if path in overrides else node.child_weights()
+        kid_weights = node.child_weights()
+        if path in overrides:
+            kid_weights, ann_w = overrides[path]
         for child, w in zip(node.children, kid_weights):
             # A child's term of role r is scaled by this node's core weight and the child's weight for r.
             passed = ChildWeights(*(c * core_w * x for c, x in zip((coef.core, coef.shaping, coef.safety), w)))
@@ -380,8 +384,10 @@ def compile_tree(
     )
 
 
-def _check_overrides(tree: Node, weights: Mapping[str, Sequence[float]]) -> dict[str, tuple[ChildWeights, ...]]:
-    """``weights`` as each adapting node's :class:`ChildWeights`, checked against the tree."""
+def _check_overrides(
+    tree: Node, weights: Mapping[str, Sequence[float]]
+) -> dict[str, tuple[tuple[ChildWeights, ...], tuple[float, ...]]]:
+    """``weights`` as each adapting node's children's :class:`ChildWeights` and annotation weights, checked."""
     nodes = dict(tree.walk())
     out = {}
     for path, ws in weights.items():
@@ -394,12 +400,18 @@ def _check_overrides(tree: Node, weights: Mapping[str, Sequence[float]]) -> dict
                 f"such nodes: {', '.join(map(repr, adapting)) or 'none'}",
             )
         values = tuple(float(w) for w in ws)
-        if len(values) != len(node.children) or not all(math.isfinite(w) and w >= 0 for w in values):
+        adapted = adapted_annotations(node)
+        n = len(node.children)
+        if len(values) != n + len(adapted) or not all(math.isfinite(w) and w >= 0 for w in values):
+            per = "one per child" + (f", then one per constraint of the node ({len(adapted)})" if adapted else "")
             raise InvalidSpec(
                 f"weights[{path!r}]",
-                f"expected {len(node.children)} finite weights >= 0 (one per child), got {values!r}",
+                f"expected {n + len(adapted)} finite weights >= 0 ({per}), got {values!r}",
             )
-        out[path] = tuple(ChildWeights.same(w) for w in values)
+        annotation_weights = list(component_weights(node)[1])
+        for i, w in zip(adapted, values[n:]):
+            annotation_weights[i] = w
+        out[path] = tuple(ChildWeights.same(w) for w in values[:n]), tuple(annotation_weights)
     return out
 
 

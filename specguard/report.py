@@ -236,10 +236,9 @@ def curves_figure(rows: Sequence[Row]) -> Figure | None:
                     color=colour,
                     gid=f"{goal}:evaluation",
                 )
-        ceiling = 2.0
-        for y, x, text, colour, gid in sorted(ends, reverse=True):
-            ceiling = min(y, ceiling - 0.045)  # labels of curves ending together stack down instead of overlapping
-            ax.text(x, ceiling, f" {text}", fontsize=6, color=colour, va="center", ha="left", gid=gid)
+        labelled = _label_heights([y for y, *_ in sorted(ends, reverse=True)])
+        for (_, x, text, colour, gid), y in zip(sorted(ends, reverse=True), labelled):
+            ax.text(x, y, f" {text}", fontsize=6, color=colour, va="center", ha="left", gid=gid)
         ax.set_title(group.split("::", 1)[-1], fontsize=9)
         ax.set_xlabel("training steps")
         ax.xaxis.set_major_locator(MaxNLocator(4))
@@ -251,7 +250,7 @@ def curves_figure(rows: Sequence[Row]) -> Figure | None:
         handles.append(Line2D([], [], color="grey", linestyle="--", linewidth=1.0))
         labels.append("threshold")
         handles.append(Line2D([], [], color="grey", linewidth=0.8, alpha=0.6))
-        labels.append("seeds (s<n>); bold: mean")
+        labels.append("seeds (s<n>); bold: mean" if len(labelled) == len(ends) else "seeds; bold: mean")
         if evaluated:
             handles.append(Line2D([], [], color="grey", linestyle="none", marker="o", markerfacecolor="white"))
             labels.append("evaluation")
@@ -260,6 +259,30 @@ def curves_figure(rows: Sequence[Row]) -> Figure | None:
         row[0].set_ylabel("success (training episodes)")
     fig.tight_layout()
     return fig
+
+
+LABEL_GAP = 0.045  # the height of one seed label, in success units
+
+
+def _label_heights(ends: Sequence[float], bottom: float = -0.05) -> list[float]:
+    """Heights for seed labels at curve ends given from the highest down, or ``[]`` when they do not all fit.
+
+    Labels of curves ending together stack down instead of overlapping; when the
+    stack would leave the axes (many goals times many seeds), the seeds go
+    unlabelled rather than piling up below the plot.
+
+    Example:
+        >>> [round(y, 3) for y in _label_heights([1.0, 1.0, 0.5])]
+        [1.0, 0.955, 0.5]
+        >>> _label_heights([0.0] * 3)
+        []
+    """
+    heights: list[float] = []
+    ceiling = 2.0
+    for y in ends:
+        ceiling = min(y, ceiling - LABEL_GAP)
+        heights.append(ceiling)
+    return heights if not heights or heights[-1] >= bottom else []
 
 
 def plot_curves(rows: Sequence[Row], path: Path) -> bool:

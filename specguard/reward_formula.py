@@ -20,7 +20,8 @@ from __future__ import annotations
 
 from collections import Counter
 
-from specguard.extend import SAFETY, SHAPING, ChildWeights, Node, component_weights
+from specguard.auto_weights import adapted_annotations
+from specguard.extend import SAFETY, SHAPING, Annotation, ChildWeights, Node, component_weights
 from specguard.validation import number_text
 
 __all__ = ["formula"]
@@ -67,8 +68,7 @@ def formula(tree: Node) -> str:
         parts = [_weighted(core_w, " + ".join(core_parts))] if core_parts else []
         for a, w in zip(node.annotations, ann_w):
             if a.role in roles and w != 0:
-                suffix = "" if a.name in ("distance", "constraint") else f":{a.name}"
-                parts.append(_weighted(w, f"{a.symbol}[{name}{suffix}]"))
+                parts.append(_weighted(w, _annotation_text(name, a)))
         return " + ".join(parts)
 
     def _child(c: Node, path: str, w: ChildWeights, roles: frozenset[str]) -> list[str]:
@@ -84,7 +84,19 @@ def formula(tree: Node) -> str:
         return out
 
     out = f"R = {expr(tree, tree.name, frozenset(_ROLES)) or '0'}"
-    adapting = [label(path, node) for path, node in paths if node.adapts_weights]
+    adapting = [_adapting_text(label(path, node), node) for path, node in paths if node.adapts_weights]
     if adapting:  # the formula shows where they start (specguard.auto_weights)
-        out += f"\n  weights of {', '.join(adapting)}: 1/N at the start, adapted during training"
+        out += f"\n  weights of {', '.join(adapting)}: as written at the start, adapted during training"
     return out
+
+
+def _annotation_text(name: str, a: Annotation) -> str:
+    """An annotation's term: ``D[position]``, or ``P[lander:crash]`` for a name other than the default."""
+    suffix = "" if a.name in ("distance", "constraint") else f":{a.name}"
+    return f"{a.symbol}[{name}{suffix}]"
+
+
+def _adapting_text(name: str, node: Node) -> str:
+    """``p`` or ``p with P[p:crash]``: an adapting node and the annotations whose weights adapt with it."""
+    adapted = [_annotation_text(name, node.annotations[i]) for i in adapted_annotations(node)]
+    return name + (f" with {', '.join(adapted)}" if adapted else "")

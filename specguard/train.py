@@ -184,7 +184,7 @@ class _GoalCurve:
                 self._episodes += 1
                 _count_episode(self._counts, info)
                 if self.adapter is not None:
-                    self.adapter.observe(info["goals"])
+                    self.adapter.observe(info["goals"], info.get("safe"))
         if self.report is not None and num_timesteps >= self._next_tick:
             self._next_tick = num_timesteps + self._tick
             self.report("train", num_timesteps, None)

@@ -9,7 +9,14 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import specguard as sg
-from specguard.auto_weights import FLOOR, MIN_EPISODES, WeightAdapter, adapted_weights, adapting_nodes
+from specguard.auto_weights import (
+    FLOOR,
+    MIN_EPISODES,
+    WeightAdapter,
+    adapted_annotations,
+    adapted_weights,
+    adapting_nodes,
+)
 
 up = sg.Goal("up", x=(0.9, 1.0))
 still = sg.Goal("still", v=(-0.1, 0.1))
@@ -68,3 +75,22 @@ def test_adapter_waits_for_enough_episodes_then_follows_the_window():
         adapter.observe({"p": True, "p/up": True, "p/still": True})
     assert adapter.rates() == {"p/up": 1.0, "p/still": 1.0}
     assert adapter.update() == {"p": (0.5, 0.5)}
+
+
+def fast(s, a):
+    return s.v > 1.0
+
+
+def test_a_constraint_of_the_auto_node_left_at_its_default_weight_adapts_with_the_children():
+    tree = auto_tree().annotate(sg.Constraint(fast, name="fast"), sg.Constraint(fast, name="kept", weight=2.0))
+    inner = sg.All(up.annotate(sg.Constraint(fast, name="below")), still, name="p", weights="auto")
+    assert adapted_annotations(tree) == (0,)  # "kept" has the weight its author set
+    assert adapting_nodes(tree) == {"p": ("p/up", "p/still", "p:fast")}
+    assert adapting_nodes(inner) == {"p": ("p/up", "p/still")}  # a child's constraint goes with the child
+    adapter = WeightAdapter.of(tree)
+    assert adapter is not None and adapter.in_force == {"p": (0.5, 0.5, 1.0)}  # 1/N per child, 1 per constraint
+    for _ in range(MIN_EPISODES):  # it never speeds, and never holds still up there: the goals get the weight
+        adapter.observe({"p": False, "p/up": False, "p/still": True}, {"p:fast": True, "p:kept": True})
+    assert adapter.rates() == {"p/up": 0.0, "p/still": 1.0, "p:fast": 1.0}
+    assert adapter.update() == {"p": adapted_weights([0.0, 1.0, 1.0])}
+    assert adapter.in_force["p"][2] == pytest.approx(FLOOR / (1 + 3 * FLOOR))

@@ -266,3 +266,27 @@ def test_adapted_weights_replace_an_auto_nodes_weights_only():
         compile_tree(tree, ("x", "v"), weights={"p": (1.0,)})
     with pytest.raises(sg.InvalidSpec, match=r"such nodes: none"):
         compile_tree(sg.All(up, still, name="p"), ("x", "v"), weights={"p": (0.9, 0.1)})
+
+
+def test_adapted_weights_of_an_auto_node_include_its_default_weight_constraints():
+    up, still = sg.Goal("up", x=(0.5, None)), sg.Goal("still", v=(-0.1, 0.1))
+    fast, kept = sg.Constraint(lambda s, a: s.v > 1, name="fast"), sg.Constraint(lambda s, a: False, weight=2.0)
+    tree = sg.All(up, still, name="p", weights="auto").annotate(fast, kept)
+    plain = compile_tree(tree, ("x", "v"))
+    adapted = compile_tree(tree, ("x", "v"), weights={"p": (0.6, 0.3, 0.1)})
+    assert [(t.key, t.coef) for t in plain.terms] == [
+        ("p/up", 0.5),
+        ("p/still", 0.5),
+        ("p:fast", 1.0),
+        ("p:constraint", 2.0),
+    ]
+    assert [(t.key, t.coef) for t in adapted.terms] == [
+        ("p/up", 0.6),
+        ("p/still", 0.3),
+        ("p:fast", 0.1),
+        ("p:constraint", 2.0),  # a weight its author set is kept
+    ]
+    with pytest.raises(
+        sg.InvalidSpec, match=r"expected 3 finite weights >= 0 \(one per child, then one per constraint"
+    ):
+        compile_tree(tree, ("x", "v"), weights={"p": (0.9, 0.1)})

@@ -223,3 +223,17 @@ def test_figure_labels_an_asserted_safety_rate_as_safety():
     assert [line.get_gid() for line in lines_of(fig, "pendulum:fast") if "threshold" in line.get_gid()] == [
         "pendulum:fast:threshold"
     ]
+
+
+def seed_labels(fig):
+    return [t for ax in fig.axes for t in ax.texts if (t.get_gid() or "").endswith(":label")]
+
+
+def test_seed_labels_stack_inside_the_axes_or_are_left_out():
+    labelled = seed_labels(curves_figure([ROW]))
+    assert sorted(t.get_text().strip() for t in labelled) == ["s0", "s1"]
+    # Many seeds ending together at 0: their labels would pile up below the plot, so none is drawn.
+    many = {**ROW, "per_seed": [{"seed": i} for i in range(30)], "curves": [curve(0.0, 0.0)] * 30}
+    fig = curves_figure([many])
+    assert seed_labels(fig) == []
+    assert "seeds; bold: mean" in [t.get_text() for t in fig.axes[0].get_legend().get_texts()]

@@ -35,4 +35,7 @@ def test_named_and_weighted_annotations():
 
 def test_auto_weights_are_shown_where_they_start():
     tree = sg.All(sg.Goal("up", x=(0.9, 1)), sg.Goal("still", v=(-0.1, 0.1)), name="p", weights="auto")
-    assert sg.formula(tree) == "R = 0.5*R[up] + 0.5*R[still]\n  weights of p: 1/N at the start, adapted during training"
+    note = ": as written at the start, adapted during training"
+    assert sg.formula(tree) == "R = 0.5*R[up] + 0.5*R[still]\n  weights of p" + note
+    fast, kept = sg.Constraint(lambda s, a: s.v > 1, name="fast"), sg.Constraint(lambda s, a: False, weight=2)
+    assert sg.formula(tree.annotate(fast, kept)).endswith("weights of p with P[p:fast]" + note)

@@ -199,3 +199,14 @@ def test_auto_weights_adapt_during_training_and_are_recorded():
     assert result.curve[-1]["weights"] == result.weights
     baseline, _ = train_run(dataclasses.replace(spec, baseline=True), seed=0)
     assert baseline.weights == {} and "weights" not in baseline.curve[0]
+
+
+def test_auto_weights_see_the_safety_of_the_nodes_own_constraints():
+    initial = sg.InitialEnv(lambda: ReplayEnv([[0.0], [1.0], [0.0], [1.0]]), features=("x",))
+    never = sg.Constraint(lambda s, a: False, name="never")
+    tree = sg.All(sg.Goal("up", x=(0.5, None)), sg.Goal("low", x=(None, 0.7)), name="p", weights="auto").annotate(never)
+    spec = sg.Spec(initial, tree, budget=sg.Budget(timesteps=128, eval_episodes=2), hyperparameters=TINY)
+    result, _ = train_run(spec, seed=0)
+    # "up" reached and "never" kept in every episode: "low" takes the weight, both others keep the floor.
+    assert result.weights == {"p": pytest.approx([0.1 / 1.3, 1.1 / 1.3, 0.1 / 1.3])}
+    assert result.curve[0]["weights"] == {"p": [0.5, 0.5, 1.0]}
