@@ -50,7 +50,9 @@ def _import_file(path: Path) -> ModuleType:
     if not path.is_file():
         raise SpecError(f"{path}: no such file")
     name = f"specguard_user_{abs(hash(path.resolve()))}"
-    sys.path.insert(0, str(path.resolve().parent))  # let the file import its neighbours
+    for folder in _import_roots(path):  # let the file import its neighbours, and its package by name
+        if folder not in sys.path:
+            sys.path.insert(0, folder)
     module_spec = importlib.util.spec_from_file_location(name, path)
     assert module_spec is not None and module_spec.loader is not None
     module = importlib.util.module_from_spec(module_spec)
@@ -64,6 +66,19 @@ def _import_file(path: Path) -> ModuleType:
     # Workers are separate processes: ship this file's functions by value.
     cloudpickle.register_pickle_by_value(module)
     return module
+
+
+def _import_roots(path: Path) -> list[str]:
+    """The file's folder and, when that is a package, the folder above its top package (pytest's rootdir rule).
+
+    So ``example_specs/weights.py`` may write ``from example_specs import pendulum``
+    under ``specguard run`` as it does under pytest.
+    """
+    folder = path.resolve().parent
+    top = folder
+    while (top / "__init__.py").is_file():
+        top = top.parent
+    return [str(folder)] if top == folder else [str(top), str(folder)]
 
 
 def load_objects(target: str, kinds: tuple[type, ...] = (Spec,)) -> dict[str, Any]:

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import json
+import sys
 import textwrap
 
 import pytest
 
-from specguard.cli import main
+from specguard.cli import load_objects, main
 from specguard.error import SpecError
 
 SPEC_FILE = textwrap.dedent(
@@ -157,3 +158,17 @@ def test_json_path_that_cannot_be_written_fails_before_training(spec_file, tmp_p
     assert main(["run", f"{spec_file}::easy", "--no-cache", "--json", str(tmp_path)]) == 2
     assert f"--json {tmp_path}: is a directory; expected a file name" in capsys.readouterr().err
     assert no_training == []
+
+
+def test_a_spec_file_in_a_package_imports_its_package_by_name(tmp_path, monkeypatch):
+    monkeypatch.setattr(sys, "path", list(sys.path))
+    monkeypatch.setattr(sys, "modules", dict(sys.modules))
+    package = tmp_path / "cases"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "base.py").write_text("import specguard as sg\nTREE = sg.Goal('up', x=(0.5, None))\n")
+    (package / "more.py").write_text(
+        "import specguard as sg\nfrom cases import base\n"
+        "spec = sg.Spec(sg.InitialEnv('Pendulum-v1', features=('x', 'y', 'omega')), base.TREE, sg.Budget(64))\n"
+    )
+    assert list(load_objects(str(package / "more.py"))) == ["spec"]
