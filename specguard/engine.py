@@ -34,7 +34,7 @@ from specguard.spec import Spec
 from specguard.stats import QuorumVerdict, RunVerdict, quorum_verdict, run_verdict, success_interval
 from specguard.text import render_table
 from specguard.train import RunResult, TrainingError
-from specguard.workers import Failure, Report, Task
+from specguard.workers import Failure, Outcome, Report, Task
 from specguard.workers import resolve_workers as workers_for
 
 __all__ = ["GoalVerdict", "SpecResult", "resolve_workers", "run_spec"]
@@ -344,10 +344,30 @@ class _Runs:
             self.say(ProgressEvent(self.spec.label, seed, "start", budget=self.spec.budget.timesteps))
             keyed = versions() if self._key(seed) is not None else None
             tasks.append(Task(seed, _train_task, (self.spec, seed, keyed)))
+        trained: dict[int, RunResult] = {}
+
+        def finished(seed: int, outcome: Outcome) -> None:
+            # As each seed ends, not after the batch: a finished run is stored even if a later seed
+            # is interrupted (Ctrl-C, SIGTERM) or the spec is stopped.
+            if isinstance(outcome, Failure):
+                if not _is_spec_error(outcome):  # a spec error is raised below, once every child has stopped
+                    self.result.errors[seed] = _describe_failure(seed, outcome)
+                    if outcome.traceback:
+                        self.result.tracebacks[seed] = outcome.traceback
+                    self.say(ProgressEvent(self.spec.label, seed, "failed", message=self.result.errors[seed]))
+                return
+            run = RunResult(**outcome.value["result"])
+            key = self._key(seed)
+            if key is not None and self.cache is not None:
+                self.cache.store_files(key, run, outcome.value["files"])
+            trained[seed] = run
+            self._event(seed, "done", run, message=self._rates(run))
+
         outcomes = self.executor.run(
             tasks,
             on_line=lambda seed, line: self.say(decode_update(self.spec.label, seed, line)),
             stop_on=_is_spec_error,
+            on_outcome=finished,
         )
         for outcome in outcomes.values():
             if isinstance(outcome, Failure) and _is_spec_error(outcome):
@@ -355,20 +375,10 @@ class _Runs:
                 if outcome.traceback:
                     outcome.exception.add_note(f"worker traceback (seed {outcome.key}):\n{outcome.traceback}")
                 raise outcome.exception
-        for seed, outcome in outcomes.items():
-            if isinstance(outcome, Failure):  # other seeds' results are kept
-                self.result.errors[seed] = _describe_failure(seed, outcome)
-                if outcome.traceback:
-                    self.result.tracebacks[seed] = outcome.traceback
-                self.say(ProgressEvent(self.spec.label, seed, "failed", message=self.result.errors[seed]))
-                continue
-            run = RunResult(**outcome.value["result"])
-            key = self._key(seed)
-            if key is not None and self.cache is not None:
-                self.cache.store_files(key, run, outcome.value["files"])
-            self.result.runs.append(run)
-            self.result.cached[seed] = False
-            self._event(seed, "done", run, message=self._rates(run))
+        for seed in outcomes:  # the runs in seed order, whatever order they finished in
+            if seed in trained:
+                self.result.runs.append(trained[seed])
+                self.result.cached[seed] = False
 
     @staticmethod
     def _rates(run: RunResult) -> str:

@@ -55,7 +55,11 @@ class ExecutorError(SpecError):
 
 
 class Executor(Protocol):
-    """Runs a batch of tasks and returns one outcome per finished task, in task order."""
+    """Runs a batch of tasks and returns one outcome per finished task, in task order.
+
+    ``on_outcome(key, outcome)`` is called as each task ends (the engine stores a
+    finished seed at once, so an interrupted batch keeps it), ``stop_on`` after it.
+    """
 
     def run(
         self,
@@ -63,6 +67,7 @@ class Executor(Protocol):
         *,
         on_line: Callable[[int, str], None] | None = None,
         stop_on: Callable[[Failure], bool] | None = None,
+        on_outcome: Callable[[int, Outcome], None] | None = None,
     ) -> dict[int, Outcome]: ...
 
     def close(self) -> None: ...
@@ -108,8 +113,9 @@ class LocalExecutor:
         *,
         on_line: Callable[[int, str], None] | None = None,
         stop_on: Callable[[Failure], bool] | None = None,
+        on_outcome: Callable[[int, Outcome], None] | None = None,
     ) -> dict[int, Outcome]:
-        return run_tasks(tasks, max_workers=self.workers, on_line=on_line, stop_on=stop_on)
+        return run_tasks(tasks, max_workers=self.workers, on_line=on_line, stop_on=stop_on, on_outcome=on_outcome)
 
     def close(self) -> None:
         pass
@@ -164,6 +170,7 @@ class DaskExecutor:
         *,
         on_line: Callable[[int, str], None] | None = None,
         stop_on: Callable[[Failure], bool] | None = None,
+        on_outcome: Callable[[int, Outcome], None] | None = None,
     ) -> dict[int, Outcome]:
         from distributed import Queue
 
@@ -193,6 +200,9 @@ class DaskExecutor:
                     key = futures[future]
                     outcome = self._outcome(future, key, where[key])
                     outcomes[key] = outcome
+                    if on_outcome is not None:
+                        self._drain(queue, where, on_line)  # its last progress lines before its result
+                        on_outcome(key, outcome)
                     if isinstance(outcome, Failure) and stop_on is not None and stop_on(outcome):
                         return {t.key: outcomes[t.key] for t in tasks if t.key in outcomes}
             self._drain(queue, where, on_line)

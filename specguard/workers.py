@@ -443,6 +443,7 @@ def run_tasks(
     max_workers: int,
     on_line: Callable[[int, str], None] | None = None,
     stop_on: Callable[[Failure], bool] | None = None,
+    on_outcome: Callable[[int, Outcome], None] | None = None,
 ) -> dict[int, Outcome]:
     """Run every task in a spawned process of its own, at most ``max_workers`` at once.
 
@@ -457,6 +458,9 @@ def run_tasks(
         on_line: called in the parent as ``on_line(key, line)`` for each line a task reports, in order per task.
         stop_on: called with each failure as it arrives; when it returns True, the other children are
             terminated and the outcomes so far are returned at once (unfinished tasks are absent).
+        on_outcome: called in the parent as ``on_outcome(key, outcome)`` as each task ends, before
+            ``stop_on`` sees it, so a caller can keep a finished task's result even if the batch is
+            interrupted later.
 
     Returns:
         The outcome of each finished task by key, in the order of ``tasks``.
@@ -501,6 +505,8 @@ def run_tasks(
                     if outcome is not None:
                         outcomes[child.task.key] = outcome
                         child.deadline = time.monotonic() + _EXIT_GRACE_S
+                        if on_outcome is not None:
+                            on_outcome(child.task.key, outcome)
                         if isinstance(outcome, Failure) and stop_on is not None and stop_on(outcome):
                             return _in_task_order(tasks, outcomes)
                     elif child.eof and child.deadline is None:
@@ -514,6 +520,8 @@ def run_tasks(
                 _release([child])
                 if failure is not None:
                     outcomes[child.task.key] = failure
+                    if on_outcome is not None:
+                        on_outcome(child.task.key, failure)
                     if stop_on is not None and stop_on(failure):
                         return _in_task_order(tasks, outcomes)
         return _in_task_order(tasks, outcomes)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import multiprocessing
 import os
 import re
 import signal
@@ -376,3 +377,28 @@ def test_a_worker_with_the_keyed_versions_trains():
 
     out = _train_task(spec(), 0, versions(), report=lambda phase, step=None, line=None: None)
     assert out["result"]["timesteps"] == 128 and out["files"]
+
+
+class WaitsForAStoredRun(gym.Wrapper):
+    """Seed 1's training env (in a worker; the parent's fingerprint probe resets too) blocks until a run is stored."""
+
+    def __init__(self, env, cache):
+        super().__init__(env)
+        self.cache = Path(cache)
+
+    def reset(self, *, seed=None, options=None):
+        if seed == 1 and multiprocessing.parent_process() is not None:
+            deadline = time.monotonic() + 120
+            while not list(self.cache.rglob("result.json")):
+                if time.monotonic() > deadline:
+                    raise RuntimeError("seed 0's run was never stored while seed 1 trained")
+                time.sleep(0.1)
+        return self.env.reset(seed=seed, options=options)
+
+
+def test_a_finished_seed_is_stored_while_the_other_still_trains(tmp_path):
+    cache = tmp_path / "cache"
+    initial = sg.InitialEnv(lambda: WaitsForAStoredRun(gym.make("Pendulum-v1"), cache), features=("x", "y", "omega"))
+    s = sg.Spec(initial, pendulum.trees["b"], budget=sg.Budget(timesteps=128, eval_episodes=2), hyperparameters=TINY)
+    result = sg.run_spec(s, workers=2, cache_dir=cache, progress=None)
+    assert result.errors == {} and [r.seed for r in result.runs] == [0, 1]

@@ -55,6 +55,15 @@ def count_lines(key: int, n: int, *, report: Report) -> int:
     return n
 
 
+def wait_for_file(path: str, timeout: float, *, report: Report) -> str:
+    deadline = time.monotonic() + timeout
+    while not os.path.exists(path):
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"{path} never appeared")
+        time.sleep(0.05)
+    return "saw it"
+
+
 def _explode(step: int) -> None:
     raise ValueError(f"boom at {step}\nsecond line of the message")
 
@@ -431,3 +440,19 @@ def test_auto_shares_the_cores():
     assert resolve_workers("auto", share=cores) == 1
     assert resolve_workers("auto", share=cores * 4) == 1  # never 0
     assert resolve_workers(5, share=8) == 5  # an explicit count is taken as given
+
+
+def test_each_outcome_reaches_the_caller_as_its_task_ends(tmp_path):
+    # Task 1 ends only once the parent has been told of task 0: an outcome held back to the batch's end fails it.
+    marker = tmp_path / "task 0 ended"
+    seen: list[tuple[int, Outcome]] = []
+
+    def on_outcome(key: int, outcome: Outcome) -> None:
+        seen.append((key, outcome))
+        if key == 0:
+            marker.write_text("")
+
+    tasks = [Task(0, sleep_then_return, (0, 0.0)), Task(1, wait_for_file, (str(marker), 60.0))]
+    outcomes = run_tasks(tasks, max_workers=2, on_outcome=on_outcome)
+    assert isinstance(outcomes[1], Done) and outcomes[1].value == "saw it"
+    assert [key for key, _ in seen] == [0, 1] and dict(seen) == outcomes
