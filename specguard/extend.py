@@ -259,6 +259,8 @@ class Node:
     def adapts_weights(self) -> bool:
         """Whether training may replace :meth:`child_weights` by one adapted weight per child.
 
+        The weights of the node's own safety annotations left at their default
+        weight adapt with them (:func:`specguard.auto_weights.adapted_annotations`).
         ``All(weights="auto")`` does (:mod:`specguard.auto_weights`); the tree
         as declared keeps its own weights, so an env built from it alone is
         unchanged.
