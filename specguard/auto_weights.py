@@ -57,7 +57,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Iterable, Mapping, Sequence
 
-from specguard.extend import SAFETY, Annotation, Node, annotation_key, component_weights
+from specguard.extend import SAFETY, Node, annotation_key, component_weights
 from specguard.validation import PATH_SEPARATOR
 
 __all__ = [
@@ -75,7 +75,7 @@ __all__ = [
 
 WINDOW = 100  # episodes the success shares are measured over
 MIN_EPISODES = 10  # fewer finished episodes say too little to move the weights
-FLOOR = 0.1  # a reached child keeps FLOOR / (sum) of the weight
+FLOOR = 0.1  # a reached outcome keeps FLOOR / (sum) of the weight
 
 
 def adapted_weights(rates: Sequence[float]) -> tuple[float, ...]:
@@ -97,11 +97,7 @@ def adapted_annotations(node: Node) -> tuple[int, ...]:
 
     Its safety annotations left at their default weight; a weight the user set is kept.
     """
-    return tuple(i for i, a in enumerate(node.annotations) if _adapts(a))
-
-
-def _adapts(a: Annotation) -> bool:
-    return a.role == SAFETY and a.weight is None
+    return tuple(i for i, a in enumerate(node.annotations) if a.role == SAFETY and a.weight is None)
 
 
 def adapting_nodes(tree: Node) -> dict[str, tuple[str, ...]]:

@@ -340,9 +340,9 @@ class _Runs:
         if not seeds:
             return
         tasks = []
+        keyed = versions() if self.fingerprint is not None and self.cache is not None else None
         for seed in seeds:
             self.say(ProgressEvent(self.spec.label, seed, "start", budget=self.spec.budget.timesteps))
-            keyed = versions() if self._key(seed) is not None else None
             tasks.append(Task(seed, _train_task, (self.spec, seed, keyed)))
         trained: dict[int, RunResult] = {}
 
