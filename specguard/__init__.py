@@ -29,41 +29,41 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-__version__ = "0.1.0"
+from specguard.version import __version__
 
 _EXPORTS = {
-    "All": "specguard.nodes",
+    "All": "specguard.tree.nodes",
     "Annotation": "specguard.extend",
-    "Budget": "specguard.budget",
-    "Cache": "specguard.cache",
-    "CompiledTree": "specguard.compiled",
-    "Constraint": "specguard.annotations",
-    "Distance": "specguard.annotations",
+    "Budget": "specguard.engine.budget",
+    "Cache": "specguard.engine.cache",
+    "CompiledTree": "specguard.build.compiled",
+    "Constraint": "specguard.tree.builtin_annotations",
+    "Distance": "specguard.tree.builtin_annotations",
     "EvaluationError": "specguard.error",
     "FingerprintError": "specguard.error",
-    "Goal": "specguard.nodes",
-    "GoalEnv": "specguard.env",  # deprecated name of SpecEnv (warns)
-    "SpecEnv": "specguard.env",
-    "GoalInfo": "specguard.env",
-    "GoalVerdict": "specguard.engine",
-    "InitialEnv": "specguard.initial_env",
+    "Goal": "specguard.tree.nodes",
+    "GoalEnv": "specguard.build.env",  # deprecated name of SpecEnv (warns)
+    "SpecEnv": "specguard.build.env",
+    "GoalInfo": "specguard.build.env",
+    "GoalVerdict": "specguard.engine.run",
+    "InitialEnv": "specguard.build.initial_env",
     "InitialEnvError": "specguard.error",
     "InvalidSpec": "specguard.error",
     "Node": "specguard.extend",
-    "Spec": "specguard.spec",
+    "Spec": "specguard.engine.spec",
     "SpecError": "specguard.error",
-    "SpecResult": "specguard.engine",
+    "SpecResult": "specguard.engine.run",
     "StateMappingError": "specguard.error",
     "UnknownFeature": "specguard.error",
     "UnreachableGoal": "specguard.error",
     "VersionMismatch": "specguard.error",
-    "compile_tree": "specguard.compiled",
-    "formula": "specguard.reward_formula",
-    "goal_spec": "specguard.declare",
-    "goal_specs": "specguard.declare",
-    "make_baseline_env": "specguard.env",
-    "make_env": "specguard.env",
-    "run_spec": "specguard.engine",
+    "compile_tree": "specguard.build.compiled",
+    "formula": "specguard.tree.formula",
+    "goal_spec": "specguard.pytest_plugin.declare",
+    "goal_specs": "specguard.pytest_plugin.declare",
+    "make_baseline_env": "specguard.build.env",
+    "make_env": "specguard.build.env",
+    "run_spec": "specguard.engine.run",
 }
 
 __all__ = [
@@ -123,13 +123,13 @@ def __dir__() -> list[str]:
 
 
 if TYPE_CHECKING:
-    from specguard.annotations import Constraint, Distance
-    from specguard.budget import Budget
-    from specguard.cache import Cache
-    from specguard.compiled import CompiledTree, compile_tree
-    from specguard.declare import goal_spec, goal_specs
-    from specguard.engine import GoalVerdict, SpecResult, run_spec
-    from specguard.env import GoalInfo, SpecEnv, make_baseline_env, make_env
+    from specguard.build.compiled import CompiledTree, compile_tree
+    from specguard.build.env import GoalInfo, SpecEnv, make_baseline_env, make_env
+    from specguard.build.initial_env import InitialEnv
+    from specguard.engine.budget import Budget
+    from specguard.engine.cache import Cache
+    from specguard.engine.run import GoalVerdict, SpecResult, run_spec
+    from specguard.engine.spec import Spec
     from specguard.error import (
         EvaluationError,
         FingerprintError,
@@ -142,7 +142,7 @@ if TYPE_CHECKING:
         VersionMismatch,
     )
     from specguard.extend import Annotation, Node
-    from specguard.initial_env import InitialEnv
-    from specguard.nodes import All, Goal
-    from specguard.reward_formula import formula
-    from specguard.spec import Spec
+    from specguard.pytest_plugin.declare import goal_spec, goal_specs
+    from specguard.tree.builtin_annotations import Constraint, Distance
+    from specguard.tree.formula import formula
+    from specguard.tree.nodes import All, Goal

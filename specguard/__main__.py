@@ -1,7 +1,7 @@
-"""``python -m specguard``: the command line (see :mod:`specguard.cli`)."""
+"""``python -m specguard``: the command line (see :mod:`specguard.cli.main`)."""
 
 import sys
 
-from specguard.cli import main
+from specguard.cli.main import main
 
 sys.exit(main())

@@ -74,6 +74,7 @@ __all__ = [
     "Node",
     "ShapingForm",
     "Slot",
+    "adapted_annotations",
     "annotation_key",
     "check_children",
     "component_weights",
@@ -260,8 +261,8 @@ class Node:
         """Whether training may replace :meth:`child_weights` by one adapted weight per child.
 
         The weights of the node's own safety annotations left at their default
-        weight adapt with them (:func:`specguard.auto_weights.adapted_annotations`).
-        ``All(weights="auto")`` does (:mod:`specguard.auto_weights`); the tree
+        weight adapt with them (:func:`adapted_annotations`).
+        ``All(weights="auto")`` does (:mod:`specguard.engine.auto_weights`); the tree
         as declared keeps its own weights, so an env built from it alone is
         unchanged.
         """
@@ -424,6 +425,16 @@ def component_weights(node: Node) -> tuple[float, tuple[float, ...]]:
     default = 1.0 / n
     ann = tuple(a.weight if a.weight is not None else (default if a.normalised else 1.0) for a in node.annotations)
     return default, ann
+
+
+def adapted_annotations(node: Node) -> tuple[int, ...]:
+    """Indices in ``node.annotations`` of the ones whose weight a node that adapts its weights adapts.
+
+    The rule: its safety annotations left at their default weight; a weight the
+    user set is kept. The compiled tree, the reward formula and the training-time
+    adapter (:mod:`specguard.engine.auto_weights`) all read it here.
+    """
+    return tuple(i for i, a in enumerate(node.annotations) if a.role == SAFETY and a.weight is None)
 
 
 def annotation_key(path: str, annotation: Annotation) -> str:

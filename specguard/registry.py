@@ -52,8 +52,8 @@ class PluginWarning(UserWarning):
 
 
 def _builtins() -> dict[str, type]:
-    from specguard.annotations import Constraint, Distance
-    from specguard.nodes import All, Goal
+    from specguard.tree.builtin_annotations import Constraint, Distance
+    from specguard.tree.nodes import All, Goal
 
     return {c.__name__: c for c in (Goal, All, Distance, Constraint)}
 

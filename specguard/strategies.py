@@ -16,16 +16,16 @@ Example:
 from __future__ import annotations
 
 import keyword
-import math
 from collections.abc import Sequence
-from typing import Any
 
-import numpy as np
 from hypothesis import strategies as st
 
-from specguard.annotations import Constraint, Distance
 from specguard.extend import Annotation, Node
-from specguard.nodes import All, Goal
+from specguard.tree import _draw
+from specguard.tree._draw import bounds, weights
+from specguard.tree._draw import values as _values
+from specguard.tree.builtin_annotations import Constraint, Distance
+from specguard.tree.nodes import All, Goal
 
 __all__ = [
     "bounds",
@@ -41,16 +41,6 @@ __all__ = [
     "weights",
 ]
 
-# Goal bounds and state values share one small grid plus arbitrary floats in
-# [-LIMIT, LIMIT]: the grid makes states land exactly on box edges often.
-LIMIT = 4.0
-GRID = (-2.0, -1.0, -0.5, 0.0, 0.5, 1.0, 2.0)
-
-_values = st.one_of(
-    st.sampled_from(GRID),
-    st.floats(-LIMIT, LIMIT, allow_nan=False, allow_infinity=False),
-)
-
 
 def feature_names(min_size: int = 1, max_size: int = 5) -> st.SearchStrategy[tuple[str, ...]]:
     """Tuples of distinct feature names usable as ``InitialEnv(features=...)``."""
@@ -64,15 +54,6 @@ def node_names() -> st.SearchStrategy[str]:
 
 
 @st.composite
-def bounds(draw: st.DrawFn, values: st.SearchStrategy[float] = _values) -> tuple[float | None, float | None]:
-    """An inclusive interval ``(lo, hi)``, ``lo <= hi``, either side possibly open (``None``)."""
-    a, b = sorted((draw(values), draw(values)))
-    lo = None if draw(st.integers(0, 5)) == 0 else a
-    hi = None if draw(st.integers(0, 5)) == 0 else b
-    return lo, hi
-
-
-@st.composite
 def goals(draw: st.DrawFn, features: Sequence[str], name: str | None = None) -> Goal:
     """A leaf with a box on a non-empty subset of ``features``."""
     chosen = draw(st.lists(st.sampled_from(list(features)), min_size=1, max_size=len(features), unique=True))
@@ -82,41 +63,24 @@ def goals(draw: st.DrawFn, features: Sequence[str], name: str | None = None) -> 
     return Goal(name or draw(node_names()), **box)
 
 
-def weights(n: int) -> st.SearchStrategy[list[float] | None]:
-    """``None`` (the default ``1/N``) or ``n`` weights >= 0, at least one of them > 0."""
-    return st.none() | st.lists(st.floats(0.0, 10.0), min_size=n, max_size=n).filter(lambda w: any(x > 0 for x in w))
-
-
-def _distance_fn(feature: str, target: float) -> Any:
-    def fn(s: Any) -> Any:
-        return abs(getattr(s, feature) - target)
-
-    fn.__qualname__ = f"|{feature} - {target:g}|"
-    return fn
-
-
-def _constraint_fn(feature: str, threshold: float) -> Any:
-    def fn(s: Any, a: Any) -> Any:
-        return getattr(s, feature) > threshold
-
-    fn.__qualname__ = f"{feature} > {threshold:g}"
-    return fn
-
-
-@st.composite
-def distances(draw: st.DrawFn, features: Sequence[str], name: str = "distance") -> Distance:
+def distances(features: Sequence[str], name: str = "distance") -> st.SearchStrategy[Distance]:
     """A distance ``|s.f - c|`` with a random scale and weight (works on scalars and column arrays)."""
-    f = draw(st.sampled_from(list(features)))
-    weight = draw(st.none() | st.floats(0.0, 10.0))
-    return Distance(_distance_fn(f, draw(_values)), scale=draw(st.floats(0.1, 10.0)), weight=weight, name=name)
+    return _draw.distances(Distance, features, name)  # type: ignore[return-value]
 
 
-@st.composite
-def constraints(draw: st.DrawFn, features: Sequence[str], name: str = "constraint") -> Constraint:
+def constraints(features: Sequence[str], name: str = "constraint") -> st.SearchStrategy[Constraint]:
     """A constraint ``s.f > c`` with a small budget."""
-    f = draw(st.sampled_from(list(features)))
-    weight = draw(st.none() | st.floats(0.0, 10.0))
-    return Constraint(_constraint_fn(f, draw(_values)), budget=draw(st.integers(1, 4)), weight=weight, name=name)
+    return _draw.constraints(Constraint, features, name)  # type: ignore[return-value]
+
+
+def refinements(leaf: Goal, max_children: int = 3, loosen: bool = True) -> st.SearchStrategy[All]:
+    """An ``All`` whose children's boxes intersect to exactly ``leaf``'s box.
+
+    Each of the leaf's bounds goes to at least one child. With ``loosen``,
+    children may also carry looser bounds on features that another child
+    bounds exactly, which leaves the intersection unchanged.
+    """
+    return _draw.refinements(leaf, All, max_children, loosen)  # type: ignore[return-value]
 
 
 def _annotated(node: Node, features: Sequence[str], kinds: Sequence[type[Annotation]]) -> st.SearchStrategy[Node]:
@@ -174,35 +138,6 @@ def trees(
     return st.one_of(leaf(name), combine(inner, st.just(name)))
 
 
-@st.composite
-def refinements(draw: st.DrawFn, leaf: Goal, max_children: int = 3, loosen: bool = True) -> All:
-    """An ``All`` whose children's boxes intersect to exactly ``leaf``'s box.
-
-    Each of the leaf's bounds goes to at least one child. With ``loosen``,
-    children may also carry looser bounds on features that another child
-    bounds exactly, which leaves the intersection unchanged.
-    """
-    items = list(leaf.bounds)
-    n = draw(st.integers(1, max_children))
-    owner = [draw(st.integers(0, n - 1)) for _ in items]
-    children = []
-    for k in range(n):
-        box: dict[str, tuple[float | None, float | None]] = {}
-        for (f, lo, hi), o in zip(items, owner):
-            if o == k:
-                box[f] = (None if math.isinf(lo) else lo, None if math.isinf(hi) else hi)
-            elif loosen and draw(st.booleans()):
-                wider_lo = None if math.isinf(lo) or draw(st.booleans()) else lo - draw(st.floats(0.0, 1.0))
-                wider_hi = None if math.isinf(hi) or draw(st.booleans()) else hi + draw(st.floats(0.0, 1.0))
-                box[f] = (wider_lo, wider_hi)
-        if all(lo is None and hi is None for lo, hi in box.values()):  # a child must bound something
-            bounded = [(f, lo, hi) for f, lo, hi in items if not (math.isinf(lo) and math.isinf(hi))]
-            f, lo, hi = bounded[k % len(bounded)]  # repeating one of the leaf's bounds leaves the intersection
-            box[f] = (None if math.isinf(lo) else lo, None if math.isinf(hi) else hi)
-        children.append(Goal(f"part{k}", **box))
-    return All(*children, name=leaf.name, weights=draw(weights(n)))
-
-
 def states(features: Sequence[str]) -> st.SearchStrategy[list[float]]:
     """Feature vectors (Python floats), often exactly on box edges."""
     return st.lists(_values, min_size=len(features), max_size=len(features))
@@ -213,8 +148,3 @@ def trajectories(
 ) -> st.SearchStrategy[list[list[float]]]:
     """Sequences of feature vectors ``s_0 .. s_T``."""
     return st.lists(states(features), min_size=min_size, max_size=max_size)
-
-
-def as_array(trajectory: Sequence[Sequence[float]]) -> np.ndarray:
-    """A trajectory as a ``(T, features)`` float64 array."""
-    return np.asarray(trajectory, dtype=np.float64)

@@ -1,7 +1,7 @@
 """Testing tools: the operator contract kit and a simulator-free test double.
 
 For authors of operators and annotations (:mod:`specguard.extend`): each
-check of :mod:`specguard.contract` states one invariant of SPEC.md section 6
+check of :mod:`specguard.contract.checks` states one invariant of SPEC.md section 6
 and tests it with Hypothesis on random trees that contain the class, the way
 scikit-learn's ``parametrize_with_checks`` tests an estimator.
 
@@ -43,24 +43,23 @@ Example:
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING, Any
 
-import gymnasium as gym
-import numpy as np
+from specguard.contract.replay import ReplayEnv
 
 if TYPE_CHECKING:
     import pytest
 
-    from specguard.contract import CHECKS
+    from specguard.contract.checks import CHECKS
 
 __all__ = ["CHECKS", "ReplayEnv", "check_operator", "checks_for", "parametrize_with_checks"]
 
 
 def __getattr__(name: str) -> Any:
-    # CHECKS lives in specguard.contract, which imports Hypothesis: load it on first use only.
+    # CHECKS lives in specguard.contract.checks, which imports Hypothesis: load it on first use only.
     if name == "CHECKS":
-        from specguard.contract import CHECKS
+        from specguard.contract.checks import CHECKS
 
         return CHECKS
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
@@ -75,7 +74,7 @@ def checks_for(cls: type) -> tuple[Callable[..., None], ...]:
     Raises:
         TypeError: ``cls`` is not a ``Node`` or ``Annotation`` subclass.
     """
-    from specguard.contract import checks_for as applicable
+    from specguard.contract.checks import checks_for as applicable
 
     return applicable(cls)
 
@@ -126,37 +125,3 @@ def check_operator(cls: type, max_examples: int | None = None) -> None:
         raise AssertionError(
             f"{len(failures)} contract check(s) failed for {cls.__name__}:\n\n" + "\n\n".join(failures)
         )
-
-
-class ReplayEnv(gym.Env[np.ndarray, int]):
-    """Replays a fixed trajectory of observations, whatever the actions.
-
-    ``reset`` returns ``trajectory[0]``; step ``t`` returns ``trajectory[t]``
-    and truncates at the last one. Rewards are 0; it never terminates itself.
-
-    Args:
-        trajectory: the observations ``s_0 .. s_T``, at least two.
-        n_actions: the size of the ``Discrete`` action space.
-    """
-
-    metadata = {"render_modes": []}  # noqa: RUF012  # Gymnasium declares it per instance
-
-    def __init__(self, trajectory: Sequence[Sequence[float]], n_actions: int = 3) -> None:
-        self.trajectory = np.asarray(trajectory, dtype=np.float32)
-        if self.trajectory.ndim != 2 or len(self.trajectory) < 2:
-            raise ValueError(f"expected at least two observations of equal length, got shape {self.trajectory.shape}")
-        self.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=self.trajectory.shape[1:], dtype=np.float32)
-        self.action_space = gym.spaces.Discrete(n_actions)  # type: ignore[assignment]
-        self._t = 0
-
-    def reset(
-        self, *, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[np.ndarray, dict[str, Any]]:
-        super().reset(seed=seed)
-        self._t = 0
-        return self.trajectory[0].copy(), {}
-
-    def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        self._t += 1
-        truncated = self._t >= len(self.trajectory) - 1
-        return self.trajectory[self._t].copy(), 0.0, False, truncated, {}

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from specguard.anytime import (
+from specguard.engine.budget import Budget
+from specguard.stats.anytime import (
     checkpoint_steps,
     evaluation_stages,
     final_evaluation,
@@ -15,8 +16,7 @@ from specguard.anytime import (
     met,
     min_successes_to_meet,
 )
-from specguard.budget import Budget
-from specguard.stats import success_interval
+from specguard.stats.intervals import success_interval
 
 
 def test_stages_double_up_to_the_maximum():

@@ -8,7 +8,8 @@ import textwrap
 
 import pytest
 
-from specguard.cli import load_objects, main
+from specguard.cli.main import main
+from specguard.engine.specfiles import load_objects
 from specguard.error import SpecError
 
 SPEC_FILE = textwrap.dedent(
@@ -128,7 +129,7 @@ def test_bad_option_values_are_usage_errors(spec_file, option, capsys):
 @pytest.fixture
 def no_training(monkeypatch):
     """Replace training by a stub that records what it was asked, and stops the run."""
-    import specguard.engine
+    import specguard.engine.run
 
     calls = []
 
@@ -136,7 +137,7 @@ def no_training(monkeypatch):
         calls.append(spec)
         raise SpecError("stub: no training in this test")
 
-    monkeypatch.setattr(specguard.engine, "run_spec", run_spec)
+    monkeypatch.setattr(specguard.engine.run, "run_spec", run_spec)
     return calls
 
 

@@ -10,9 +10,9 @@ from hypothesis import strategies as st
 
 import specguard as sg
 from specguard import strategies as sgst
-from specguard.compiled import compile_tree
+from specguard.build.compiled import compile_tree
+from specguard.build.reference import ReferenceEvaluator
 from specguard.extend import ChildWeights, Context, Node, Slot
-from specguard.reference import ReferenceEvaluator
 
 FEATURES = ("a", "b", "c")
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from specguard.compare import Baseline, BaselineError, compare, load_baseline, save_baseline
+from specguard.stats.compare import Baseline, BaselineError, compare, load_baseline, save_baseline
 
 
 def test_clear_drop_across_seeds():
@@ -71,9 +71,9 @@ def test_missing_baseline(tmp_path):
 def test_safety_rates_round_trip_and_old_baselines_without_them_are_noted(tmp_path):
     import specguard as sg
     from example_specs import pendulum
-    from specguard.engine import SpecResult, _judge
-    from specguard.gate import check_item
-    from specguard.train import RunResult
+    from specguard.engine.run import SpecResult, _judge
+    from specguard.engine.train import RunResult
+    from specguard.pytest_plugin.gate import check_item
 
     old = tmp_path / "old.json"  # saved before safety rates were measured: goals only
     old.write_text('{"format": 2, "goals": {"g::pendulum": {"runs": [[30, 30], [29, 30]], "spec": null}}}')

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import specguard as sg
-from specguard import contract
-from specguard.env import SpecEnv
+from specguard.build.env import SpecEnv
+from specguard.contract import checks as contract
 from specguard.testing import check_operator, parametrize_with_checks
 
 

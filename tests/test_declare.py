@@ -7,7 +7,7 @@ import re
 import pytest
 
 import specguard as sg
-from specguard.goals import ROOT
+from specguard.tree.keys import ROOT
 
 
 def test_marks_and_uses_the_goal_fixture():

@@ -17,7 +17,7 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.engine import resolve_workers
+from specguard.engine.run import resolve_workers
 
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 
@@ -268,8 +268,8 @@ SAFE_TREE = sg.All(*pendulum.trees["b"].children, name="pendulum").annotate(FAST
 
 
 def _safety_result(per_seed, expect):
-    from specguard.engine import SpecResult, _judge
-    from specguard.train import RunResult
+    from specguard.engine.run import SpecResult, _judge
+    from specguard.engine.train import RunResult
 
     s = sg.Spec(pendulum.initial_env, SAFE_TREE, budget=sg.Budget(timesteps=10), expect=expect)
     runs = [
@@ -310,7 +310,7 @@ def test_safety_rates_are_judged_tabled_and_serialised_like_goals():
 
 
 def test_progress_lines_label_safety_rates():
-    from specguard.engine import _Runs
+    from specguard.engine.run import _Runs
 
     run = _safety_result([12], {"fast": 0.0}).runs[0]
     assert _Runs._rates(run).startswith("pendulum:fast (safe) 12/30, pendulum 30/30")
@@ -361,8 +361,8 @@ def test_the_table_lists_each_seeds_adapted_weights():
 
 def test_a_worker_running_other_code_than_the_key_names_refuses_to_train(tmp_path, monkeypatch):
     # The driver keyed its runs with one specguard; the spawned workers import another (sources edited meanwhile).
-    from specguard import engine
-    from specguard.fingerprint import versions
+    from specguard.engine import run as engine
+    from specguard.engine.fingerprint import versions
 
     keyed = {**versions(), "specguard": "0.0.0+edited"}
     monkeypatch.setattr(engine, "versions", lambda: keyed)
@@ -372,8 +372,8 @@ def test_a_worker_running_other_code_than_the_key_names_refuses_to_train(tmp_pat
 
 
 def test_a_worker_with_the_keyed_versions_trains():
-    from specguard.engine import _train_task
-    from specguard.fingerprint import versions
+    from specguard.engine.fingerprint import versions
+    from specguard.engine.run import _train_task
 
     out = _train_task(spec(), 0, versions(), report=lambda phase, step=None, line=None: None)
     assert out["result"]["timesteps"] == 128 and out["files"]

@@ -285,7 +285,7 @@ def test_goal_env_is_a_deprecated_name_of_spec_env():
     with pytest.warns(DeprecationWarning, match="GoalEnv is renamed SpecEnv"):
         assert sg.GoalEnv is sg.SpecEnv
     with pytest.warns(DeprecationWarning):
-        from specguard.env import GoalEnv
+        from specguard.build.env import GoalEnv
     assert GoalEnv is sg.SpecEnv
 
 

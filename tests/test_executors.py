@@ -10,7 +10,7 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.executors import DaskExecutor, ExecutorError, LocalExecutor, check_address, make_executor
+from specguard.engine.executors import DaskExecutor, ExecutorError, LocalExecutor, check_address, make_executor
 
 distributed = pytest.importorskip("distributed")
 
@@ -189,7 +189,7 @@ def test_a_bad_executor_is_a_usage_error_before_anything_trains(pytester, addres
 
 
 def test_specguard_run_takes_an_executor(cluster, tmp_path, capsys):
-    from specguard.cli import main
+    from specguard.cli.main import main
 
     path = tmp_path / "specs.py"
     path.write_text(

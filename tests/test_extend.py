@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 import specguard as sg
+from specguard.build.initial_env import state_type
 from specguard.extend import ChildWeights, Context, Node, Slot, check_children, component_weights, goal_test
-from specguard.initial_env import state_type
 
 State = state_type(("x", "y"))
 

@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.fingerprint import canonical, digest, fingerprint_spec, probe
+from specguard.engine.fingerprint import canonical, digest, fingerprint_spec, probe
 
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 BUDGET = sg.Budget(timesteps=128, min_seeds=1, eval_episodes=2)
@@ -314,7 +314,7 @@ def test_the_key_is_the_same_across_processes_and_hash_seeds(tmp_path):
         """
         import specguard as sg
         from example_specs import pendulum
-        from specguard.fingerprint import fingerprint_spec
+        from specguard.engine.fingerprint import fingerprint_spec
 
         def factory(inner, target, names):
             def distance(s):

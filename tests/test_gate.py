@@ -6,12 +6,12 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.compare import Baseline
-from specguard.engine import SpecResult, _judge
-from specguard.gate import check_goal
-from specguard.goals import ROOT
-from specguard.stats import Outcome
-from specguard.train import RunResult
+from specguard.engine.run import SpecResult, _judge
+from specguard.engine.train import RunResult
+from specguard.pytest_plugin.gate import check_goal
+from specguard.stats.compare import Baseline
+from specguard.stats.intervals import Outcome
+from specguard.tree.keys import ROOT
 
 
 def result_of(spec, per_seed, errors=None):
@@ -100,7 +100,7 @@ def test_competing_subgoals_hint_at_weights():
 
 
 def test_with_thresholds_resolves_decorator_goals():
-    from specguard.gate import with_thresholds
+    from specguard.pytest_plugin.gate import with_thresholds
 
     s, paths = with_thresholds(spec(), {ROOT: 0.5, "position": 0.7}, "position")
     assert s.thresholds == {"pendulum": 0.5, "pendulum/position": 0.7} and paths == ["pendulum/position"]
@@ -110,7 +110,7 @@ def test_with_thresholds_resolves_decorator_goals():
 
 
 def test_check_item_fails_a_passing_goal_that_dropped_against_the_baseline():
-    from specguard.gate import check_item
+    from specguard.pytest_plugin.gate import check_item
 
     s = spec(expect={"pendulum": 0.3})
     result = result_of(s, [(20, 30), (21, 30)])
@@ -203,7 +203,7 @@ def test_a_passing_or_undecided_safety_rate():
 
 
 def test_old_baselines_without_a_safety_rate_are_noted_not_compared():
-    from specguard.gate import check_item
+    from specguard.pytest_plugin.gate import check_item
 
     s = safety_spec({"pendulum": 0.3, "fast": 0.3})
     result = safety_result(s, [20, 21])

@@ -9,8 +9,8 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.gate import with_thresholds
-from specguard.goals import ROOT, check_threshold, resolve_goal
+from specguard.pytest_plugin.gate import with_thresholds
+from specguard.tree.keys import ROOT, check_threshold, resolve_goal
 
 TREE = sg.All(
     sg.All(sg.Goal("x", a=(0, 1)), name="left"),
@@ -106,7 +106,7 @@ SAFE_TREE = sg.All(
 
 
 def test_safety_keys_are_path_colon_name_of_safety_annotations_only():
-    from specguard.goals import is_safety_key, kind, label, result_keys, safety_keys
+    from specguard.tree.keys import is_safety_key, kind, label, result_keys, safety_keys
 
     assert safety_keys(SAFE_TREE) == ["lunar:crash", "lunar/up:spin"]  # tree order; Distance has no rate
     assert result_keys(SAFE_TREE) == ["lunar", "lunar/up", "lunar/spin", "lunar/near", "lunar:crash", "lunar/up:spin"]
@@ -118,7 +118,7 @@ def test_safety_keys_are_path_colon_name_of_safety_annotations_only():
 
 def test_every_annotation_whose_role_is_safety_gets_a_key():
     from specguard.extend import Annotation
-    from specguard.goals import resolve_goal, safety_keys
+    from specguard.tree.keys import resolve_goal, safety_keys
 
     class Guard(Annotation):  # a third party's constraint-like annotation: only its role matters, not its class
         role = "safety"

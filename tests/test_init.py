@@ -23,6 +23,6 @@ def test_unknown_attribute():
 
 def test_import_is_light():
     heavy = "{'torch', 'scipy', 'gymnasium', 'stable_baselines3'}"
-    code = f"import sys, specguard, specguard.plugin; print(sorted({heavy} & set(sys.modules)))"
+    code = f"import sys, specguard, specguard.pytest_plugin.plugin; print(sorted({heavy} & set(sys.modules)))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import specguard as sg
-from specguard.nodes import component_weights
+from specguard.tree.nodes import component_weights
 
 
 def dist(s):

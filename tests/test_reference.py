@@ -11,8 +11,9 @@ from hypothesis import strategies as st
 
 import specguard as sg
 from specguard import strategies as sgst
-from specguard.initial_env import state_type
-from specguard.reference import ExtendedState, ReferenceEvaluator, process
+from specguard.build.initial_env import state_type
+from specguard.build.reference import ExtendedState, ReferenceEvaluator, process
+from specguard.extend import component_weights
 
 FEATURES = ("a", "b", "c")
 State = state_type(FEATURES)
@@ -74,7 +75,7 @@ def test_distance_shaping_telescopes(goal, distance, trajectory):
     req = process(tree, root=False)
     ext = chain(req, trajectory)
     key = f"root/{goal.name}:{distance.name}"
-    _, weights = sg.nodes.component_weights(goal.annotate(distance))
+    _, weights = component_weights(goal.annotate(distance))
     shaped = sum(req.reward(s, 0, s2)[key] for s, s2 in pairwise(ext))
     expected = weights[0] * (distance.fn(ext[0].s) - distance.fn(ext[-1].s)) / distance.scale
     assert shaped == pytest.approx(expected, abs=1e-9)

@@ -7,8 +7,8 @@ from pathlib import Path
 import matplotlib
 import pytest
 
-from specguard.report import curves_figure, markdown, plot_curves, table_lines, write_reports
-from specguard.rollout import Gif
+from specguard.engine.rollout import Gif
+from specguard.report.session import curves_figure, markdown, plot_curves, table_lines, write_reports
 
 
 def curve(*rates, evaluation=None):

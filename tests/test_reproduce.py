@@ -14,9 +14,9 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.cli import main
-from specguard.fingerprint import versions
-from specguard.reproduce import TITLE, sections, sized
+from specguard.cli.main import main
+from specguard.cli.reproduce import TITLE, sections, sized
+from specguard.engine.fingerprint import versions
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -8,9 +8,9 @@ import pytest
 from PIL import Image
 
 import specguard as sg
-from specguard.cache import Cache
-from specguard.rollout import Gif, load_model, report_gifs, rollout, write_gif
-from specguard.train import train_run
+from specguard.engine.cache import Cache
+from specguard.engine.rollout import Gif, load_model, report_gifs, rollout, write_gif
+from specguard.engine.train import train_run
 
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 

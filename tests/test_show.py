@@ -9,8 +9,8 @@ import warnings
 import pytest
 
 import specguard as sg
-from specguard.budget import trained_timesteps
-from specguard.show import has_goal_specs, render_spec
+from specguard.engine.budget import trained_timesteps
+from specguard.pytest_plugin.show import has_goal_specs, render_spec
 
 SPECS = textwrap.dedent(
     """

@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 
 import specguard as sg
 from specguard import strategies as sgst
-from specguard.compiled import compile_tree
+from specguard.build.compiled import compile_tree
 
 FEATURES = ("a", "b", "c")
 
@@ -36,7 +36,7 @@ def test_refinements_intersect_to_the_leaf(data):
 
 @given(sgst.trajectories(FEATURES, min_size=3, max_size=5))
 def test_trajectories_have_the_requested_shape(trajectory):
-    arr = sgst.as_array(trajectory)
+    arr = np.asarray(trajectory, dtype=np.float64)
     assert arr.shape[1] == 3 and 3 <= arr.shape[0] <= 5
     assert np.all(np.isfinite(arr))
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from specguard.text import render_table
+from specguard.utils.text import render_table
 
 
 def test_columns_align_and_lines_have_no_trailing_spaces():

@@ -10,9 +10,9 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.anytime import min_successes_to_meet
+from specguard.engine.train import EVAL_SEED_BASE, TrainingError, evaluate, train_run
+from specguard.stats.anytime import min_successes_to_meet
 from specguard.testing import ReplayEnv
-from specguard.train import EVAL_SEED_BASE, TrainingError, evaluate, train_run
 
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 
@@ -127,7 +127,7 @@ def test_evaluate_counts_an_episode_ended_by_its_constraint_as_unsafe():
 
 
 def test_training_curve_records_safety_rates():
-    from specguard.train import _GoalCurve
+    from specguard.engine.train import _GoalCurve
 
     curve = _GoalCurve(every=2, wall_clock_s=None, total=4, report=None)
     unsafe = {"goals": {"root": True}, "safe": {"root:c": False}}

@@ -1,4 +1,4 @@
-"""specguard.workers: one spawned process per task, each failing alone, none left behind.
+"""specguard.engine.workers: one spawned process per task, each failing alone, none left behind.
 
 The task functions below live in this module. ``tests/`` is not a package, so the module is
 registered with cloudpickle to be pickled by value: the spawned children get the functions
@@ -21,7 +21,7 @@ from typing import Any
 import cloudpickle
 import pytest
 
-from specguard.workers import (
+from specguard.engine.workers import (
     Done,
     Failure,
     Outcome,
@@ -368,7 +368,7 @@ def write_pid_then_sleep(pid_file, *, report):
 PARENT = """
 import signal, sys
 import sg_worker_helper
-from specguard.workers import Task, run_tasks, parse_workers, resolve_workers
+from specguard.engine.workers import Task, run_tasks, parse_workers, resolve_workers
 
 try:
     run_tasks([Task(0, sg_worker_helper.write_pid_then_sleep, (sys.argv[1],))], max_workers=1)

@@ -12,9 +12,9 @@ from specguard_plugins import AnyOf, Avoid, Sequence
 
 import specguard as sg
 from specguard import strategies as sgst
+from specguard.build.reference import ExtendedState, process
 from specguard.error import InvalidSpec
 from specguard.extend import ChildWeights, Context
-from specguard.reference import ExtendedState, process
 
 from .helpers import both_checkers, replay, rewards
 

@@ -47,7 +47,7 @@ def private_uses(source: str, filename: str = "<source>") -> list[str]:
     ``importlib.import_module`` or ``__import__``), a star import from
     specguard, any name starting with ``_`` imported from or read off a
     specguard module, and reaching a non-public submodule as an attribute
-    (``sg.nodes.Goal``).
+    (``sg.tree.nodes.Goal``).
     """
     tree = ast.parse(source, filename)
     found: list[str] = []
@@ -116,22 +116,23 @@ def test_plugin_sources_import_only_the_public_extension_api(path):
 @pytest.mark.parametrize(
     "source",
     [
-        "from specguard.nodes import Goal",
-        "from specguard.reference import process",
-        "import specguard.compiled",
-        "import specguard.codegen as cg",
+        "from specguard.tree.nodes import Goal",
+        "from specguard.build.reference import process",
+        "import specguard.build.compiled",
+        "import specguard.build.codegen as cg",
         "from specguard.extend import _private",
         "from specguard.extend import annotation_key, _call",
         "from specguard import _EXPORTS",
-        "from specguard import nodes",
+        "from specguard import tree",
+        "from specguard import engine",
         "from specguard import *",
         "from specguard._vendored import x",
-        "import specguard as sg\nsg.nodes.Goal",
+        "import specguard as sg\nsg.tree.nodes.Goal",
         "import specguard as sg\nsg._EXPORTS",
         "from specguard import strategies as st\nst._values",
-        "import importlib\nimportlib.import_module('specguard.compiled')",
-        "__import__('specguard.reference')",
-        "def f():\n    from specguard.initial_env import state_type",
+        "import importlib\nimportlib.import_module('specguard.build.compiled')",
+        "__import__('specguard.build.reference')",
+        "def f():\n    from specguard.build.initial_env import state_type",
     ],
 )
 def test_the_checker_flags_private_uses(source):
@@ -265,7 +266,7 @@ def _tree(budget):
 def test_trees_of_plugin_operators_have_exact_fingerprints():
     # Under an editable install the plugin is user code, whose dataclass bodies the fingerprint follows
     # (it failed on Field.metadata, a mappingproxy, until specguard's encoder learnt it).
-    from specguard.fingerprint import digest
+    from specguard.engine.fingerprint import digest
 
     assert digest(_UserOperator("o")) == digest(_UserOperator("o"))
     assert digest(_tree(2)) == digest(_tree(2))

@@ -11,9 +11,9 @@ from specguard_plugins import AnyOf, Avoid, Sequence
 
 import specguard as sg
 from specguard import strategies as sgst
+from specguard.build.reference import ReferenceEvaluator
 from specguard.error import InvalidSpec
 from specguard.extend import SHAPING, Annotation, ChildWeights, Context, Slot
-from specguard.reference import ReferenceEvaluator
 
 from .helpers import both_checkers, replay, rewards
 

@@ -1,0 +1,257 @@
+"""The ``specguard`` command line.
+
+``specguard show PATH[::NAME]`` prints the tree and the reward formula of the
+specs (or trees) a Python file defines; ``specguard run PATH[::NAME]`` trains
+them within their budgets and prints the per-goal table; ``specguard reproduce
+PATH...`` trains every spec of case-study files on several seeds and writes a
+Markdown table and plots (:mod:`specguard.cli.reproduce`). A file's specs are its
+module-level ``Spec`` objects (named by variable) and the values of its
+module-level dicts of specs (named by key); ``show`` also lists goal trees.
+
+Exit status of ``run``: 0 when every spec passed (a goal the spec declares in
+``xfail`` may miss), 1 when one failed, 2 for a usage or spec error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from specguard.engine.spec import Spec
+from specguard.engine.specfiles import load_objects
+from specguard.error import SpecError
+from specguard.tree.nodes import Node
+
+__all__ = ["main"]
+
+
+def _show(target: str) -> int:
+    from specguard.pytest_plugin.show import has_goal_specs, render_spec, render_tree, show_goal_spec_file
+
+    if has_goal_specs(Path(target.partition("::")[0])):  # a pytest file: only pytest resolves its fixtures
+        return show_goal_spec_file(target)
+    for name, obj in load_objects(target, (Spec, Node)).items():
+        if isinstance(obj, Spec):
+            print(render_spec(obj, name))
+        else:
+            print("\n".join([f"== {name}", *render_tree(obj)]))
+        print()
+    return 0
+
+
+def _prepare_json(text: str) -> Path:
+    """The ``--json`` file, its directory created now: a bad path must not cost a training run."""
+    path = Path(text)
+    if path.is_dir():
+        raise SpecError(f"--json {path}: is a directory; expected a file name, e.g. {path / 'results.json'}")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise SpecError(f"--json {path}: cannot create the directory {path.parent} ({e.strerror or e})") from e
+    if not os.access(path.parent, os.W_OK | os.X_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        raise SpecError(f"--json {path}: not writable; expected a file in a directory you can write to")
+    return path
+
+
+def _run(args: argparse.Namespace) -> int:
+    from specguard.engine.executors import make_executor
+    from specguard.engine.run import resolve_workers
+
+    specs = load_objects(args.target)
+    json_path = _prepare_json(args.json) if args.json else None  # before training, which may take hours
+    executor = make_executor(args.executor, workers=resolve_workers(args.workers))  # a cluster answers, or exit 2
+    try:
+        results, failed = _run_all(args, specs, executor)
+    finally:
+        executor.close()
+    if json_path is not None:
+        json_path.write_text(json.dumps(results, indent=1))
+    return 1 if failed else 0
+
+
+def _run_all(args: argparse.Namespace, specs: dict[str, Any], executor: Any) -> tuple[dict[str, Any], bool]:
+    """Train and print every spec; returns the results as JSON data and whether one failed."""
+    from specguard.engine.progress import print_event
+    from specguard.engine.run import run_spec
+
+    results = {}
+    failed = False
+    for name, spec in specs.items():
+        spec = spec.scaled(args.budget_scale, checkpoints=args.checkpoints)
+        result = run_spec(
+            spec,
+            executor=executor,
+            workers=args.workers,
+            cache_dir=None if args.no_cache else args.cache_dir,
+            progress=None if args.quiet else print_event,
+        )
+        results[name] = result.to_dict()
+        status = "passed" if result.passed else "missed as expected (xfail)" if result.as_expected else "FAILED"
+        print(f"== {name}: {status} ({result.seconds:.1f}s)")
+        print(result.table())
+        print()
+        failed = failed or not result.as_expected
+    return results, failed
+
+
+def _workers(text: str) -> int | str:
+    from specguard.engine.workers import parse_workers
+
+    try:
+        return parse_workers(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def _executor(text: str) -> str:
+    from specguard.engine.executors import ExecutorError, check_address
+
+    try:
+        return check_address(text)
+    except ExecutorError as e:
+        raise argparse.ArgumentTypeError(str(e).removeprefix("executor: ")) from None
+
+
+def _checkpoints(text: str) -> int:
+    from specguard.stats.anytime import parse_checkpoints
+
+    try:
+        return parse_checkpoints(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def _scale(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="specguard", description="Goal-tree specifications for RL: show and run.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    show = sub.add_parser(
+        "show",
+        help="print the tree, reward formula, observation layout and budget of specs in a file "
+        "(a pytest goal-spec file too), training nothing",
+    )
+    show.add_argument("target", metavar="PATH[::NAME]")
+    run = sub.add_parser("run", help="train specs within their budgets and print per-goal verdicts")
+    run.add_argument("target", metavar="PATH[::NAME]")
+    run.add_argument(
+        "--workers",
+        type=_workers,
+        default="auto",
+        help="parallel training processes (default: auto, one per usable core)",
+    )
+    run.add_argument("--cache-dir", default=".specguard/cache", help="run cache (default: .specguard/cache)")
+    run.add_argument("--no-cache", action="store_true", help="neither read nor write the cache")
+    run.add_argument("--budget-scale", type=_scale, default=1.0, help="multiply training timesteps, e.g. 0.25")
+    run.add_argument(
+        "--checkpoints",
+        type=_checkpoints,
+        default=None,
+        metavar="N",
+        help="judge each run at N checkpoints and stop its training once every threshold is met "
+        "(anytime verdicts; default: the spec's budget, 1 unless set: the whole budget)",
+    )
+    run.add_argument("--json", metavar="FILE", help="also write the results as JSON (missing directories are created)")
+    run.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    run.add_argument(
+        "--executor",
+        type=_executor,
+        default="local",
+        metavar="ADDRESS",
+        help="where runs train: local (default; --workers processes here) or a Dask scheduler, tcp://host:8786",
+    )
+    rep = sub.add_parser(
+        "reproduce",
+        help="train every spec of the case-study files on N seeds at their whole budget; write a Markdown "
+        "table beside the paper's figures and plots of success over training",
+    )
+    rep.add_argument("targets", metavar="PATH", nargs="+", help="case-study files (their specs and PAPER figures)")
+    rep.add_argument("--seeds", type=_positive, default=5, help="seeds per spec (default: 5)")
+    rep.add_argument("--budget-scale", type=_scale, default=1.0, help="multiply training timesteps, e.g. 0.5")
+    rep.add_argument(
+        "--case-scale",
+        type=_case_scale,
+        action="append",
+        default=[],
+        metavar="CASE=X",
+        help="another budget scale for one case (its file's stem), e.g. lunar_lander=0.5; repeatable",
+    )
+    rep.add_argument(
+        "--workers", type=_workers, default="auto", help="specs trained at once, one process each (default: auto)"
+    )
+    rep.add_argument("--cache-dir", default=".specguard/cache", help="run cache, to resume (default: .specguard/cache)")
+    rep.add_argument("--out", default="docs/reproduction.md", help="the Markdown file; plots go to images/ beside it")
+    rep.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    return parser
+
+
+def _positive(text: str) -> int:
+    from specguard.validation import parse_count
+
+    try:
+        return parse_count(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def _case_scale(text: str) -> tuple[str, float]:
+    name, sep, value = text.partition("=")
+    if not sep or not name:
+        raise argparse.ArgumentTypeError(f"expected CASE=X, e.g. lunar_lander=0.5, got {text!r}")
+    return name, _scale(value)
+
+
+def _reproduce(args: argparse.Namespace, argv: Sequence[str]) -> int:
+    from specguard.cli.reproduce import load_case, reproduce, write_markdown
+    from specguard.engine.progress import print_event
+    from specguard.engine.run import resolve_workers
+
+    cases = [load_case(path) for path in args.targets]
+    command = "specguard " + " ".join(argv)
+    result = reproduce(
+        cases,
+        seeds=args.seeds,
+        budget_scale=args.budget_scale,
+        case_scales=dict(args.case_scale),
+        workers=resolve_workers(args.workers),
+        cache_dir=args.cache_dir,
+        progress=None if args.quiet else print_event,
+        command=command,
+    )
+    out = write_markdown(result, Path(args.out))
+    print(f"wrote {out} and its plots")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(argv)
+    try:
+        if args.command == "show":
+            return _show(args.target)
+        if args.command == "reproduce":
+            return _reproduce(args, argv)
+        return _run(args)
+    except SpecError as e:
+        print(f"specguard: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("specguard: interrupted; finished runs are cached, unfinished ones were not stored", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,250 @@
+"""The examples the contract checks run on, and how their failures read (support of :mod:`specguard.contract.checks`).
+
+An example (:class:`Case`) is a random goal tree over :data:`FEATURES` that
+contains the class under test, a trajectory of float32 states and the actions
+taken. :func:`run_property` runs a check's property with Hypothesis
+(derandomized, so CI sees the same examples every time) and turns the shrunk
+failing example into one readable :class:`AssertionError` (:func:`fail`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any, NamedTuple, NoReturn
+
+import numpy as np
+from hypothesis import HealthCheck, Phase, assume, given, settings
+from hypothesis import strategies as st
+from hypothesis.errors import HypothesisException
+
+from specguard import strategies as sgst
+from specguard.build.env import SpecEnv
+from specguard.build.initial_env import state_type
+from specguard.build.reference import ExtendedState, Requirements, process
+from specguard.contract.replay import ReplayEnv
+from specguard.extend import Annotation, Context, Node
+from specguard.tree._draw import values
+from specguard.tree.builtin_annotations import Constraint, Distance
+from specguard.tree.nodes import All, Goal
+from specguard.validation import PATH_SEPARATOR
+
+__all__ = ["FEATURES", "Broken", "Case", "cases", "fail", "refinement_cases", "run_property", "trees_with"]
+
+FEATURES = ("a", "b", "c")
+"""The features of the random trees and trajectories."""
+MAX_EXAMPLES = 40
+"""Examples per check by default."""
+
+Check = Callable[..., None]
+
+
+class Case(NamedTuple):
+    """One example: a tree and, for most checks, a trajectory ``s_0 .. s_T`` with the actions ``a_0 .. a_{T-1}``."""
+
+    tree: Node
+    trajectory: list[list[float]] | None = None
+    actions: list[int] | None = None
+    leaf: Node | None = None  # the refined leaf (check_refinement_preserves_root_goal)
+
+
+class Broken(Exception):
+    """Raised by a property with what breaks the invariant; :func:`run_property` adds the rest."""
+
+
+# -- strategies ----------------------------------------------------------------
+
+
+def _annotated(draw: st.DrawFn, node: Node, kinds: Sequence[type[Annotation]]) -> Node:
+    anns = []
+    for i in range(max(0, draw(st.integers(0, 4)) - 2)):  # mostly none, up to 2
+        kind = draw(st.sampled_from(kinds))
+        anns.append(draw(kind.strategy(FEATURES, f"{kind.__name__.lower()}{i}")))
+    return node.annotate(*anns) if anns else node
+
+
+def _goal(draw: st.DrawFn, name: str) -> Goal:
+    """A ``Goal`` on some of :data:`FEATURES` (a lighter :func:`specguard.strategies.goals`), often on grid edges."""
+    box: dict[str, tuple[float | None, float | None]] = {}
+    for f in FEATURES:
+        side = draw(st.integers(0, 4))  # 0: unbounded (what it shrinks to), 1: lo only, 2: hi only, else both
+        if side:
+            lo, hi = sorted((draw(values), draw(values)))
+            box[f] = (None if side == 2 else lo, None if side == 1 else hi)
+    if not box:
+        box[FEATURES[0]] = (draw(values), None)
+    return Goal(name, **box)
+
+
+def _subtree(
+    draw: st.DrawFn, ops: Sequence[type[Node]], kinds: Sequence[type[Annotation]], depth: int, name: str
+) -> Node:
+    """A ``Goal`` leaf or an operator of ``ops`` (``strategy(children, name)``) over up to 3 children ``n0..n2``."""
+    if depth <= 1 or draw(st.integers(0, 2)) == 0:  # shrinks towards a leaf
+        node: Node = _goal(draw, name)
+    else:
+        op = draw(st.sampled_from(ops))
+        kids = [_subtree(draw, ops, kinds, depth - 1, f"n{i}") for i in range(draw(st.integers(1, 3)))]
+        node = draw(op.strategy(kids, name))
+    return _annotated(draw, node, kinds)
+
+
+@st.composite
+def trees_with(draw: st.DrawFn, cls: type) -> Node:
+    """Random trees over :data:`FEATURES` that contain ``cls``, with ``Distance`` and ``Constraint`` annotations.
+
+    An operator roots the tree (``cls.strategy(children, "root")``) and may
+    recur below it; an annotation class is attached to the root
+    (``cls.strategy(FEATURES, "kit")``) and may be drawn on any node; ``Goal``
+    (a leaf) is in every tree. Constraints let children end episodes.
+    """
+    kinds: tuple[type[Annotation], ...] = (Distance, Constraint, Distance)  # constraints end episodes early
+    if issubclass(cls, Annotation):
+        tree = _subtree(draw, (All,), (cls, Distance, Constraint), 3, "root")
+        return tree.annotate(draw(cls.strategy(FEATURES, "kit")))
+    if issubclass(cls, Goal) or not issubclass(cls, Node):
+        return _subtree(draw, (All,), kinds, 3, "root")
+    kids = [_subtree(draw, (All, cls), kinds, 2, f"n{i}") for i in range(draw(st.integers(1, 3)))]
+    return _annotated(draw, draw(cls.strategy(kids, "root")), kinds)
+
+
+def f32(rows: Sequence[Sequence[float]]) -> list[list[float]]:
+    """States as observations carry them (float32), so that every evaluator sees the same numbers."""
+    out: list[list[float]] = np.asarray(rows, dtype=np.float32).astype(np.float64).tolist()
+    return out
+
+
+@st.composite
+def cases(draw: st.DrawFn, cls: type, max_size: int = 10) -> Case:
+    """A tree containing ``cls``, a trajectory of 2 to ``max_size`` states and an action (0-2) per step."""
+    tree = draw(trees_with(cls))
+    trajectory = f32(draw(sgst.trajectories(FEATURES, max_size=max_size)))
+    n = len(trajectory) - 1
+    return Case(tree, trajectory, draw(st.lists(st.integers(0, 2), min_size=n, max_size=n)))
+
+
+@st.composite
+def refinement_cases(draw: st.DrawFn, cls: type[Node]) -> Case:
+    """A ``Goal`` leaf, a refinement of it by ``cls`` (as the tree) and 1 to 8 states (as the trajectory)."""
+    leaf = _goal(draw, "leaf")
+    refinements = cls.refinements(leaf)
+    assume(refinements is not None)
+    assert refinements is not None
+    states = f32(draw(st.lists(sgst.states(FEATURES), min_size=1, max_size=8)))
+    return Case(draw(refinements), states, None, leaf)
+
+
+# -- running a property and reporting its counterexample --------------------------
+
+
+def value_text(v: float) -> str:
+    """A float32 state value as its shortest exact text."""
+    return str(np.float32(v)) if float(np.float32(v)) == v else repr(v)
+
+
+def _example(case: Case) -> list[str]:
+    lines = ["tree:", *(f"    {line}" for line in case.tree.pretty().splitlines())]
+    if case.leaf is not None:
+        lines[1:1] = [f"    (a refinement of the leaf {case.leaf.describe()})"]
+    if case.trajectory is not None:
+        what = "states" if case.actions is None else "trajectory (state s_t, then the action a_t taken in it)"
+        lines += ["", f"{what}, features ({', '.join(FEATURES)}):"]
+        for t, s in enumerate(case.trajectory):
+            act = f"   a{t} = {case.actions[t]}" if case.actions is not None and t < len(case.actions) else ""
+            lines.append(f"    s{t} = ({', '.join(value_text(v) for v in s)}){act}")
+    return lines
+
+
+def fail(check: Check, cls: type, case: Case, detail: str) -> NoReturn:
+    """Raise the :class:`AssertionError` of ``check`` on ``cls``: the invariant, the example, what breaks it."""
+    invariant = (check.__doc__ or check.__name__).strip().splitlines()[0]
+    lines = [f"{check.__name__} failed for {cls.__name__}.", f"Invariant: {invariant}", "", *_example(case)]
+    raise AssertionError("\n".join([*lines, "", f"What breaks it: {detail}"]))
+
+
+def run_property(
+    check: Check, cls: type, max_examples: int, body: Callable[[Case], None], examples: Any = None
+) -> None:
+    """Run ``body`` on examples (default: :func:`cases`); a :class:`Broken` or any error fails ``check`` readably.
+
+    Hypothesis shrinks the failing example and re-raises the failure of the
+    smallest one, so the message describes that one.
+    """
+    health = [HealthCheck.too_slow, HealthCheck.filter_too_much, HealthCheck.data_too_large]
+
+    @settings(
+        max_examples=max_examples,
+        deadline=None,
+        derandomize=True,
+        database=None,
+        report_multiple_bugs=False,
+        suppress_health_check=[*health, HealthCheck.large_base_example],
+        phases=(Phase.explicit, Phase.reuse, Phase.generate, Phase.target, Phase.shrink),  # no explain: slow
+    )
+    @given(cases(cls) if examples is None else examples)
+    def prop(case: Case) -> None:
+        try:
+            body(case)
+        except Broken as e:
+            fail(check, cls, case, str(e))
+        except (AssertionError, HypothesisException):
+            raise
+        except Exception as e:
+            fail(check, cls, case, f"evaluating the example raised {type(e).__name__}: {e}")
+
+    prop()
+
+
+def step_name(t: int) -> str:
+    """``after reset`` or ``after step t (...)``, as messages name a moment of the episode."""
+    return "after reset (s0)" if t == 0 else f"after step {t} (s{t - 1} -> s{t}, action a{t - 1})"
+
+
+# -- driving the env and the reference requirements ---------------------------------
+
+
+def replay_env(tree: Node, trajectory: list[list[float]], evaluator: str = "flat") -> SpecEnv:
+    """The constructed env of ``tree`` over a :class:`~specguard.contract.replay.ReplayEnv` of ``trajectory``.
+
+    Built as :func:`specguard.make_env` builds it, without its static checks:
+    a goal no state can be in (an ``All`` of disjoint boxes) is a fine example here.
+    """
+    return SpecEnv(ReplayEnv(trajectory), tree=tree, features=FEATURES, evaluator=evaluator)  # type: ignore[arg-type]
+
+
+class Step(NamedTuple):
+    """What the env returned after reset (``reward`` None) or a step."""
+
+    obs: np.ndarray
+    reward: Any
+    terminated: bool
+    info: dict[str, Any]
+
+
+def play(env: SpecEnv, actions: Sequence[int]) -> list[Step]:
+    """Reset, then step until the episode ends: ``[reset, step 1, ...]``."""
+    obs, info = env.reset(seed=0)
+    steps = [Step(obs, None, False, info)]
+    for a in actions:
+        obs, reward, terminated, truncated, info = env.step(a)
+        steps.append(Step(obs, reward, terminated, info))
+        if terminated or truncated:
+            break
+    return steps
+
+
+def extended_states(tree: Node, trajectory: list[list[float]], actions: list[int]) -> tuple[Requirements, list[Any]]:
+    """The reference requirements and the extended states (true own states) along the trajectory."""
+    req = process(tree)
+    make = state_type(FEATURES)._make
+    s = make(trajectory[0])
+    xs = [ExtendedState(s, req.initial(s))]
+    for a, f in zip(actions, trajectory[1:]):
+        s2 = make(f)
+        xs.append(ExtendedState(s2, req.transition(xs[-1], a, s2)))
+    return req, xs
+
+
+def context(req: Requirements, path: str, node: Node, x: Any) -> Context:
+    """The node's :class:`Context` in the extended state ``x``: its own state and its children's memberships."""
+    inside = tuple(req.goals[f"{path}{PATH_SEPARATOR}{c.name}"](x) for c in node.children)
+    return Context(x.s, tuple(x.states.get(path, ())), inside)

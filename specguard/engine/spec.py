@@ -1,0 +1,186 @@
+"""A spec: what to train (initial env + goal tree + algorithm), on what budget, and what to expect.
+
+Example:
+    >>> import specguard as sg
+    >>> from example_specs import pendulum
+    >>> spec = sg.Spec(
+    ...     pendulum.initial_env,
+    ...     pendulum.trees["w"],
+    ...     budget=sg.Budget(timesteps=100_000),
+    ...     expect={"pendulum": 0.8, "position": 0.9},
+    ... )
+    >>> spec.thresholds
+    {'pendulum': 0.8, 'pendulum/position': 0.9}
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from numbers import Real
+from typing import Any
+
+from specguard.build.initial_env import InitialEnv
+from specguard.engine.budget import Budget
+from specguard.error import InvalidSpec
+from specguard.tree.keys import ROOT, check_threshold, resolve_goal
+from specguard.tree.nodes import Node
+
+__all__ = ["ALGORITHMS", "Spec"]
+
+# stable-baselines3 algorithms by name, and the action spaces each can act in.
+ALGORITHMS: dict[str, tuple[str, ...]] = {
+    "PPO": ("Box", "Discrete", "MultiDiscrete", "MultiBinary"),
+    "A2C": ("Box", "Discrete", "MultiDiscrete", "MultiBinary"),
+    "DQN": ("Discrete",),
+    "SAC": ("Box",),
+    "TD3": ("Box",),
+    "DDPG": ("Box",),
+}
+
+UNDECIDED_OUTCOMES = ("fail", "pass")
+
+
+@dataclass(frozen=True)
+class Spec:
+    """A goal tree over an initial env, trained and judged against per-goal thresholds.
+
+    Args:
+        initial_env: the initial environment.
+        tree: the goal tree.
+        budget: training and evaluation budget.
+        expect: ``{node path or unique node name: minimum success}``, or one
+            number for the root goal. Empty: measure only.
+        algorithm: a stable-baselines3 algorithm name that fits the action space.
+        hyperparameters: keyword arguments for the algorithm (``n_steps``, ...).
+        n_envs: parallel environments per run (a ``DummyVecEnv``).
+        normalize: wrap the training env in ``VecNormalize``.
+        quorum: runs that must meet each threshold; default every run
+            (``budget.max_seeds``).
+        deterministic: evaluate the policy's deterministic action.
+        confidence: the confidence of the success intervals.
+        undecided: what a verdict still undecided at the end counts as: "fail" or "pass".
+        baseline: train on the initial env's own reward, termination and
+            observation, and evaluate the same goals (the paper's baseline).
+        name: a label for reports; defaults to the root's name.
+        xfail: ``{goal: reason}`` for thresholded goals the spec is expected
+            to miss (e.g. a negative result of the paper): pytest reports them
+            XFAIL (XPASS once they pass), ``specguard run`` does not count
+            their miss as a failure. Under anytime verdicts their runs are
+            never cut short: a goal not met keeps its run training.
+    """
+
+    initial_env: InitialEnv
+    tree: Node
+    budget: Budget
+    expect: Mapping[str, float] | float = field(default_factory=dict)
+    algorithm: str = "PPO"
+    hyperparameters: Mapping[str, Any] = field(default_factory=dict)
+    n_envs: int = 1
+    normalize: bool = False
+    quorum: int | None = None
+    deterministic: bool = True
+    confidence: float = 0.95
+    undecided: str = "fail"
+    baseline: bool = False
+    name: str | None = None
+    xfail: Mapping[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        label = f"Spec {self.label!r}"
+        if not isinstance(self.initial_env, InitialEnv):
+            raise InvalidSpec(f"{label}.initial_env", f"expected an InitialEnv, got {self.initial_env!r}")
+        if not isinstance(self.tree, Node):
+            raise InvalidSpec(f"{label}.tree", f"expected a Goal or All node, got {self.tree!r}")
+        if not isinstance(self.budget, Budget):
+            raise InvalidSpec(f"{label}.budget", f"expected a Budget, got {self.budget!r}")
+        if self.algorithm not in ALGORITHMS:
+            raise InvalidSpec(
+                f"{label}.algorithm",
+                f"unknown algorithm {self.algorithm!r}; expected one of {', '.join(ALGORITHMS)}",
+            )
+        if not isinstance(self.hyperparameters, Mapping):
+            raise InvalidSpec(f"{label}.hyperparameters", f"expected a mapping, got {self.hyperparameters!r}")
+        if isinstance(self.n_envs, bool) or not isinstance(self.n_envs, int) or self.n_envs < 1:
+            raise InvalidSpec(f"{label}.n_envs", f"expected an integer >= 1, got {self.n_envs!r}")
+        assert self.budget.max_seeds is not None
+        if self.quorum is not None and not (isinstance(self.quorum, int) and 1 <= self.quorum <= self.budget.max_seeds):
+            raise InvalidSpec(
+                f"{label}.quorum",
+                f"expected an integer in [1, budget.max_seeds={self.budget.max_seeds}], got {self.quorum!r}",
+            )
+        if not (isinstance(self.confidence, Real) and 0.0 < self.confidence < 1.0):
+            raise InvalidSpec(f"{label}.confidence", f"expected a number in (0, 1), got {self.confidence!r}")
+        if self.undecided not in UNDECIDED_OUTCOMES:
+            raise InvalidSpec(f"{label}.undecided", f"expected one of {UNDECIDED_OUTCOMES}, got {self.undecided!r}")
+        object.__setattr__(self, "expect", self._resolve_thresholds(label))
+        object.__setattr__(self, "xfail", self._resolve_xfail(label))
+
+    @property
+    def label(self) -> str:
+        return self.name or str(getattr(self.tree, "name", "?"))
+
+    def scaled(self, factor: float, *, checkpoints: int | None = None) -> Spec:
+        """This spec with its training budget multiplied by ``factor`` (the one place budgets are scaled).
+
+        ``checkpoints``, if given, replaces the budget's own (1 trains every
+        run's whole budget; more makes it a ceiling, :mod:`specguard.stats.anytime`).
+        Nothing to change returns the spec itself, so its identity (and cache key) is unchanged.
+        """
+        if factor == 1 and checkpoints in (None, self.budget.checkpoints):
+            return self
+        return dataclasses.replace(self, budget=self.budget.scaled(factor, checkpoints=checkpoints))
+
+    @property
+    def verdict_confidence(self) -> float:
+        """The confidence each look at a run judges at: ``confidence`` corrected for ``budget.looks`` looks.
+
+        Intervals shown in tables stay at ``confidence``; run verdicts (met,
+        missed, undecided) use this one, so that a run whose true success is
+        its threshold is called met (or missed) with probability at most
+        ``(1 - confidence) / 2`` over all its looks (:mod:`specguard.stats.anytime`).
+        """
+        from specguard.stats.anytime import look_confidence
+
+        return look_confidence(self.confidence, self.budget.looks)
+
+    @property
+    def thresholds(self) -> dict[str, float]:
+        """The thresholds by full node path."""
+        assert isinstance(self.expect, Mapping)
+        return dict(self.expect)
+
+    @property
+    def required_runs(self) -> int:
+        """Runs that must meet each threshold."""
+        assert self.budget.max_seeds is not None
+        return self.quorum if self.quorum is not None else self.budget.max_seeds
+
+    def _resolve_xfail(self, label: str) -> dict[str, str]:
+        if not isinstance(self.xfail, Mapping):
+            raise InvalidSpec(f"{label}.xfail", f"expected {{goal: reason}}, got {self.xfail!r}")
+        resolved: dict[str, str] = {}
+        for key, reason in self.xfail.items():
+            where = f"{label}.xfail[{key!r}]"
+            path = resolve_goal(self.tree, key, where)
+            if path not in self.thresholds:
+                raise InvalidSpec(where, f"expected a goal that expect gives a threshold to: {list(self.thresholds)}")
+            if not isinstance(reason, str) or not reason.strip():
+                raise InvalidSpec(where, f"expected the reason as text, got {reason!r}")
+            resolved[path] = reason
+        return resolved
+
+    def _resolve_thresholds(self, label: str) -> dict[str, float]:
+        expect: Any = self.expect
+        if isinstance(expect, Real) and not isinstance(expect, bool):
+            expect = {ROOT: expect}
+        if not isinstance(expect, Mapping):
+            raise InvalidSpec(
+                f"{label}.expect", f"expected {{node path or name: min success}} or a number, got {expect!r}"
+            )
+        resolved: dict[str, float] = {}
+        for key, value in expect.items():
+            where = f"{label}.expect[{key!r}]"
+            resolved[resolve_goal(self.tree, key, where)] = check_threshold(where, value)
+        return resolved

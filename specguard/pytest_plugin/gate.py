@@ -1,0 +1,275 @@
+"""Judging one goal (or safety rate) of a trained spec for a test item: outcome, message, figures.
+
+Plain logic over :class:`specguard.engine.run.SpecResult`, used by the pytest
+plugin and unit-tested without pytest. A safety rate (key ``path:name``, see
+:mod:`specguard.tree.keys`) is judged exactly as a goal is; its message and hint
+speak of violations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from specguard.engine.run import SpecResult
+from specguard.engine.spec import Spec
+from specguard.extend import SHAPING, Node
+from specguard.stats.intervals import Outcome, QuorumVerdict, RunVerdict
+from specguard.tree.keys import GOAL, SAFETY, kind, resolve_goal
+
+if TYPE_CHECKING:
+    from specguard.stats.compare import Baseline
+
+__all__ = ["GoalCheck", "check_goal", "check_item", "with_thresholds"]
+
+
+@dataclass
+class GoalCheck:
+    """One (spec, goal) item's figures and outcome; ``to_row()`` is plain data.
+
+    Attributes:
+        goal: the node path, or a safety key ``path:name``.
+        outcome: passed, failed, or undecided (the goal failed only because
+            runs stayed undecided: none missed, none crashed).
+        success, successes: for a safety rate, the share and number of
+            episodes without a violation.
+        comparison: against the stored baseline, or a note that the baseline has no figures for it.
+        kind: ``"goal"`` or ``"safety"``.
+    """
+
+    group: str
+    spec: str
+    goal: str
+    threshold: float
+    outcome: Outcome
+    success: float
+    interval: tuple[float, float]
+    successes: int
+    episodes: int
+    runs_met: int
+    runs: int
+    required: int
+    per_seed: list[dict[str, Any]]
+    train_seconds: float
+    cached: bool
+    errors: dict[int, str] = field(default_factory=dict)
+    hint: str | None = None
+    comparison: str | None = None
+    spec_key: str | None = None
+    kind: str = GOAL
+
+    @property
+    def key(self) -> str:
+        """The goal's identity across sessions, for stored baselines."""
+        return f"{self.group}::{self.goal}"
+
+    @property
+    def runs_counts(self) -> list[tuple[int, int]]:
+        return [(s["successes"], s["episodes"]) for s in self.per_seed]
+
+    def junit_properties(self) -> list[tuple[str, Any]]:
+        """The figures as ``(name, value)`` pairs for JUnit XML properties."""
+        lo, hi = self.interval
+        names = ("kind", "success", "threshold", "successes", "episodes", "runs_met", "runs", "train_seconds", "cached")
+        return [(n, getattr(self, n)) for n in names] + [("interval", f"[{lo:.4f}, {hi:.4f}]")]
+
+    def message(self) -> str:
+        verb = {Outcome.PASSED: "met", Outcome.FAILED: "missed", Outcome.UNDECIDED: "could not be decided for"}[
+            self.outcome
+        ]
+        lo, hi = self.interval
+        seeds = ", ".join(str(s["seed"]) for s in self.per_seed) or "none"
+        safety = self.kind == SAFETY
+        what = f"safety rate {self.goal!r}" if safety else f"goal {self.goal!r}"
+        rate = "safe (no violation) in" if safety else "success"
+        lines = [
+            f"{what} of spec {self.spec!r} {verb} its threshold",
+            f"  {rate} {self.success:.0%} ({self.successes}/{self.episodes}), interval [{lo:.2f}, {hi:.2f}], "
+            f"threshold >= {self.threshold:g}",
+            f"  runs: {self.runs_met} of {self.runs} met ({self.required} required); seeds {seeds}",
+            "  per seed: "
+            + (
+                ", ".join(f"seed {s['seed']}: {s['successes']}/{s['episodes']} ({s['verdict']})" for s in self.per_seed)
+                or "-"
+            ),
+        ]
+        lines += [f"  seed {seed} failed: {error}" for seed, error in self.errors.items()]
+        if self.hint:
+            lines.append(f"  hint: {self.hint}")
+        return "\n".join(lines)
+
+    def to_row(self) -> dict[str, Any]:
+        row = asdict(self)
+        row["interval"] = list(self.interval)
+        row["errors"] = {str(k): v for k, v in self.errors.items()}
+        row["runs_counts"] = [list(r) for r in self.runs_counts]
+        return row
+
+
+def _node(tree: Node, path: str) -> Node:
+    return dict(tree.walk())[path]
+
+
+def _undecided_hint(spec: Spec) -> str:
+    return (
+        f"runs stayed undecided after {spec.budget.max_eval_episodes} evaluation episodes: "
+        "raise budget.max_eval_episodes, or ask for a threshold further from the measured rate"
+    )
+
+
+def _safety_hint(spec: Spec, key: str, result: SpecResult, verdicts: list[RunVerdict]) -> str | None:
+    """What to try when a safety rate (``path:name``) missed its threshold."""
+    runs = result.runs
+    episodes = sum(r.episodes for r in runs)
+    if not episodes:
+        return None
+    if RunVerdict.UNDECIDED in verdicts and RunVerdict.MISSED not in verdicts:
+        return _undecided_hint(spec)
+    unsafe = episodes - sum(r.successes[key] for r in runs)
+    always = [r.seed for r in runs if r.successes[key] == 0]
+    where = f"; in every episode of {len(always)}/{len(runs)} seeds" if always else ""
+    return (
+        f"{key!r} was violated in {unsafe / episodes:.0%} of evaluation episodes{where} "
+        "(an episode with any violation counts as unsafe, whatever the annotation's budget): "
+        "consider a larger weight for its penalty, or a larger training budget"
+    )
+
+
+def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[RunVerdict]) -> str | None:
+    if kind(path) == SAFETY:
+        return _safety_hint(spec, path, result, verdicts)
+    runs = result.runs
+    never = [r.seed for r in runs if r.successes[path] == 0]
+    shaped = any(a.role == SHAPING for _, n in _node(spec.tree, path).walk() for a in n.annotations)
+    if never:
+        from specguard.build.checks import unreachable_reason
+
+        # "Impossible" is refused before training; should a result from elsewhere (an old cache) get here,
+        # no Distance can help: say why, instead of "never reached".
+        impossible = unreachable_reason(spec.initial_env, spec.tree, path)
+        if impossible is not None:
+            return f"goal impossible, not just never reached: {impossible}"
+    if never and not shaped:
+        return (
+            f"sparse goal never reached in {len(never)}/{len(runs)} seeds: consider a Distance annotation on {path!r}"
+        )
+    if never:
+        return f"goal never reached in {len(never)}/{len(runs)} seeds: consider a larger budget or other weights"
+    node = _node(spec.tree, path)
+    episodes = sum(r.episodes for r in runs)
+    if node.children and episodes:
+        rates = {
+            f"{path}/{c.name}": sum(r.successes[f"{path}/{c.name}"] for r in runs) / episodes for c in node.children
+        }
+        best, worst = max(rates, key=rates.__getitem__), min(rates, key=rates.__getitem__)
+        if rates[best] - rates[worst] >= 0.3:
+            return (
+                f"subgoals compete: {best!r} is reached in {rates[best]:.0%} of episodes, {worst!r} in "
+                f"{rates[worst]:.0%}; consider a Distance on {worst!r} or a larger weight for it"
+            )
+    if RunVerdict.UNDECIDED in verdicts:
+        return _undecided_hint(spec)
+    if any(r.stopped_early for r in runs):
+        return "training stopped at the budget's wall-clock cap in some seeds"
+    return None
+
+
+def check_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalCheck:
+    """The figures and outcome of goal (or safety key) ``path``, which must have a threshold in ``spec``."""
+    verdict = result.goals[path]
+    per_seed = [
+        {
+            "seed": r.seed,
+            "successes": r.successes[path],
+            "episodes": r.episodes,
+            "verdict": v.value,
+            "timesteps": r.timesteps,
+            "met_early": r.met_early,
+            "evaluated": sum(p.get("evaluation_episodes", 0) for p in r.curve) or r.episodes,
+            **({"weights": r.weights} if r.weights else {}),
+        }
+        for r, v in zip(result.runs, verdict.runs)
+    ]
+    if verdict.verdict is QuorumVerdict.PASSED:
+        outcome = Outcome.PASSED
+    elif not result.errors and RunVerdict.MISSED not in verdict.runs and verdict.runs:
+        outcome = Outcome.UNDECIDED
+    else:
+        outcome = Outcome.FAILED
+    return GoalCheck(
+        group=group,
+        spec=spec.label,
+        goal=path,
+        threshold=verdict.threshold,
+        outcome=outcome,
+        success=verdict.success,
+        interval=verdict.interval,
+        successes=verdict.successes,
+        episodes=verdict.episodes,
+        runs_met=verdict.runs.count(RunVerdict.MET),
+        runs=len(verdict.runs) + len(result.errors),
+        required=verdict.required,
+        per_seed=per_seed,
+        train_seconds=sum(r.train_seconds for r in result.runs),
+        cached=bool(result.cached) and all(result.cached.values()),
+        errors=dict(result.errors),
+        spec_key=result.spec_key,
+        hint=None if outcome is Outcome.PASSED else _hint(spec, path, result, verdict.runs),
+        kind=kind(path),
+    )
+
+
+def with_thresholds(spec: Spec, expect: dict[Any, float] | None, goal: object) -> tuple[Spec, list[str]]:
+    """The spec with a decorator's thresholds (if any) and the goal paths one item asserts.
+
+    Raises:
+        InvalidSpec: a goal the tree lacks; SpecError: nothing to check.
+    """
+    import dataclasses
+
+    from specguard.error import SpecError
+
+    where = f"Spec {spec.label!r}"
+    if expect:
+        thresholds = {resolve_goal(spec.tree, g, where): t for g, t in expect.items()}
+        xfail = {g: r for g, r in spec.xfail.items() if g in thresholds}  # the decorator's own xfail marks items
+        spec = dataclasses.replace(spec, expect=thresholds, xfail=xfail)
+    if not spec.thresholds:
+        raise SpecError(f"{where}: no thresholds to check; give expect= to the Spec or to @goal_spec")
+    return spec, [resolve_goal(spec.tree, goal, where)] if goal is not None else list(spec.thresholds)
+
+
+def check_item(
+    result: SpecResult,
+    spec: Spec,
+    paths: list[str],
+    group: str,
+    baseline: tuple[Baseline, str] | None = None,
+) -> list[GoalCheck]:
+    """Check the goals of one test item, failing a passing goal whose success dropped against ``baseline``.
+
+    A goal or safety rate the baseline has no figures for (a baseline stored
+    before it was asserted, or before safety rates were measured) is not
+    compared; its ``comparison`` says so.
+
+    Args:
+        baseline: the stored baseline and its name.
+    """
+    checks = []
+    for path in paths:
+        check = check_goal(result, spec, path, group)
+        if baseline is not None and check.key not in baseline[0].runs:
+            check.comparison = f"not compared: baseline {baseline[1]!r} has no figures for it"
+        elif baseline is not None and check.runs_counts:
+            from specguard.stats.compare import compare
+
+            comparison = compare(baseline[0].runs[check.key], check.runs_counts)
+            check.comparison = comparison.describe()
+            if baseline[0].spec_changed(check.key, check.spec_key):
+                check.comparison += f" (the spec changed since baseline {baseline[1]!r})"
+            if comparison.dropped and check.outcome is Outcome.PASSED:
+                check.outcome = Outcome.FAILED
+                rate = "safety rate" if check.kind == SAFETY else "success"
+                check.hint = f"{rate} {check.comparison} against baseline {baseline[1]!r}"
+        checks.append(check)
+    return checks

@@ -1,0 +1,115 @@
+"""Success rates with confidence intervals, and the verdicts built on them.
+
+A *run* (one training seed) is evaluated on ``n`` episodes, ``k`` of which end
+in a goal. Its success rate gets a Clopper-Pearson ("exact") interval from
+``scipy.stats.binomtest``; the run
+
+* **meets** a threshold ``t`` when the whole interval lies at or above ``t``,
+* **misses** it when the whole interval lies below ``t``,
+* is **undecided** otherwise (more evaluation episodes narrow the interval).
+
+False alarms: with confidence ``c`` the interval is two-sided, so a run whose
+true success rate is exactly ``t`` is called *missed* with probability at most
+``(1 - c) / 2`` (2.5% at the default 0.95), and a run whose true rate is below
+``t`` is called *met* with at most that probability. Clopper-Pearson is
+conservative: the actual rates are lower.
+
+A spec's verdict counts runs against a quorum (:func:`quorum_verdict`), the
+way the paper reports "6 of 10 runs".
+
+Example:
+    >>> lo, hi = success_interval(28, 30)
+    >>> round(lo, 3), round(hi, 3)
+    (0.779, 0.992)
+    >>> run_verdict(28, 30, threshold=0.7)
+    <RunVerdict.MET: 'met'>
+    >>> quorum_verdict([RunVerdict.MET, RunVerdict.MISSED], required=2, max_runs=2)
+    <QuorumVerdict.FAILED: 'failed'>
+"""
+
+from __future__ import annotations
+
+import enum
+import functools
+from collections.abc import Sequence
+
+__all__ = ["Outcome", "QuorumVerdict", "RunVerdict", "quorum_verdict", "run_verdict", "success_interval"]
+
+
+class RunVerdict(str, enum.Enum):
+    """One run against one goal's threshold."""
+
+    MET = "met"
+    MISSED = "missed"
+    UNDECIDED = "undecided"
+
+
+class QuorumVerdict(str, enum.Enum):
+    """A spec's goal over its runs."""
+
+    PASSED = "passed"
+    FAILED = "failed"
+    OPEN = "open"  # neither is settled yet: more runs could decide it
+
+
+class Outcome(str, enum.Enum):
+    """A test item's goal at the end: passed, failed, or undecided (failed only through undecided runs)."""
+
+    PASSED = "passed"
+    FAILED = "failed"
+    UNDECIDED = "undecided"
+
+
+def _check_counts(successes: int, episodes: int) -> None:
+    if episodes < 1:
+        raise ValueError(f"expected at least one episode, got episodes={episodes}")
+    if not 0 <= successes <= episodes:
+        raise ValueError(f"expected 0 <= successes <= episodes, got successes={successes}, episodes={episodes}")
+
+
+@functools.lru_cache(maxsize=65536)
+def success_interval(successes: int, episodes: int, confidence: float = 0.95) -> tuple[float, float]:
+    """The Clopper-Pearson interval of a success rate of ``successes`` out of ``episodes``.
+
+    Cached: verdicts ask for the same few counts again and again (:mod:`specguard.stats.anytime`).
+
+    Raises:
+        ValueError: counts out of range, or ``confidence`` outside (0, 1).
+    """
+    _check_counts(successes, episodes)
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"expected a confidence in (0, 1), got {confidence!r}")
+    from scipy.stats import binomtest  # scipy.stats takes ~1 s to import: only when needed
+
+    ci = binomtest(int(successes), int(episodes)).proportion_ci(confidence_level=confidence, method="exact")
+    return float(ci.low), float(ci.high)
+
+
+def run_verdict(successes: int, episodes: int, threshold: float, confidence: float = 0.95) -> RunVerdict:
+    """Whether one run's interval lies at or above ``threshold``, below it, or across it."""
+    lo, hi = success_interval(successes, episodes, confidence)
+    if lo >= threshold:
+        return RunVerdict.MET
+    if hi < threshold:
+        return RunVerdict.MISSED
+    return RunVerdict.UNDECIDED
+
+
+def quorum_verdict(runs: Sequence[RunVerdict], required: int, max_runs: int) -> QuorumVerdict:
+    """Count final run verdicts against a quorum of ``required`` out of at most ``max_runs``.
+
+    Passed once ``required`` runs met the threshold; failed once so many runs
+    did not (missed, or stayed undecided) that even ``max_runs`` runs cannot
+    reach the quorum; open otherwise, which is when training another seed can
+    still change the answer.
+    """
+    if not 1 <= required <= max_runs:
+        raise ValueError(f"expected 1 <= required <= max_runs, got required={required}, max_runs={max_runs}")
+    if len(runs) > max_runs:
+        raise ValueError(f"got {len(runs)} runs, more than max_runs={max_runs}")
+    met = sum(1 for r in runs if r is RunVerdict.MET)
+    if met >= required:
+        return QuorumVerdict.PASSED
+    if len(runs) - met > max_runs - required:
+        return QuorumVerdict.FAILED
+    return QuorumVerdict.OPEN

@@ -1,0 +1,289 @@
+"""The package's architecture, kept by a test: which part may import which, and no import cycles.
+
+Every import counts, wherever it is written: at module level, inside a
+function (a lazy import is still a dependency) or under ``TYPE_CHECKING`` (a
+design dependency). Parts, lowest first:
+
+- base: ``error``, ``validation``, ``version``, ``utils/``;
+- ``extend`` (the operator API), then ``tree/`` (the built-in nodes), then ``build/`` (the constructed env);
+- ``stats/`` (intervals, anytime looks, comparisons: numbers only);
+- the public tools over the core: ``strategies``, ``registry``, ``contract/``, ``testing``;
+- ``engine/`` (specs, training, runs, the cache);
+- ``report/`` (session reports, figures, GIFs);
+- the doors: ``pytest_plugin/`` and ``cli/``; and the facade ``specguard`` (``__init__``) and ``__main__``.
+"""
+
+from __future__ import annotations
+
+import ast
+import textwrap
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+
+import pytest
+
+import specguard
+
+PACKAGE = Path(specguard.__file__).parent
+
+BASE = frozenset({"error", "validation", "version", "utils"})
+CORE = BASE | {"extend", "tree", "build"}
+TOOLS = CORE | {"strategies", "registry", "contract", "testing"}
+# Per part, the parts its modules may import (its own included).
+ALLOWED: Mapping[str, frozenset[str]] = {
+    "error": frozenset({"error"}),
+    "version": frozenset({"version"}),
+    "validation": frozenset({"validation", "error"}),
+    "utils": BASE,
+    "extend": BASE | {"extend"},
+    "tree": BASE | {"extend", "tree"},
+    "build": CORE,
+    "stats": BASE | {"stats"},
+    "strategies": BASE | {"extend", "tree", "strategies"},
+    "registry": BASE | {"extend", "tree", "registry"},
+    "contract": CORE | {"strategies", "contract"},
+    "testing": CORE | {"contract", "testing"},
+    "engine": TOOLS | {"stats", "engine"},
+    "report": TOOLS | {"stats", "engine", "report"},
+    "pytest_plugin": TOOLS | {"stats", "engine", "report", "pytest_plugin"},
+    "cli": TOOLS | {"stats", "engine", "report", "pytest_plugin", "cli"},
+    "__main__": frozenset({"cli", "__main__"}),
+}
+NO_DEEP_LEARNING = ("extend", "tree", "build", "stats", "contract", "strategies", "registry", "testing", *tuple(BASE))
+DEEP_LEARNING = ("torch", "stable_baselines3")
+
+
+def module_name(path: Path, package: Path) -> str:
+    """``specguard/engine/run.py`` -> ``specguard.engine.run``; a package's ``__init__`` is the package."""
+    parts = path.relative_to(package.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def modules_of(package: Path) -> dict[str, Path]:
+    """Every module of ``package``, subpackages included, by dotted name."""
+    return {module_name(p, package): p for p in sorted(package.rglob("*.py")) if "__pycache__" not in p.parts}
+
+
+def imports_of(path: Path, name: str, known: Iterable[str]) -> set[str]:
+    """Every module ``path`` (module ``name``) imports, anywhere in its body, resolved to the most specific known one.
+
+    ``from a.b import c`` is ``a.b.c`` when that is a module, else ``a.b``;
+    relative imports are resolved against ``name``.
+    """
+    known = set(known)
+    is_package = path.name == "__init__.py"
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = name.split(".") if is_package else name.split(".")[:-1]
+                anchor = anchor[: len(anchor) - (node.level - 1)]
+                base = ".".join([*anchor, *([base] if base else [])])
+            for alias in node.names:
+                full = f"{base}.{alias.name}"
+                found.add(full if full in known else base)
+    return found
+
+
+def import_graph(package: Path) -> dict[str, set[str]]:
+    """Per module of ``package``, the modules of ``package`` it imports (itself left out)."""
+    modules = modules_of(package)
+    top = package.name
+    graph: dict[str, set[str]] = {}
+    for name, path in modules.items():
+        deps = set()
+        for imported in imports_of(path, name, modules):
+            while imported and imported not in modules and imported.startswith(top):
+                imported = imported.rpartition(".")[0]  # a name inside a module: the module
+            if imported in modules and imported != name:
+                deps.add(imported)
+        graph[name] = deps
+    return graph
+
+
+def third_party_imports(package: Path) -> dict[str, set[str]]:
+    """Per module, the top-level names of the modules it imports from outside the package."""
+    modules = modules_of(package)
+    return {
+        name: {m.split(".")[0] for m in imports_of(path, name, modules) if m and not m.startswith(package.name)}
+        for name, path in modules.items()
+    }
+
+
+def part_of(module: str) -> str:
+    """The part a module belongs to: its first name below the package (``specguard.engine.run`` -> ``engine``)."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else "__init__"
+
+
+def layer_violations(graph: Mapping[str, set[str]], allowed: Mapping[str, frozenset[str]] = ALLOWED) -> list[str]:
+    """Each import that runs against the layering, as ``importer -> imported``.
+
+    The facade (the package's ``__init__``) may import anything; nothing may import the facade.
+    """
+    out = []
+    for module, deps in sorted(graph.items()):
+        for dep in sorted(deps):
+            if part_of(dep) == "__init__":
+                out.append(f"{module} -> {dep} (the facade: import the module that defines the name)")
+            elif part_of(module) != "__init__" and part_of(dep) not in allowed[part_of(module)]:
+                out.append(f"{module} -> {dep} ({part_of(module)} may not import {part_of(dep)})")
+    return out
+
+
+def cycles(graph: Mapping[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan's algorithm), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return sorted(found)
+
+
+def deep_learning_imports(package: Path) -> list[str]:
+    """Modules of the core and the tools that import torch or stable-baselines3."""
+    return [
+        f"{module} imports {', '.join(sorted(names & set(DEEP_LEARNING)))}"
+        for module, names in sorted(third_party_imports(package).items())
+        if part_of(module) in NO_DEEP_LEARNING and names & set(DEEP_LEARNING)
+    ]
+
+
+# -- the package itself ------------------------------------------------------------------
+
+
+def test_every_module_belongs_to_a_part_with_rules():
+    parts = {part_of(m) for m in modules_of(PACKAGE)} - {"__init__"}
+    assert parts <= set(ALLOWED), f"parts without import rules: {sorted(parts - set(ALLOWED))}"
+
+
+def test_no_module_imports_against_the_layering():
+    assert layer_violations(import_graph(PACKAGE)) == []
+
+
+def test_no_import_cycles():
+    assert cycles(import_graph(PACKAGE)) == []
+
+
+def test_the_core_and_the_tools_never_import_torch_or_stable_baselines3():
+    assert deep_learning_imports(PACKAGE) == []
+
+
+# -- the checker can fail ----------------------------------------------------------------------
+
+
+def write_package(root: Path, files: Mapping[str, str]) -> Path:
+    package = root / "specguard"
+    for relative, source in {"__init__.py": "", **files}.items():
+        path = package / relative
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(textwrap.dedent(source))
+        for folder in path.relative_to(package).parents:
+            (package / folder / "__init__.py").touch()
+    return package
+
+
+def test_a_lazy_import_of_the_engine_from_the_tree_is_a_violation(tmp_path):
+    package = write_package(
+        tmp_path,
+        {
+            "tree/nodes.py": """
+                def strategy():
+                    from specguard.engine.train import train_run
+                    return train_run
+            """,
+            "engine/train.py": "from specguard.tree import nodes\n",
+        },
+    )
+    assert layer_violations(import_graph(package)) == [
+        "specguard.tree.nodes -> specguard.engine.train (tree may not import engine)"
+    ]
+
+
+def test_the_engine_importing_the_cli_and_the_plugin_are_violations(tmp_path):
+    package = write_package(
+        tmp_path,
+        {
+            "engine/run.py": "from specguard.cli import main\nfrom specguard.pytest_plugin.report import markdown\n",
+            "cli/main.py": "",
+            "pytest_plugin/report.py": "",
+        },
+    )
+    assert layer_violations(import_graph(package)) == [
+        "specguard.engine.run -> specguard.cli.main (engine may not import cli)",
+        "specguard.engine.run -> specguard.pytest_plugin.report (engine may not import pytest_plugin)",
+    ]
+
+
+def test_a_cycle_through_a_type_checking_import_is_found(tmp_path):
+    package = write_package(
+        tmp_path,
+        {
+            "build/compiled.py": "from specguard.build.codegen import source_of\n",
+            "build/codegen.py": """
+                from typing import TYPE_CHECKING
+                if TYPE_CHECKING:
+                    from specguard.build.compiled import CompiledTree
+            """,
+            "build/env.py": "from specguard.build import compiled\n",
+        },
+    )
+    assert cycles(import_graph(package)) == [["specguard.build.codegen", "specguard.build.compiled"]]
+    assert layer_violations(import_graph(package)) == []
+
+
+def test_relative_imports_and_the_facade_are_resolved(tmp_path):
+    package = write_package(
+        tmp_path,
+        {
+            "engine/run.py": "from . import cache\nfrom .cache import Cache\nimport specguard\n",
+            "engine/cache.py": "from .. import error\n",
+            "error.py": "",
+        },
+    )
+    graph = import_graph(package)
+    assert graph["specguard.engine.run"] == {"specguard", "specguard.engine.cache"}
+    assert graph["specguard.engine.cache"] == {"specguard.error"}
+    assert layer_violations(graph) == [
+        "specguard.engine.run -> specguard (the facade: import the module that defines the name)"
+    ]
+
+
+def test_torch_in_the_build_is_found(tmp_path):
+    package = write_package(tmp_path, {"build/env.py": "def f():\n    import torch.nn\n"})
+    assert deep_learning_imports(package) == ["specguard.build.env imports torch"]
+
+
+@pytest.mark.parametrize("module", ["specguard.tree.nodes", "specguard.engine.run", "specguard.cli.main"])
+def test_the_real_graph_is_read(module):
+    graph = import_graph(PACKAGE)
+    assert graph[module], f"{module} imports nothing of specguard? the reader is broken"
