@@ -11,6 +11,7 @@ import sys
 import textwrap
 import threading
 import warnings
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -380,3 +381,26 @@ def test_anytime_checkpoints_and_thresholds_are_part_of_a_runs_key_but_xfail_is_
     keys = [fingerprint_spec(s) for s in (spec, anytime, stricter, expected_miss)]
     assert len({k.run_key(0) for k in keys[:3]}) == 3
     assert keys[3].run_key(0) == keys[1].run_key(0) and keys[3].spec_key != keys[1].spec_key
+
+
+def test_the_source_digest_sees_every_module_of_every_subpackage(tmp_path):
+    import shutil
+
+    from specguard.engine.fingerprint import source_digest
+
+    package = tmp_path / "specguard"
+    shutil.copytree(Path(sg.__file__).parent, package, ignore=shutil.ignore_patterns("__pycache__"))
+    before = source_digest(package)
+    deep = package / "engine" / "run.py"
+    deep.write_text(deep.read_text() + "\n# edited\n")
+    edited = source_digest(package)
+    assert edited != before  # a module two folders down counts
+    (package / "engine" / "run.py").rename(package / "engine" / "moved.py")
+    assert source_digest(package) != edited  # so does where it lies
+    assert len({source_digest(package), source_digest(package)}) == 1  # and it is stable
+
+
+def test_the_run_key_uses_the_digest_of_the_installed_package():
+    from specguard.engine.fingerprint import source_digest, versions
+
+    assert versions()["specguard"] == f"{sg.__version__}+{source_digest(Path(sg.__file__).parent)}"
