@@ -45,14 +45,14 @@ _EXPORTS = {
     "GoalEnv": "specguard.build.env",  # deprecated name of SpecEnv (warns)
     "SpecEnv": "specguard.build.env",
     "GoalInfo": "specguard.build.env",
-    "GoalVerdict": "specguard.engine.run",
+    "GoalVerdict": "specguard.engine.spec_result",
     "InitialEnv": "specguard.build.initial_env",
     "InitialEnvError": "specguard.error",
     "InvalidSpec": "specguard.error",
     "Node": "specguard.extend",
     "Spec": "specguard.engine.spec",
     "SpecError": "specguard.error",
-    "SpecResult": "specguard.engine.run",
+    "SpecResult": "specguard.engine.spec_result",
     "StateMappingError": "specguard.error",
     "UnknownFeature": "specguard.error",
     "UnreachableGoal": "specguard.error",
@@ -128,8 +128,9 @@ if TYPE_CHECKING:
     from specguard.build.initial_env import InitialEnv
     from specguard.engine.budget import Budget
     from specguard.engine.cache import Cache
-    from specguard.engine.run import GoalVerdict, SpecResult, run_spec
+    from specguard.engine.run import run_spec
     from specguard.engine.spec import Spec
+    from specguard.engine.spec_result import GoalVerdict, SpecResult
     from specguard.error import (
         EvaluationError,
         FingerprintError,

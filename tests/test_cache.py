@@ -15,7 +15,8 @@ import pytest
 import specguard as sg
 from example_specs import pendulum
 from specguard.engine.cache import SECRET_ENV, Cache
-from specguard.engine.train import RunResult, train_run
+from specguard.engine.results import RunResult
+from specguard.engine.train import train_run
 
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 BUDGET = sg.Budget(timesteps=128, min_seeds=1, eval_episodes=2)
@@ -189,7 +190,7 @@ def test_a_store_killed_midway_leaves_no_entry_only_a_temporary_folder(tmp_path)
         import os
         from pathlib import Path
         from specguard.engine.cache import Cache
-        from specguard.engine.train import RunResult
+        from specguard.engine.results import RunResult
 
         def dies(path, data):
             with open(path, "wb") as f:

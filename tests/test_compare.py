@@ -71,8 +71,9 @@ def test_missing_baseline(tmp_path):
 def test_safety_rates_round_trip_and_old_baselines_without_them_are_noted(tmp_path):
     import specguard as sg
     from example_specs import pendulum
-    from specguard.engine.run import SpecResult, _judge
-    from specguard.engine.train import RunResult
+    from specguard.engine.judging import judge as _judge
+    from specguard.engine.results import RunResult
+    from specguard.engine.spec_result import SpecResult
     from specguard.pytest_plugin.gate import check_item
 
     old = tmp_path / "old.json"  # saved before safety rates were measured: goals only

@@ -268,8 +268,9 @@ SAFE_TREE = sg.All(*pendulum.trees["b"].children, name="pendulum").annotate(FAST
 
 
 def _safety_result(per_seed, expect):
-    from specguard.engine.run import SpecResult, _judge
-    from specguard.engine.train import RunResult
+    from specguard.engine.judging import judge as _judge
+    from specguard.engine.results import RunResult
+    from specguard.engine.spec_result import SpecResult
 
     s = sg.Spec(pendulum.initial_env, SAFE_TREE, budget=sg.Budget(timesteps=10), expect=expect)
     runs = [
@@ -310,7 +311,7 @@ def test_safety_rates_are_judged_tabled_and_serialised_like_goals():
 
 
 def test_progress_lines_label_safety_rates():
-    from specguard.engine.run import _Runs
+    from specguard.engine.runs import Runs as _Runs
 
     run = _safety_result([12], {"fast": 0.0}).runs[0]
     assert _Runs._rates(run).startswith("pendulum:fast (safe) 12/30, pendulum 30/30")
@@ -361,7 +362,7 @@ def test_the_table_lists_each_seeds_adapted_weights():
 
 def test_a_worker_running_other_code_than_the_key_names_refuses_to_train(tmp_path, monkeypatch):
     # The driver keyed its runs with one specguard; the spawned workers import another (sources edited meanwhile).
-    from specguard.engine import run as engine
+    from specguard.engine import runs as engine
     from specguard.engine.fingerprint import versions
 
     keyed = {**versions(), "specguard": "0.0.0+edited"}
@@ -373,7 +374,7 @@ def test_a_worker_running_other_code_than_the_key_names_refuses_to_train(tmp_pat
 
 def test_a_worker_with_the_keyed_versions_trains():
     from specguard.engine.fingerprint import versions
-    from specguard.engine.run import _train_task
+    from specguard.engine.task import train_task as _train_task
 
     out = _train_task(spec(), 0, versions(), report=lambda phase, step=None, line=None: None)
     assert out["result"]["timesteps"] == 128 and out["files"]
@@ -402,3 +403,54 @@ def test_a_finished_seed_is_stored_while_the_other_still_trains(tmp_path):
     s = sg.Spec(initial, pendulum.trees["b"], budget=sg.Budget(timesteps=128, eval_episodes=2), hyperparameters=TINY)
     result = sg.run_spec(s, workers=2, cache_dir=cache, progress=None)
     assert result.errors == {} and [r.seed for r in result.runs] == [0, 1]
+
+
+class _ForgingExecutor:
+    """An executor whose 'worker' sends back a result that is not what a run measures."""
+
+    def __init__(self, forge):
+        self.forge = forge
+
+    def run(self, tasks, *, on_line=None, stop_on=None, on_outcome=None):
+        from specguard.engine.workers import Done
+
+        outcomes = {}
+        for task in tasks:
+            outcome = Done(task.key, {"result": self.forge(task.key), "files": {}})
+            outcomes[task.key] = outcome
+            if on_outcome is not None:
+                on_outcome(task.key, outcome)
+        return outcomes
+
+    def close(self):
+        pass
+
+
+@pytest.mark.parametrize(
+    "forge",
+    [
+        lambda seed: None,
+        lambda seed: {"seed": seed},
+        lambda seed: {
+            "spec": "w",
+            "seed": seed,
+            "timesteps": 10,
+            "episodes": 4,
+            "successes": {"pendulum": 9},
+            "train_seconds": 0.1,
+            "stopped_early": False,
+            "curve": [],
+            "met_early": False,
+            "weights": {},
+        },
+    ],
+    ids=["none", "fields missing", "more successes than episodes"],
+)
+def test_a_malformed_result_from_a_worker_fails_its_seed_and_is_never_stored(tmp_path, forge):
+    result = sg.run_spec(
+        spec(expect={"pendulum": 0.5}), cache_dir=tmp_path, progress=None, executor=_ForgingExecutor(forge)
+    )
+    assert result.runs == [] and not result.passed
+    assert set(result.errors) == {0, 1}
+    assert all("malformed result" in message for message in result.errors.values()), result.errors
+    assert not list(tmp_path.rglob("result.json"))

@@ -6,8 +6,9 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.engine.run import SpecResult, _judge
-from specguard.engine.train import RunResult
+from specguard.engine.judging import judge as _judge
+from specguard.engine.results import RunResult
+from specguard.engine.spec_result import SpecResult
 from specguard.pytest_plugin.gate import check_goal
 from specguard.stats.compare import Baseline
 from specguard.stats.intervals import Outcome

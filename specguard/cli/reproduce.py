@@ -35,8 +35,9 @@ from typing import Any
 from specguard.engine.budget import Budget
 from specguard.engine.fingerprint import versions
 from specguard.engine.progress import ProgressEvent
-from specguard.engine.run import SpecResult, run_spec
+from specguard.engine.run import run_spec
 from specguard.engine.spec import Spec
+from specguard.engine.spec_result import SpecResult
 from specguard.engine.specfiles import import_file, load_objects
 from specguard.engine.workers import stopping_all_tasks
 from specguard.error import SpecError

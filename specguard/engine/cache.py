@@ -28,11 +28,9 @@ waits and then reads its entry.
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import hmac
 import json
-import math
 import os
 import shutil
 import tempfile
@@ -42,8 +40,8 @@ from pathlib import Path
 from typing import Any
 
 from specguard.engine.fingerprint import fingerprint_spec, versions
+from specguard.engine.results import RunResult
 from specguard.engine.spec import Spec
-from specguard.engine.train import RunResult
 from specguard.error import SpecError
 from specguard.tree.keys import result_keys
 
@@ -126,50 +124,6 @@ def _check_versions(record: dict[str, Any]) -> None:
         raise ValueError("made with other versions of specguard or its dependencies")
 
 
-def _is_int(v: Any) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool)
-
-
-def _check_result(result: Any, seed: int, paths: Collection[str]) -> None:
-    if not isinstance(result, dict):
-        raise ValueError("result is not an object")
-    expected = {f.name for f in dataclasses.fields(RunResult)}
-    if set(result) != expected:
-        raise ValueError(f"result fields {sorted(result)} are not {sorted(expected)}")
-    if result["seed"] != seed or not _is_int(result["seed"]):
-        raise ValueError(f"seed {result['seed']!r} is not {seed}")
-    if not isinstance(result["spec"], str):
-        raise ValueError("spec label is not a string")
-    if not _is_int(result["timesteps"]) or result["timesteps"] < 0:
-        raise ValueError(f"timesteps {result['timesteps']!r} is not an integer >= 0")
-    episodes = result["episodes"]
-    if not _is_int(episodes) or episodes < 1:
-        raise ValueError(f"episodes {episodes!r} is not an integer >= 1")
-    weights = result["weights"]
-    if not isinstance(weights, dict) or not all(
-        isinstance(ws, list) and all(isinstance(w, float) and math.isfinite(w) for w in ws) for ws in weights.values()
-    ):
-        raise ValueError("weights is not an object of lists of finite numbers")
-    successes = result["successes"]
-    if not isinstance(successes, dict):
-        raise ValueError("successes is not an object")
-    missing, extra = sorted(set(paths) - set(successes)), sorted(set(successes) - set(paths))
-    if missing or extra:  # e.g. an entry stored before safety rates were measured
-        parts = (("missing", missing), ("unexpected", extra))
-        diff = "; ".join(f"{what} {', '.join(map(repr, keys))}" for what, keys in parts if keys)
-        raise ValueError(f"successes do not list exactly the tree's goals and safety rates ({diff})")
-    for path, k in successes.items():
-        if not _is_int(k) or not 0 <= k <= episodes:
-            raise ValueError(f"successes[{path!r}] = {k!r} is not an integer in [0, episodes={episodes}]")
-    if not isinstance(result["train_seconds"], (int, float)) or isinstance(result["train_seconds"], bool):
-        raise ValueError("train_seconds is not a number")
-    for flag in ("stopped_early", "met_early"):
-        if not isinstance(result[flag], bool):
-            raise ValueError(f"{flag} is not a boolean")
-    if not isinstance(result["curve"], list) or not all(isinstance(p, dict) for p in result["curve"]):
-        raise ValueError("curve is not a list of points")
-
-
 def validate_record(
     record: Any, folder: Path, *, key: str, seed: int, paths: Collection[str], secret: bytes | None
 ) -> RunResult:
@@ -186,8 +140,7 @@ def validate_record(
     _check_signature(record, secret)
     _check_files(record, folder)
     _check_versions(record)
-    _check_result(record.get("result"), seed, paths)
-    return RunResult(**record["result"])
+    return RunResult.from_dict(record.get("result"), seed=seed, paths=paths)
 
 
 def _secret_from_env() -> bytes | None:

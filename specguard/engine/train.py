@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import gymnasium as gym
@@ -27,6 +26,7 @@ import gymnasium as gym
 from specguard.build.env import make_baseline_env, make_env
 from specguard.engine.auto_weights import WeightAdapter
 from specguard.engine.progress import decode_update, encode_update, format_event
+from specguard.engine.results import RunResult
 from specguard.engine.spec import ALGORITHMS, Spec
 from specguard.engine.workers import Report
 from specguard.error import InvalidSpec, SpecError
@@ -51,49 +51,6 @@ class TrainingError(SpecError):
     """The environment or a user function failed while a run trained or was evaluated."""
 
     default_hint = "reproduce it without training: build sg.make_env(...) and step it from the seed named above"
-
-
-@dataclass
-class RunResult:
-    """What one run measured; plain data (``to_dict`` is JSON-serialisable).
-
-    Attributes:
-        spec: the spec's label.
-        seed: the training seed.
-        timesteps: environment steps actually trained.
-        episodes: evaluation episodes.
-        successes: per node path, evaluation episodes whose last state lies in the goal;
-            then per safety key (``path:name``), evaluation episodes without a violation.
-        train_seconds: wall-clock training time.
-        stopped_early: training hit the budget's wall-clock cap.
-        curve: success per goal (and safety rate per safety key) over training
-            episodes (stochastic policy),
-            ``[{"timesteps": t, "episodes": n, "success": {key: rate}}, ...]``;
-            a point where the policy was evaluated (an interim checkpoint, or
-            the end) also has ``"evaluation": {key: rate}`` and
-            ``"evaluation_episodes"``.
-        met_early: every threshold was met at an interim checkpoint, so
-            training stopped there (``timesteps`` is that step) and that
-            checkpoint's evaluation is the run's result (:mod:`specguard.stats.anytime`).
-        weights: per node with ``weights="auto"``, the adapted weights in
-            force when training ended (:mod:`specguard.engine.auto_weights`); each
-            curve point also has the ones in force then, under ``"weights"``.
-            Empty when no node adapts its weights.
-    """
-
-    spec: str
-    seed: int
-    timesteps: int
-    episodes: int
-    successes: dict[str, int]
-    train_seconds: float
-    stopped_early: bool = False
-    curve: list[dict[str, Any]] = field(default_factory=list)
-    met_early: bool = False
-    weights: dict[str, list[float]] = field(default_factory=dict)
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
 
 
 def _policy_action(space: gym.Space[Any], action: Any) -> Any:

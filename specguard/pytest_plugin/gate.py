@@ -11,8 +11,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from specguard.engine.run import SpecResult
 from specguard.engine.spec import Spec
+from specguard.engine.spec_result import SpecResult
 from specguard.extend import SHAPING, Node
 from specguard.stats.intervals import Outcome, QuorumVerdict, RunVerdict
 from specguard.tree.keys import GOAL, SAFETY, kind, resolve_goal

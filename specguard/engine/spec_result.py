@@ -1,0 +1,153 @@
+"""A spec's runs judged: per-goal verdicts (:class:`GoalVerdict`), and :class:`SpecResult` with its table and models."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from specguard.engine.results import RunResult
+from specguard.engine.spec import Spec
+from specguard.error import SpecError
+from specguard.stats.intervals import QuorumVerdict, RunVerdict, success_interval
+from specguard.tree.keys import GOAL, kind, label
+from specguard.utils.text import render_table, weights_text
+
+__all__ = ["GoalVerdict", "SpecResult"]
+
+
+@dataclass
+class GoalVerdict:
+    """One goal (or safety rate) of a spec against its threshold, over all runs.
+
+    Attributes:
+        path: the node path, or for a safety rate its key ``path:name``.
+        threshold: the minimum success asked for.
+        required: runs that must meet it.
+        runs: each run's verdict, by seed order.
+        verdict: passed, failed, or open (more runs could still decide it).
+        successes, episodes: pooled over runs (for a safety rate: episodes without a violation).
+        interval: the pooled success rate's confidence interval.
+    """
+
+    path: str
+    threshold: float
+    required: int
+    runs: list[RunVerdict]
+    verdict: QuorumVerdict
+    successes: int
+    episodes: int
+    interval: tuple[float, float]
+
+    @property
+    def success(self) -> float:
+        return self.successes / self.episodes if self.episodes else 0.0
+
+
+@dataclass
+class SpecResult:
+    """Everything ``run_spec`` measured; ``to_dict()`` is JSON-serialisable."""
+
+    spec: str
+    runs: list[RunResult]
+    goals: dict[str, GoalVerdict]
+    errors: dict[int, str] = field(default_factory=dict)
+    tracebacks: dict[int, str] = field(default_factory=dict)  # the worker's, per failed seed (shown under -v)
+    cached: dict[int, bool] = field(default_factory=dict)
+    seconds: float = 0.0
+    confidence: float = 0.95
+    spec_key: str | None = None
+    trained: Spec | None = field(default=None, repr=False, compare=False)  # the spec as run, for model()/rollout()
+    cache_dir: Path | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def passed(self) -> bool:
+        """No seed failed and every thresholded goal passed."""
+        return not self.errors and all(g.verdict is QuorumVerdict.PASSED for g in self.goals.values())
+
+    @property
+    def as_expected(self) -> bool:
+        """No seed failed and every thresholded goal passed, except goals the spec expects to miss (``xfail``)."""
+        xfail = self.trained.xfail if self.trained is not None else {}
+        return not self.errors and all(g.verdict is QuorumVerdict.PASSED or p in xfail for p, g in self.goals.items())
+
+    def model(self, seed: int) -> Any:
+        """The trained SB3 model of run ``seed`` (loaded from the cache, after its checksums are verified).
+
+        Raises:
+            SpecError: the run was not cached (``cache_dir=None``) or is gone.
+        """
+        return self._load(seed)[0]
+
+    def rollout(self, seed: int, episodes: int = 1, *, deterministic: bool = True) -> list[list[dict[str, Any]]]:
+        """Episodes of run ``seed``'s policy on its env, seeded as evaluation episodes are.
+
+        Returns:
+            One list of steps per episode: ``{"obs", "action", "reward",
+            "terminated", "truncated", "info"}`` with ``info["goals"]``.
+
+        Example:
+            >>> result = goal_spec_result(spec)  # doctest: +SKIP
+            >>> last = result.rollout(0, episodes=1)[0][-1]  # doctest: +SKIP
+            >>> assert last["info"]["goals"]["pendulum/stabilization"]  # doctest: +SKIP
+        """
+        from specguard.engine.rollout import rollout
+
+        model, normalizer = self._load(seed)
+        assert self.trained is not None
+        return rollout(model, self.trained, episodes=episodes, deterministic=deterministic, normalizer=normalizer)
+
+    def _load(self, seed: int) -> tuple[Any, Any]:
+        from specguard.engine.rollout import load_model
+
+        if self.trained is None or self.cache_dir is None:
+            raise SpecError(
+                f"Spec {self.spec!r}: no model kept for seed {seed}: the runs were not cached",
+                hint="run with a cache (the default) to reach trained models",
+            )
+        try:
+            return load_model(self.trained, seed, self.cache_dir)
+        except FileNotFoundError as e:
+            raise SpecError(f"Spec {self.spec!r}: {e}", hint="train it again: its cache entry is gone") from None
+
+    def success(self, path: str) -> tuple[int, int]:
+        """Pooled ``(successes, episodes)`` of a goal (or safe episodes of a safety key) over all runs."""
+        return sum(r.successes[path] for r in self.runs), sum(r.episodes for r in self.runs)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "spec": self.spec,
+            "passed": self.passed,
+            "seconds": self.seconds,
+            "runs": [r.to_dict() for r in self.runs],
+            "goals": {p: {**asdict(g), "kind": kind(p)} for p, g in self.goals.items()},
+            "errors": {str(k): v for k, v in self.errors.items()},
+            "cached": {str(k): v for k, v in self.cached.items()},
+            "confidence": self.confidence,
+            "spec_key": self.spec_key,
+        }
+
+    def table(self) -> str:
+        """A per-goal table: pooled success with interval, threshold, runs, verdict.
+
+        Goals first, then the safety rates, labelled ``path:name (safe)``.
+        """
+        paths = [p for r in self.runs[:1] for p in r.successes] or list(self.goals)
+        paths.sort(key=lambda p: kind(p) != GOAL)  # stable: each kind keeps its order
+        header = ("goal", "success", f"{self.confidence:.0%} interval", "threshold", "runs met", "verdict")
+        rows = []
+        for p in paths:
+            k, n = self.success(p)
+            rate = f"{k / n:.0%} ({k}/{n})" if n else "-"
+            iv = "-" if not n else "[{:.2f}, {:.2f}]".format(*success_interval(k, n, self.confidence))
+            g = self.goals.get(p)
+            met = "-" if g is None else f"{g.runs.count(RunVerdict.MET)}/{len(g.runs)} (need {g.required})"
+            threshold = "-" if g is None else f">= {g.threshold:g}"
+            rows.append((label(p), rate, iv, threshold, met, "-" if g is None else g.verdict.value))
+        lines = render_table(header, rows)
+        for run in self.runs:
+            if run.weights:
+                lines.append(f"seed {run.seed} adapted weights: {weights_text(run.weights)}")
+        for seed, message in self.errors.items():
+            lines.append(f"seed {seed} failed: {message}")
+        return "\n".join(lines)

@@ -1,0 +1,51 @@
+"""The worker's task: train one seed of a spec, and the one line that says why a seed failed."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from specguard.engine.fingerprint import check_versions
+from specguard.engine.spec import Spec
+from specguard.engine.train import TrainingError
+from specguard.engine.workers import Failure, Report
+from specguard.error import SpecError
+
+__all__ = ["describe_failure", "is_spec_error", "train_task"]
+
+
+def train_task(spec: Spec, seed: int, keyed_versions: Mapping[str, str] | None, *, report: Report) -> dict[str, Any]:
+    """A worker's task (a local process or a cluster worker): train one seed, return its result and model bytes.
+
+    The driver stores them in its cache: keys are computed only by the driver
+    (functions unpickled in a worker are not the driver's), and cluster
+    workers need no shared filesystem. ``keyed_versions``, given when the
+    result is to be cached, are the versions the driver's key names: a worker
+    with other code refuses to train (:class:`~specguard.error.VersionMismatch`).
+    """
+    from specguard.engine.cache import model_files
+    from specguard.engine.train import train_run
+
+    if keyed_versions is not None:
+        check_versions(keyed_versions, f"Spec {spec.label!r}, seed {seed}")
+    with_model = keyed_versions is not None
+    result, model = train_run(spec, seed, report=report)
+    files = model_files(model, normalize=spec.normalize) if with_model else {}
+    return {"result": result.to_dict(), "files": files}
+
+
+_PHASES = {"start": "starting", "build": "building the env", "train": "training step", "evaluate": "evaluation episode"}
+
+
+def describe_failure(seed: int, failure: Failure) -> str:
+    """One line: the seed, where the run was, and why it failed."""
+    if isinstance(failure.exception, TrainingError):
+        return failure.exception.message  # already names the seed, the phase and the step (the hint is generic)
+    where = _PHASES.get(failure.phase, failure.phase)
+    step = "" if failure.step is None or failure.phase not in ("train", "evaluate") else f" {failure.step}"
+    return f"seed {seed}, {where}{step}: {failure.cause}"
+
+
+def is_spec_error(failure: Failure) -> bool:
+    """A mistake in the spec itself (e.g. rejected hyperparameters): every seed would hit it, so stop all."""
+    return isinstance(failure.exception, SpecError) and not isinstance(failure.exception, TrainingError)
