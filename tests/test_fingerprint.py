@@ -386,7 +386,7 @@ def test_anytime_checkpoints_and_thresholds_are_part_of_a_runs_key_but_xfail_is_
 def test_the_source_digest_sees_every_module_of_every_subpackage(tmp_path):
     import shutil
 
-    from specguard.engine.fingerprint import source_digest
+    from specguard.engine.versions import source_digest
 
     package = tmp_path / "specguard"
     shutil.copytree(Path(sg.__file__).parent, package, ignore=shutil.ignore_patterns("__pycache__"))
@@ -401,6 +401,6 @@ def test_the_source_digest_sees_every_module_of_every_subpackage(tmp_path):
 
 
 def test_the_run_key_uses_the_digest_of_the_installed_package():
-    from specguard.engine.fingerprint import source_digest, versions
+    from specguard.engine.versions import source_digest, versions
 
     assert versions()["specguard"] == f"{sg.__version__}+{source_digest(Path(sg.__file__).parent)}"
