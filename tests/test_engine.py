@@ -374,7 +374,7 @@ def test_a_worker_running_other_code_than_the_key_names_refuses_to_train(tmp_pat
 
 def test_a_worker_with_the_keyed_versions_trains():
     from specguard.engine.fingerprint import versions
-    from specguard.engine.task import train_task as _train_task
+    from specguard.engine.train_task import train_task as _train_task
 
     out = _train_task(spec(), 0, versions(), report=lambda phase, step=None, line=None: None)
     assert out["result"]["timesteps"] == 128 and out["files"]
@@ -412,7 +412,7 @@ class _ForgingExecutor:
         self.forge = forge
 
     def run(self, tasks, *, on_line=None, stop_on=None, on_outcome=None):
-        from specguard.engine.workers import Done
+        from specguard.engine.protocol import Done
 
         outcomes = {}
         for task in tasks:

@@ -21,17 +21,9 @@ from typing import Any
 import cloudpickle
 import pytest
 
-from specguard.engine.workers import (
-    Done,
-    Failure,
-    Outcome,
-    Report,
-    Task,
-    parse_workers,
-    resolve_workers,
-    run_tasks,
-    stopping_all_tasks,
-)
+from specguard.engine.protocol import Done, Failure, Outcome, Report, Task
+from specguard.engine.signals import stopping_all_tasks
+from specguard.engine.workers import parse_workers, resolve_workers, run_tasks
 
 cloudpickle.register_pickle_by_value(sys.modules[__name__])
 
@@ -368,7 +360,8 @@ def write_pid_then_sleep(pid_file, *, report):
 PARENT = """
 import signal, sys
 import sg_worker_helper
-from specguard.engine.workers import Task, run_tasks, parse_workers, resolve_workers
+from specguard.engine.protocol import Task
+from specguard.engine.workers import run_tasks, parse_workers, resolve_workers
 
 try:
     run_tasks([Task(0, sg_worker_helper.write_pid_then_sleep, (sys.argv[1],))], max_workers=1)

@@ -36,10 +36,10 @@ from specguard.engine.budget import Budget
 from specguard.engine.fingerprint import versions
 from specguard.engine.progress import ProgressEvent
 from specguard.engine.run import run_spec
+from specguard.engine.signals import stopping_all_tasks
 from specguard.engine.spec import Spec
 from specguard.engine.spec_result import SpecResult
 from specguard.engine.specfiles import import_file, load_objects
-from specguard.engine.workers import stopping_all_tasks
 from specguard.error import SpecError
 from specguard.stats.intervals import success_interval
 from specguard.utils.text import per_seed_text

@@ -1,8 +1,8 @@
 """Where runs train: the local process pool (default) or a Dask cluster, chosen by address.
 
 The engine hands an executor a batch of tasks (one per seed) and gets back one
-outcome per task: :class:`~specguard.engine.workers.Done` or
-:class:`~specguard.engine.workers.Failure`. The driver keeps the cache: it looks runs
+outcome per task: :class:`~specguard.engine.protocol.Done` or
+:class:`~specguard.engine.protocol.Failure`. The driver keeps the cache: it looks runs
 up before submitting, submits only missing seeds, and stores what comes back
 (results and model bytes), so cluster workers need no shared filesystem.
 
@@ -28,16 +28,9 @@ import uuid
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
-from specguard.engine.workers import (
-    Failure,
-    Outcome,
-    SigtermGuard,
-    Task,
-    TaskRunner,
-    outcome_of,
-    raise_if_stopping,
-    run_tasks,
-)
+from specguard.engine.protocol import Failure, Outcome, Position, Task, TaskRunner, outcome_of
+from specguard.engine.signals import SigtermGuard, raise_if_stopping
+from specguard.engine.workers import run_tasks
 from specguard.error import SpecError
 
 __all__ = ["LOCAL", "DaskExecutor", "Executor", "ExecutorError", "LocalExecutor", "check_address", "make_executor"]
@@ -46,8 +39,6 @@ LOCAL = "local"
 DASK_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx", "inproc")
 _POLL_S = 0.25
 ADDRESS_EXPECTED = "expected 'local' or a Dask scheduler address such as 'tcp://host:8786'"
-
-Where = tuple[str, "int | None"]  # a task's last reported phase and step
 
 
 class ExecutorError(SpecError):
@@ -132,7 +123,7 @@ def _on_cluster(fn: Callable[..., Any], args: tuple[Any, ...], queue: str, key: 
 class DaskExecutor:
     """Tasks as Dask futures on the cluster whose scheduler is at ``address``.
 
-    A task that raises gives a :class:`~specguard.engine.workers.Failure` with its
+    A task that raises gives a :class:`~specguard.engine.protocol.Failure` with its
     phase, step and cause, as locally. A worker that dies mid-task is handled by
     Dask: the scheduler retries the task on another worker up to its
     ``distributed.scheduler.allowed-failures`` (default 3), then the seed fails
@@ -178,7 +169,7 @@ class DaskExecutor:
             return {}
         batch = uuid.uuid4().hex
         queue = Queue(f"specguard-{batch}", client=self.client)
-        where: dict[int, Where] = {t.key: ("start", None) for t in tasks}
+        where = {t.key: Position() for t in tasks}
         futures = {
             self.client.submit(_on_cluster, t.fn, t.args, queue.name, t.key, key=f"specguard-{batch}-{t.key}"): t.key
             for t in tasks
@@ -188,6 +179,13 @@ class DaskExecutor:
         pending = set(futures)
         guard = SigtermGuard()
         guard.install()
+
+        def cancel_pending() -> None:
+            if pending:
+                self.client.cancel(list(pending), force=True)
+            with contextlib.suppress(Exception):
+                queue.close()
+
         try:
             while pending:
                 self._drain(queue, where, on_line)
@@ -208,33 +206,22 @@ class DaskExecutor:
             self._drain(queue, where, on_line)
             return {t.key: outcomes[t.key] for t in tasks if t.key in outcomes}
         finally:
-            guard.deferring = True
-            try:
-                if pending:
-                    self.client.cancel(list(pending), force=True)
-                with contextlib.suppress(Exception):
-                    queue.close()
-            finally:
-                guard.deferring = False
-                guard.restore()
-            if guard.pending:
-                raise KeyboardInterrupt("SIGTERM received")
+            guard.close(cancel_pending)
 
     @staticmethod
-    def _drain(queue: Any, where: dict[int, Where], on_line: Callable[[int, str], None] | None) -> None:
+    def _drain(queue: Any, where: dict[int, Position], on_line: Callable[[int, str], None] | None) -> None:
         for key, phase, step, line in queue.get(batch=True):
-            where[key] = (phase, step)
+            where[key].move(phase, step)
             if line is not None and on_line is not None:
                 on_line(key, line)
 
     @staticmethod
-    def _outcome(future: Any, key: int, where: Where) -> Outcome:
-        phase, step = where
+    def _outcome(future: Any, key: int, where: Position) -> Outcome:
         if future.status == "finished":
             return outcome_of(key, future.result())
         error = future.exception()
         cause = f"cluster worker failed ({type(error).__name__}: {error})"
-        return Failure(key=key, phase=phase, step=step, cause=cause.splitlines()[0])
+        return where.failure(key, cause.splitlines()[0])
 
     def close(self) -> None:
         with contextlib.suppress(Exception):

@@ -9,11 +9,11 @@ from specguard.engine.cache import Cache, try_acquire, wait_for
 from specguard.engine.executors import Executor
 from specguard.engine.fingerprint import fingerprint_spec, versions
 from specguard.engine.progress import ProgressEvent, decode_update
+from specguard.engine.protocol import Failure, Outcome, Task
 from specguard.engine.results import RunResult
 from specguard.engine.spec import Spec
 from specguard.engine.spec_result import SpecResult
-from specguard.engine.task import describe_failure, is_spec_error, train_task
-from specguard.engine.workers import Failure, Outcome, Task
+from specguard.engine.train_task import describe_failure, is_spec_error, train_task
 from specguard.tree.keys import label, result_keys
 
 __all__ = ["Runs"]

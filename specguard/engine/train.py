@@ -26,9 +26,9 @@ import gymnasium as gym
 from specguard.build.env import make_baseline_env, make_env
 from specguard.engine.auto_weights import WeightAdapter
 from specguard.engine.progress import decode_update, encode_update, format_event
+from specguard.engine.protocol import Report
 from specguard.engine.results import RunResult
 from specguard.engine.spec import ALGORITHMS, Spec
-from specguard.engine.workers import Report
 from specguard.error import InvalidSpec, SpecError
 from specguard.stats.anytime import checkpoint_steps, final_evaluation, interim_look
 

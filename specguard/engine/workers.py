@@ -34,42 +34,26 @@ Example:
 
 from __future__ import annotations
 
-import contextlib
 import multiprocessing
 import os
-import pickle
 import signal
 import threading
 import time
 import traceback
 from collections import deque
-from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from multiprocessing.context import SpawnContext
 from multiprocessing.process import BaseProcess
-from types import FrameType
 from typing import Any
 
 import cloudpickle
 
-__all__ = [
-    "Done",
-    "Failure",
-    "Outcome",
-    "Report",
-    "Task",
-    "TaskRunner",
-    "outcome_of",
-    "parse_workers",
-    "raise_if_stopping",
-    "resolve_workers",
-    "run_tasks",
-    "stopping_all_tasks",
-]
+from specguard.engine.protocol import Failure, Outcome, Position, Task, TaskRunner, one_line, outcome_of
+from specguard.engine.signals import STOP_POLL_S, SigtermGuard, raise_if_stopping
 
-Report = Callable[[str, int | None, str | None], None]
-"""``report(phase, step, line)``: tells the parent where the task is; ``line`` is a progress line or None."""
+__all__ = ["parse_workers", "resolve_workers", "run_tasks"]
 
 _STOP_GRACE_S = 2.0
 """How long a terminated child gets to exit before it is killed."""
@@ -77,37 +61,8 @@ _STOP_GRACE_S = 2.0
 _EXIT_GRACE_S = 10.0
 """How long a child that has sent its outcome gets to exit on its own before it is terminated."""
 
-_STOP_POLL_S = 0.25
-"""How often a waiting :func:`run_tasks` looks whether :func:`stopping_all_tasks` asks it to stop."""
-
-_STOPPING = threading.Event()
-
 _MAX_MESSAGES_PER_WAKEUP = 64
 """Messages read from one live child before the others get their turn (a chatty task must not starve them)."""
-
-
-@contextlib.contextmanager
-def stopping_all_tasks() -> Iterator[None]:
-    """While inside, every :func:`run_tasks` of this process, on any thread, stops its children and raises.
-
-    A signal reaches only the main thread. A caller that runs :func:`run_tasks`
-    on threads of its own (``specguard reproduce`` trains several specs at once)
-    enters this block on its interruption and waits for its threads there: each
-    ``run_tasks`` notices within :data:`_STOP_POLL_S`, terminates and reaps its
-    children, stores nothing and raises ``KeyboardInterrupt``. Leaving the block
-    lets later calls run again.
-    """
-    _STOPPING.set()
-    try:
-        yield
-    finally:
-        _STOPPING.clear()
-
-
-def raise_if_stopping() -> None:
-    """Raise ``KeyboardInterrupt`` inside :func:`stopping_all_tasks`, for loops that wait on tasks."""
-    if _STOPPING.is_set():
-        raise KeyboardInterrupt("stopped: the process was interrupted")
 
 
 def parse_workers(value: object) -> int | str:
@@ -145,58 +100,6 @@ def resolve_workers(value: object, *, share: int = 1) -> int:
     return max(1, cores // max(1, share))
 
 
-@dataclass(frozen=True)
-class Task:
-    """One unit of work, run in a process of its own.
-
-    Args:
-        key: identifies the task in the outcomes (e.g. the seed); unique within one :func:`run_tasks` call.
-        fn: called in the child as ``fn(*args, report=report)``; shipped with cloudpickle, so it may be a lambda.
-        args: positional arguments of ``fn``, shipped with cloudpickle too.
-    """
-
-    key: int
-    fn: Callable[..., Any]
-    args: tuple[Any, ...] = ()
-
-
-@dataclass(frozen=True)
-class Failure:
-    """A task that raised, or whose process died before it sent a result.
-
-    Args:
-        key: the task's key.
-        phase: the last phase the task reported (``"start"`` before any report).
-        step: the last step the task reported, if any.
-        cause: one line, e.g. ``"RuntimeError: boom"`` or ``"worker process died (killed by signal SIGKILL)"``.
-        traceback: the child's formatted traceback, ``""`` when the process died.
-        exception: the child's exception when it could be pickled back, else None.
-    """
-
-    key: int
-    phase: str
-    step: int | None
-    cause: str
-    traceback: str = ""
-    exception: BaseException | None = None
-
-
-@dataclass(frozen=True)
-class Done:
-    """A task that returned.
-
-    Args:
-        key: the task's key.
-        value: what ``fn`` returned.
-    """
-
-    key: int
-    value: Any
-
-
-Outcome = Done | Failure
-
-
 # ---------------------------------------------------------------------------------------------------------------------
 # Child side
 
@@ -219,69 +122,6 @@ def _exit_when_parent_dies() -> None:
     threading.Thread(target=watch, name="specguard-parent-watch", daemon=True).start()
 
 
-def _one_line(error: BaseException) -> str:
-    """``"TypeName: first line of the message"`` (just the type name when the message is empty)."""
-    try:
-        lines = str(error).strip().splitlines()
-    except Exception:  # a broken __str__ must not hide the error itself
-        lines = []
-    return f"{type(error).__name__}: {lines[0]}" if lines else type(error).__name__
-
-
-def _pickled_exception(error: BaseException) -> bytes | None:
-    """The exception pickled for the parent, or None when it cannot be pickled.
-
-    cloudpickle rather than pickle, so that exception classes the parent shipped by value
-    (defined in ``__main__`` or a module registered by value) come back as the parent's own class.
-    """
-    try:
-        data: bytes = cloudpickle.dumps(error)
-    except Exception:
-        return None
-    return data
-
-
-class TaskRunner:
-    """Runs one task where it was sent (a child process here, a cluster worker elsewhere).
-
-    Tracks the phase and step the task last reported, passes each report to
-    ``send`` (``("report", phase, step, line)``), and turns the task's end into
-    one message: ``("done", value)`` or ``("error", phase, step, cause,
-    traceback_text, pickled_exception_or_None)``, as :func:`outcome_of` reads it.
-    """
-
-    def __init__(self, send: Callable[[tuple[Any, ...]], None]) -> None:
-        self.send = send
-        self.phase = "start"
-        self.step: int | None = None
-        self._lock = threading.Lock()  # report may be called from several threads of the task
-
-    def report(self, phase: str, step: int | None = None, line: str | None = None) -> None:
-        with self._lock:
-            self.phase, self.step = phase, step
-            self.send(("report", phase, step, line))
-
-    def __call__(self, fn: Callable[..., Any], args: tuple[Any, ...]) -> tuple[Any, ...]:
-        try:
-            return ("done", fn(*args, report=self.report))
-        except BaseException as e:  # SystemExit and KeyboardInterrupt are a task's failure too
-            return ("error", self.phase, self.step, _one_line(e), traceback.format_exc(), _pickled_exception(e))
-
-
-def outcome_of(key: int, message: tuple[Any, ...]) -> Outcome:
-    """The outcome a :class:`TaskRunner` message stands for."""
-    if message[0] == "done":
-        return Done(key=key, value=message[1])
-    _, phase, step, cause, text, pickled = message
-    exception: BaseException | None = None
-    if pickled is not None:
-        with contextlib.suppress(Exception):  # e.g. an exception class whose __init__ takes other arguments
-            loaded = pickle.loads(pickled)
-            if isinstance(loaded, BaseException):
-                exception = loaded
-    return Failure(key=key, phase=phase, step=step, cause=cause, traceback=text, exception=exception)
-
-
 def _child_main(conn: Connection, payload: bytes) -> None:
     """Process entry point: unpickle ``(fn, args)``, run it and send its reports and outcome to the parent."""
     _exit_when_parent_dies()
@@ -290,13 +130,13 @@ def _child_main(conn: Connection, payload: bytes) -> None:
         try:
             fn, args = cloudpickle.loads(payload)
         except BaseException as e:
-            message: tuple[Any, ...] = ("error", "start", None, _one_line(e), traceback.format_exc(), None)
+            message: tuple[Any, ...] = ("error", "start", None, one_line(e), traceback.format_exc(), None)
         else:
             message = runner(fn, args)
         try:
             conn.send(message)  # pickles first: an unpicklable value sends nothing, then an error
         except Exception as e:
-            conn.send(("error", runner.phase, runner.step, _one_line(e), traceback.format_exc(), None))
+            conn.send(("error", runner.at.phase, runner.at.step, one_line(e), traceback.format_exc(), None))
     finally:
         conn.close()
 
@@ -312,53 +152,9 @@ class _Child:
     task: Task
     process: BaseProcess
     conn: Connection
-    phase: str = "start"
-    step: int | None = None
+    at: Position = field(default_factory=Position)
     eof: bool = False
     deadline: float | None = None  # set once its outcome or EOF arrived: when it is terminated if still alive
-
-
-class SigtermGuard:
-    """Turns SIGTERM into ``KeyboardInterrupt`` while installed (main thread only, else it does nothing).
-
-    While ``deferring``, a SIGTERM is only noted (``pending``): a child being started is
-    registered before the interruption is raised, and cleanup is not cut short.
-    """
-
-    def __init__(self) -> None:
-        self.installed = False
-        self.previous: Any = None
-        self.deferring = False
-        self.pending = False
-
-    def install(self) -> None:
-        if threading.current_thread() is threading.main_thread():
-            self.previous = signal.signal(signal.SIGTERM, self._handle)
-            self.installed = True
-
-    def _handle(self, signum: int, frame: FrameType | None) -> None:
-        if self.deferring:
-            self.pending = True
-        else:
-            raise KeyboardInterrupt(f"{signal.Signals(signum).name} received")
-
-    @contextlib.contextmanager
-    def deferred(self) -> Iterator[None]:
-        """Note a SIGTERM arriving inside the block; raise ``KeyboardInterrupt`` on leaving it."""
-        self.deferring = True
-        try:
-            yield
-        finally:
-            self.deferring = False
-        if self.pending:
-            self.pending = False
-            raise KeyboardInterrupt("SIGTERM received")
-
-    def restore(self) -> None:
-        if self.installed:
-            # None: the previous handler was not installed from Python and cannot be put back.
-            signal.signal(signal.SIGTERM, signal.SIG_DFL if self.previous is None else self.previous)
-            self.installed = False
 
 
 def _died(child: _Child) -> Failure:
@@ -370,7 +166,7 @@ def _died(child: _Child) -> Failure:
             how = f"killed by signal {-code}"
     else:
         how = f"exit code {code}"
-    return Failure(key=child.task.key, phase=child.phase, step=child.step, cause=f"worker process died ({how})")
+    return child.at.failure(child.task.key, f"worker process died ({how})")
 
 
 def _read(child: _Child, on_line: Callable[[int, str], None] | None, limit: int | None) -> Outcome | None:
@@ -384,16 +180,11 @@ def _read(child: _Child, on_line: Callable[[int, str], None] | None, limit: int 
             child.eof = True
             break
         except Exception as e:  # the result could not be unpickled here; the stream itself is intact
-            return Failure(
-                key=child.task.key,
-                phase=child.phase,
-                step=child.step,
-                cause=f"result could not be read: {_one_line(e)}",
-                traceback=traceback.format_exc(),
-            )
+            return child.at.failure(child.task.key, f"result could not be read: {one_line(e)}", traceback.format_exc())
         kind = message[0]
         if kind == "report":
-            _, child.phase, child.step, line = message
+            _, phase, step, line = message
+            child.at.move(phase, step)
             if line is not None and on_line is not None:
                 on_line(child.task.key, line)
         elif kind in ("done", "error"):
@@ -484,6 +275,11 @@ def run_tasks(
     outcomes: dict[int, Outcome] = {}
     guard = SigtermGuard()
     guard.install()
+
+    def stop_children() -> None:
+        _stop(children)
+        _release(children)
+
     try:
         while pending or children:
             while pending and len(children) < max_workers:
@@ -492,7 +288,7 @@ def run_tasks(
                     children.append(_start(context, task, payloads[task.key]))
 
             deadlines = [c.deadline for c in children if c.deadline is not None]
-            timeout = min([_STOP_POLL_S, *(max(0.0, d - time.monotonic()) for d in deadlines)])
+            timeout = min([STOP_POLL_S, *(max(0.0, d - time.monotonic()) for d in deadlines)])
             waitables: list[Any] = [c.conn for c in children if not c.eof]
             waitables += [c.process.sentinel for c in children]
             ready = set(wait(waitables, timeout))
@@ -526,15 +322,7 @@ def run_tasks(
                         return _in_task_order(tasks, outcomes)
         return _in_task_order(tasks, outcomes)
     finally:
-        guard.deferring = True  # a second SIGTERM must not cut the cleanup short
-        try:
-            _stop(children)
-            _release(children)
-        finally:
-            guard.deferring = False
-            guard.restore()
-        if guard.pending:  # SIGTERM during the cleanup: honour it now that the children are gone
-            raise KeyboardInterrupt("SIGTERM received")
+        guard.close(stop_children)  # a SIGTERM during the cleanup is raised once the children are gone
 
 
 def _in_task_order(tasks: Sequence[Task], outcomes: dict[int, Outcome]) -> dict[int, Outcome]:

@@ -6,9 +6,9 @@ from collections.abc import Mapping
 from typing import Any
 
 from specguard.engine.fingerprint import check_versions
+from specguard.engine.protocol import Failure, Report
 from specguard.engine.spec import Spec
 from specguard.engine.train import TrainingError
-from specguard.engine.workers import Failure, Report
 from specguard.error import SpecError
 
 __all__ = ["describe_failure", "is_spec_error", "train_task"]
