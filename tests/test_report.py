@@ -7,7 +7,7 @@ from pathlib import Path
 import matplotlib
 import pytest
 
-from specguard.engine.rollout import Gif
+from specguard.report.gifs import Gif
 from specguard.report.session import curves_figure, markdown, plot_curves, table_lines, write_reports
 
 

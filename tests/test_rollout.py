@@ -9,8 +9,10 @@ from PIL import Image
 
 import specguard as sg
 from specguard.engine.cache import Cache
-from specguard.engine.rollout import Gif, load_model, report_gifs, rollout, write_gif
+from specguard.engine.models import load_model
+from specguard.engine.rollout import rollout
 from specguard.engine.train import train_run
+from specguard.report.gifs import Gif, report_gifs, write_gif
 
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 

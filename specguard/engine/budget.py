@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from numbers import Integral, Real
 from typing import Any
 
+from specguard.engine.sb3 import collect_parameter, collect_steps
 from specguard.error import InvalidSpec
 
 __all__ = ["Budget", "trained_timesteps"]
@@ -127,26 +128,7 @@ class Budget:
         )
 
 
-# stable-baselines3's defaults: on-policy algorithms train whole rollouts of
-# n_steps per env; off-policy ones collect train_freq steps per env between updates.
-_ROLLOUT_STEPS = {"PPO": ("n_steps", 2048), "A2C": ("n_steps", 5)}
-_TRAIN_FREQ = {"DQN": 4, "SAC": 1, "TD3": 1, "DDPG": 1}
 ROUNDING_WARNING = 0.10  # warn when training rounds the budget up by more than this fraction
-
-
-def _collect_steps(algorithm: str, hyperparameters: Mapping[str, Any]) -> int:
-    """Steps per env that one collection takes (1 where stable-baselines3 counts episodes instead)."""
-    if algorithm in _ROLLOUT_STEPS:
-        key, default = _ROLLOUT_STEPS[algorithm]
-        value = hyperparameters.get(key, default)
-    else:
-        freq = hyperparameters.get("train_freq", _TRAIN_FREQ.get(algorithm, 1))
-        if isinstance(freq, (tuple, list)):
-            freq = freq[0] if len(freq) == 2 and str(freq[1]) == "step" else 1
-        value = freq
-    if isinstance(value, bool) or not isinstance(value, Integral) or value < 1:
-        return 1  # the algorithm rejects it when training, with its own message
-    return int(value)
 
 
 def trained_timesteps(
@@ -165,14 +147,13 @@ def trained_timesteps(
         102400
     """
     timesteps = budget.timesteps if isinstance(budget, Budget) else _positive_int("timesteps", budget)
-    chunk = _collect_steps(algorithm, hyperparameters or {}) * n_envs
+    chunk = collect_steps(algorithm, hyperparameters or {}) * n_envs
     trained = math.ceil(timesteps / chunk) * chunk
     if trained > timesteps * (1 + ROUNDING_WARNING):
         warnings.warn(
             f"budget of {timesteps} timesteps trains {trained}: {algorithm} collects {chunk} steps at a time "
             f"({chunk // n_envs} per env x {n_envs} env{'s' if n_envs != 1 else ''}); "
-            f"set timesteps to a multiple of {chunk} or lower "
-            + ("n_steps" if algorithm in _ROLLOUT_STEPS else "train_freq"),
+            f"set timesteps to a multiple of {chunk} or lower " + collect_parameter(algorithm),
             stacklevel=2,
         )
     return trained

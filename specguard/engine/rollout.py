@@ -1,54 +1,24 @@
-"""Watching a trained policy: trajectories of evaluation episodes, and an animated GIF of one.
+"""Watching a trained policy: trajectories of evaluation episodes on the env its run trained on.
 
 :func:`rollout` runs the policy on the env a run trained on (the constructed
-env, or the initial env for a baseline spec) and returns every step;
-:func:`write_gif` renders one deterministic episode into an animated GIF whose
-last frame is captioned with the goals met at the end. A missing renderer
-(an env without an ``rgb_array`` render mode, a render that raises, Pillow
-not installed) never raises: :func:`write_gif` returns a :class:`Gif` with a
-note instead of a path. :func:`report_gifs` is what ``pytest --goal-specs
---goal-specs-report DIR`` writes: one GIF per spec, of its first seed's cached
-model.
+env, or the initial env for a baseline spec) and returns every step. GIFs of
+an episode are :mod:`specguard.report.gifs`; loading a cached model is
+:mod:`specguard.engine.models`.
 """
 
 from __future__ import annotations
 
-import re
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
-from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 from specguard.engine.spec import Spec
 from specguard.engine.train import EVAL_SEED_BASE
 
-__all__ = ["MAX_FRAMES", "Gif", "load_model", "report_gifs", "rollout", "write_gif"]
-
-MAX_FRAMES = 100  # frames a GIF keeps at most (an episode's frames are subsampled evenly)
-LAST_FRAME_MS = 2000  # how long the captioned last frame stays
+__all__ = ["episode", "policy", "rollout", "spec_env"]
 
 
-@dataclass(frozen=True)
-class Gif:
-    """What :func:`write_gif` did.
-
-    Attributes:
-        path: the GIF written, or ``None`` when none could be.
-        text: the caption drawn on the last frame (goals met at the end), or,
-            without a GIF, a note saying why.
-        frames: frames in the GIF.
-    """
-
-    path: Path | None
-    text: str
-    frames: int = 0
-
-    @property
-    def written(self) -> bool:
-        return self.path is not None
-
-
-def _make_env(spec: Spec, **make_kwargs: Any) -> Any:
+def spec_env(spec: Spec, **make_kwargs: Any) -> Any:
+    """The env ``spec`` trains on, built afresh: the constructed env, or the initial env for a baseline spec."""
     from specguard.build.env import make_baseline_env, make_env
 
     if spec.baseline:
@@ -66,7 +36,8 @@ def _normalizer(model: Any, normalizer: Any) -> Any:
     return env if isinstance(env, VecNormalize) else None
 
 
-def _policy(model: Any, normalizer: Any, deterministic: bool) -> Callable[[Any], Any]:
+def policy(model: Any, normalizer: Any, deterministic: bool) -> Callable[[Any], Any]:
+    """``model``'s action for an observation, with its ``VecNormalize`` statistics applied where it has them."""
     import gymnasium as gym
 
     norm = _normalizer(model, normalizer)
@@ -79,9 +50,10 @@ def _policy(model: Any, normalizer: Any, deterministic: bool) -> Callable[[Any],
     return act
 
 
-def _episode(
+def episode(
     env: Any, act: Callable[[Any], Any], seed: int, on_step: Callable[[int], None] | None = None
 ) -> list[dict[str, Any]]:
+    """One episode of ``act`` on ``env`` from ``reset(seed=seed)``; ``on_step(n)`` after each of its ``n`` steps."""
     obs, info = env.reset(seed=seed)
     if on_step is not None:
         on_step(0)
@@ -129,193 +101,9 @@ def rollout(
         the action was chosen on and ``info["goals"]`` says which goals the
         state reached by the step lies in.
     """
-    act = _policy(model, normalizer, deterministic)
-    env = _make_env(spec)
+    act = policy(model, normalizer, deterministic)
+    env = spec_env(spec)
     try:
-        return [_episode(env, act, seed + i) for i in range(episodes)]
+        return [episode(env, act, seed + i) for i in range(episodes)]
     finally:
         env.close()
-
-
-def load_model(spec: Spec, seed: int, cache_dir: Path | str) -> tuple[Any, Any]:
-    """The cached model of run ``seed`` of ``spec`` and its ``VecNormalize`` statistics (or ``None``).
-
-    Raises:
-        FileNotFoundError: the run is not (or no longer validly) cached.
-    """
-    import pickle
-
-    import stable_baselines3
-
-    from specguard.engine.cache import NORMALIZER, Cache
-
-    cache = Cache(cache_dir)
-    if cache.load(spec, seed) is None:  # validates the entry's checksums before anything is unpickled
-        raise FileNotFoundError(f"run seed {seed} of spec {spec.label!r} is not in the cache {str(cache_dir)!r}")
-    path = cache.model_path(spec, seed)
-    model = getattr(stable_baselines3, spec.algorithm).load(path, device="cpu")
-    stats = path.parent / NORMALIZER
-    normalizer = None
-    if stats.exists():
-        with stats.open("rb") as f:
-            normalizer = pickle.load(f)  # VecNormalize.save pickles itself; only its statistics are used
-    return model, normalizer
-
-
-def _subsample(frames: list[Any], limit: int) -> list[Any]:
-    """At most ``limit`` frames, evenly spread, keeping the first and the last."""
-    if len(frames) <= limit:
-        return frames
-    n = len(frames) - 1
-    return [frames[round(i * n / (limit - 1))] for i in range(limit)]
-
-
-def _caption(spec: Spec, steps: int, goals: Mapping[str, bool]) -> str:
-    met = [p for p, inside in goals.items() if inside]
-    missed = [p for p, inside in goals.items() if not inside]
-    return f"{spec.label}, {steps} steps; goals met at the end: {', '.join(met) or 'none'}" + (
-        f"; missed: {', '.join(missed)}" if missed else ""
-    )
-
-
-def _draw_caption(image: Any, text: str) -> Any:
-    from PIL import ImageDraw, ImageFont
-
-    try:
-        font: Any = ImageFont.load_default(size=max(10, image.width // 40))
-    except (TypeError, OSError):  # an old Pillow, or no FreeType: the bitmap font
-        font = ImageFont.load_default()
-    draw = ImageDraw.Draw(image)
-    lines: list[str] = []
-    for word in text.split(" "):  # greedy wrap by the rendered width
-        if lines and draw.textlength(f"{lines[-1]} {word}", font=font) <= image.width - 8:
-            lines[-1] += f" {word}"
-        else:
-            lines.append(word)
-    line_height = draw.textbbox((0, 0), "Ag", font=font)[3] + 3
-    top = max(0, image.height - line_height * len(lines) - 6)
-    draw.rectangle((0, top, image.width, image.height), fill=(255, 255, 255), outline=(160, 160, 160))
-    for i, line in enumerate(lines):
-        draw.text((4, top + 3 + i * line_height), line, fill=(0, 0, 0), font=font)
-    return image
-
-
-def write_gif(
-    model: Any,
-    spec: Spec,
-    path: Path | str,
-    *,
-    seed: int = EVAL_SEED_BASE,
-    normalizer: Any = None,
-    max_frames: int = MAX_FRAMES,
-) -> Gif:
-    """Render one deterministic episode of ``model`` on ``spec``'s env into an animated GIF at ``path``.
-
-    The env is made with ``render_mode="rgb_array"``; frames are subsampled
-    evenly to at most ``max_frames``; the last frame carries the caption: the
-    goals met (and missed) when the episode ended (``info["goals"]``).
-
-    Returns:
-        The GIF's path and caption; or no path and a note when the env cannot
-        render ``rgb_array`` frames or Pillow is missing (never an error for those).
-    """
-    import numpy as np
-
-    try:
-        from PIL import Image
-    except ImportError:
-        return Gif(None, f"no GIF of spec {spec.label!r}: Pillow is not installed (pip install pillow)")
-    try:
-        env = _make_env(spec, render_mode="rgb_array")
-    except Exception as e:
-        return Gif(None, f"no GIF of spec {spec.label!r}: its env cannot be made to render rgb_array frames ({e})")
-    act = _policy(model, normalizer, deterministic=True)
-    frames: list[Any] = []
-    stride = 1
-    last = -1
-
-    def capture(step: int) -> None:
-        # Keep every `stride`-th frame; when twice the limit is held, drop every other and double the stride,
-        # so a long episode never holds more than 2 * max_frames frames in memory.
-        nonlocal stride, last, frames
-        if step % stride:
-            return
-        frame = env.render()
-        if not (isinstance(frame, np.ndarray) and frame.ndim == 3 and frame.shape[-1] in (3, 4)):
-            raise _NoFrames(f"render() returned {type(frame).__name__}, not an RGB array")
-        frames.append(frame)
-        last = step
-        if len(frames) > 2 * max_frames:
-            frames, stride = frames[::2], stride * 2
-
-    try:
-        try:
-            steps = _episode(env, act, seed, capture)
-            if last != len(steps):  # the final state, whatever the stride
-                frame = env.render()
-                if isinstance(frame, np.ndarray):
-                    frames.append(frame)
-        finally:
-            env.close()
-    except _NoFrames as e:
-        return Gif(None, f"no GIF of spec {spec.label!r}: its env does not render rgb_array frames ({e})")
-    except Exception as e:
-        return Gif(None, f"no GIF of spec {spec.label!r}: rendering failed ({type(e).__name__}: {e})")
-    goals = steps[-1]["info"].get("goals", {}) if steps else {}
-    caption = _caption(spec, len(steps), goals)
-    images = [Image.fromarray(np.asarray(f[..., :3], dtype=np.uint8)) for f in _subsample(frames, max_frames)]
-    images[-1] = _draw_caption(images[-1], caption)
-    fps = float(getattr(env, "metadata", {}).get("render_fps") or 30)
-    shown = max(1.0, (len(steps) + 1) / len(images))  # episode steps per GIF frame
-    duration = [max(20, round(1000 * shown / fps))] * (len(images) - 1) + [LAST_FRAME_MS]
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    images[0].save(path, save_all=True, append_images=images[1:], duration=duration, loop=0, optimize=False)
-    return Gif(path, caption, len(images))
-
-
-class _NoFrames(Exception):
-    pass
-
-
-def _slug(group: str) -> str:
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", group.replace("::", "__")).strip("_") or "spec"
-
-
-def report_gifs(
-    directory: Path,
-    rows: Sequence[Mapping[str, Any]],
-    specs: Mapping[str, Spec],
-    cache_dir: Path | str | None,
-) -> dict[str, Gif]:
-    """One GIF per spec (group) of ``rows``: its first seed's cached model, written to ``directory``.
-
-    Args:
-        specs: the trained spec of each group; a group without one (the xdist
-            controller, which built no spec) gets a note instead of a GIF.
-        cache_dir: the run cache; ``None`` (no cache): notes only.
-
-    Returns:
-        Per group, the GIF or the note saying why there is none; never raises.
-    """
-    gifs: dict[str, Gif] = {}
-    for row in rows:
-        group = row["group"]
-        if group in gifs:
-            continue
-        spec = specs.get(group)
-        seeds = [s["seed"] for s in row.get("per_seed") or []]
-        if spec is None:
-            gifs[group] = Gif(None, "no rollout GIF: the spec was built in another process (pytest-xdist worker)")
-        elif cache_dir is None:
-            gifs[group] = Gif(None, "no rollout GIF: the run cache is off (--goal-specs-no-cache), no model to load")
-        elif not seeds:
-            gifs[group] = Gif(None, "no rollout GIF: no run of the spec finished")
-        else:
-            try:
-                model, normalizer = load_model(spec, seeds[0], cache_dir)
-                gif = write_gif(model, spec, directory / f"{_slug(group)}.gif", normalizer=normalizer)
-                gifs[group] = gif
-            except Exception as e:  # a report must not fail the session
-                gifs[group] = Gif(None, f"no rollout GIF: {type(e).__name__}: {e}")
-    return gifs

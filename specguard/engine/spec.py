@@ -23,21 +23,12 @@ from typing import Any
 
 from specguard.build.initial_env import InitialEnv
 from specguard.engine.budget import Budget
+from specguard.engine.sb3 import ALGORITHMS
 from specguard.error import InvalidSpec
 from specguard.tree.keys import ROOT, check_threshold, resolve_goal
 from specguard.tree.nodes import Node
 
-__all__ = ["ALGORITHMS", "Spec"]
-
-# stable-baselines3 algorithms by name, and the action spaces each can act in.
-ALGORITHMS: dict[str, tuple[str, ...]] = {
-    "PPO": ("Box", "Discrete", "MultiDiscrete", "MultiBinary"),
-    "A2C": ("Box", "Discrete", "MultiDiscrete", "MultiBinary"),
-    "DQN": ("Discrete",),
-    "SAC": ("Box",),
-    "TD3": ("Box",),
-    "DDPG": ("Box",),
-}
+__all__ = ["Spec"]
 
 UNDECIDED_OUTCOMES = ("fail", "pass")
 

@@ -98,7 +98,7 @@ class SpecResult:
         return rollout(model, self.trained, episodes=episodes, deterministic=deterministic, normalizer=normalizer)
 
     def _load(self, seed: int) -> tuple[Any, Any]:
-        from specguard.engine.rollout import load_model
+        from specguard.engine.models import load_model
 
         if self.trained is None or self.cache_dir is None:
             raise SpecError(

@@ -28,7 +28,8 @@ from specguard.engine.auto_weights import WeightAdapter
 from specguard.engine.progress import decode_update, encode_update, format_event
 from specguard.engine.protocol import Report
 from specguard.engine.results import RunResult
-from specguard.engine.spec import ALGORITHMS, Spec
+from specguard.engine.sb3 import ALGORITHMS, algorithm_class
+from specguard.engine.spec import Spec
 from specguard.error import InvalidSpec, SpecError
 from specguard.stats.anytime import checkpoint_steps, final_evaluation, interim_look
 
@@ -209,7 +210,6 @@ def train_run(
         TrainingError: the env or a user function failed; the message has the
             seed and the training step.
     """
-    import stable_baselines3
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.env_util import make_vec_env
@@ -242,7 +242,7 @@ def train_run(
     if spec.normalize:
         venv = VecNormalize(venv)
     try:
-        algorithm = getattr(stable_baselines3, spec.algorithm)
+        algorithm = algorithm_class(spec.algorithm)
         model = algorithm("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **dict(spec.hyperparameters))
     except (TypeError, ValueError, AssertionError) as e:
         venv.close()

@@ -489,7 +489,7 @@ def _write_outputs(config: pytest.Config, state: _Session) -> list[Path]:
         return []
     written: list[Path] = []
     if state.options.report_dir is not None:
-        from specguard.engine.rollout import report_gifs
+        from specguard.report.gifs import report_gifs
         from specguard.report.session import write_reports
 
         gifs = report_gifs(state.options.report_dir, state.rows, state.specs, state.options.cache_dir)

@@ -14,7 +14,8 @@ import ast
 from pathlib import Path
 from typing import Any
 
-from specguard.engine.budget import _ROLLOUT_STEPS, _collect_steps, trained_timesteps
+from specguard.engine.budget import trained_timesteps
+from specguard.engine.sb3 import collect_steps, collection_unit
 from specguard.engine.spec import Spec
 from specguard.tree.formula import formula
 from specguard.tree.nodes import Node
@@ -60,8 +61,8 @@ def _budget(spec: Spec) -> str:
     if trained == b.timesteps:
         steps = f"{trained} timesteps per seed ({envs})"
     else:
-        per_env = _collect_steps(spec.algorithm, spec.hyperparameters)
-        unit = "rollouts" if spec.algorithm in _ROLLOUT_STEPS else "collections"
+        per_env = collect_steps(spec.algorithm, spec.hyperparameters)
+        unit = collection_unit(spec.algorithm)
         steps = (
             f"{trained} timesteps per seed ({b.timesteps} asked, rounded up to whole {spec.algorithm} {unit} "
             f"of {per_env * spec.n_envs} = {per_env} steps x {envs})"

@@ -22,7 +22,7 @@ from urllib.parse import quote
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-    from specguard.engine.rollout import Gif
+    from specguard.report.gifs import Gif
 
 from specguard.tree.keys import is_safety_key, label
 from specguard.utils.text import render_table
