@@ -25,6 +25,8 @@ Example:
 
 from __future__ import annotations
 
+from specguard.utils.text import bounds_text
+
 import warnings
 from collections.abc import Sequence
 from typing import Any
@@ -49,10 +51,6 @@ def _f32(values: np.ndarray) -> np.ndarray:
         return np.asarray(values, dtype=np.float64).astype(np.float32)
 
 
-def _interval(lo: float, hi: float) -> str:
-    return f"[{lo:g}, {hi:g}]"
-
-
 def _within(compiled: CompiledTree, low: ArrayLike, high: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Every node's box intersected with the bounds, at float32 precision: ``(nodes, features)`` each."""
     lo = np.maximum(_f32(compiled.lo), _f32(np.asarray(low))[None, :])
@@ -74,16 +72,16 @@ def _unreachable(compiled: CompiledTree, low: ArrayLike, high: ArrayLike, node: 
     j = int(empty[0])
     f = compiled.features[j]
     box_lo, box_hi = float(compiled.lo[node, j]), float(compiled.hi[node, j])
-    bounds = _interval(float(_f32(np.asarray(low))[j]), float(_f32(np.asarray(high))[j]))
+    bounds = bounds_text(float(_f32(np.asarray(low))[j]), float(_f32(np.asarray(high))[j]))
     if box_lo > box_hi:
         message = (
-            f"its children's boxes do not overlap on {f}: their intersection {_interval(box_lo, box_hi)} is empty "
+            f"its children's boxes do not overlap on {f}: their intersection {bounds_text(box_lo, box_hi)} is empty "
             f"(the bounds of {f} are {bounds}), so no state can be in this goal"
         )
         hint = "an All's goal is the intersection of its children's goals; widen them so they overlap on " + repr(f)
     else:
         message = (
-            f"goal box {f} in {_interval(box_lo, box_hi)} lies outside the bounds of {f}, {bounds}: "
+            f"goal box {f} in {bounds_text(box_lo, box_hi)} lies outside the bounds of {f}, {bounds}: "
             "no state can be in it, so training would be for nothing"
         )
         hint = (
@@ -144,9 +142,9 @@ def check_goals_off_the_edge(compiled: CompiledTree, low: ArrayLike, high: Array
     for node in _innermost(compiled, np.asarray(edge.any(axis=1))):
         for j in np.flatnonzero(edge[node]):
             f = compiled.features[j]
-            box = _interval(float(compiled.lo[node, j]), float(compiled.hi[node, j]))
+            box = bounds_text(float(compiled.lo[node, j]), float(compiled.hi[node, j]))
             names.append(
-                f"{compiled.paths[node]} ({f} in {box} meets the bounds {_interval(b_lo[0, j], b_hi[0, j])} "
+                f"{compiled.paths[node]} ({f} in {box} meets the bounds {bounds_text(b_lo[0, j], b_hi[0, j])} "
                 f"only at {float(lo[node, j]):g})"
             )
     if names:

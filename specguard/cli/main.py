@@ -26,6 +26,7 @@ from specguard.engine.spec import Spec
 from specguard.engine.specfiles import load_objects
 from specguard.error import SpecError
 from specguard.tree.nodes import Node
+from specguard.utils.files import write_atomic
 
 __all__ = ["main"]
 
@@ -70,7 +71,7 @@ def _run(args: argparse.Namespace) -> int:
     finally:
         executor.close()
     if json_path is not None:
-        json_path.write_text(json.dumps(results, indent=1))
+        write_atomic(json_path, json.dumps(results, indent=1))
     return 1 if failed else 0
 
 

@@ -42,7 +42,7 @@ from specguard.engine.spec_result import SpecResult
 from specguard.engine.specfiles import import_file, load_objects
 from specguard.error import SpecError
 from specguard.stats.intervals import success_interval
-from specguard.utils.text import per_seed_text
+from specguard.utils.text import interval_text, markdown_table, per_seed_text
 
 __all__ = ["Case", "Reproduction", "load_case", "reproduce", "write_markdown", "write_plots"]
 
@@ -180,7 +180,7 @@ def _root_row(case: Case, key: str, result: SpecResult, seeds: int) -> tuple[str
     path = next(iter(spec.tree.walk()))[0]  # the root comes first
     k, n = result.success(path) if result.runs else (0, 0)
     mean = f"{k / n:.0%} ({k}/{n})" if n else "-"
-    interval = "[{:.2f}, {:.2f}]".format(*success_interval(k, n, spec.confidence)) if n else "-"
+    interval = interval_text(success_interval(k, n, spec.confidence)) if n else "-"
     threshold = spec.thresholds.get(path)
     reached = "-"
     if threshold is not None:
@@ -218,8 +218,7 @@ def case_section(reproduction: Reproduction, case: Case, images: Mapping[str, st
         "",
     ]
     rows = [_root_row(case, key, r.results[case.name][key], r.seeds) for key in case.specs]
-    lines += ["| " + " | ".join(HEADER) + " |", "|" + "---|" * len(HEADER)]
-    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    lines += markdown_table(HEADER, rows)
     for key in case.specs:
         seeds = per_seed_text((run.seed, run.weights) for run in r.results[case.name][key].runs)
         if seeds:

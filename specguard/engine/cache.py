@@ -44,6 +44,7 @@ from specguard.engine.results import RunResult
 from specguard.engine.spec import Spec
 from specguard.error import SpecError
 from specguard.tree.keys import result_keys
+from specguard.utils.files import staged
 
 __all__ = [
     "SECRET_ENV",
@@ -207,9 +208,7 @@ class Cache:
         if MODEL not in files or unknown:
             raise ValueError(f"expected {MODEL} (and optionally {NORMALIZER}), got files {sorted(files)}")
         folder = self.folder(key)
-        folder.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=".tmp-", dir=folder.parent))
-        try:
+        with staged(folder, folder=True) as tmp:
             for name, data in sorted(files.items()):
                 (tmp / name).write_bytes(data)
             record: dict[str, Any] = {
@@ -228,8 +227,6 @@ class Cache:
             except OSError:
                 if not folder.exists():
                     raise
-        finally:
-            shutil.rmtree(tmp, ignore_errors=True)
         return folder
 
     def lock(self, key: str, timeout: float) -> Any:

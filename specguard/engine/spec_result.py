@@ -11,7 +11,7 @@ from specguard.engine.spec import Spec
 from specguard.error import SpecError
 from specguard.stats.intervals import QuorumVerdict, RunVerdict, success_interval
 from specguard.tree.keys import GOAL, kind, label
-from specguard.utils.text import render_table, weights_text
+from specguard.utils.text import interval_text, render_table, weights_text
 
 __all__ = ["GoalVerdict", "SpecResult"]
 
@@ -139,7 +139,7 @@ class SpecResult:
         for p in paths:
             k, n = self.success(p)
             rate = f"{k / n:.0%} ({k}/{n})" if n else "-"
-            iv = "-" if not n else "[{:.2f}, {:.2f}]".format(*success_interval(k, n, self.confidence))
+            iv = "-" if not n else interval_text(success_interval(k, n, self.confidence))
             g = self.goals.get(p)
             met = "-" if g is None else f"{g.runs.count(RunVerdict.MET)}/{len(g.runs)} (need {g.required})"
             threshold = "-" if g is None else f">= {g.threshold:g}"

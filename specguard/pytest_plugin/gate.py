@@ -16,6 +16,7 @@ from specguard.engine.spec_result import SpecResult
 from specguard.extend import SHAPING, Node
 from specguard.stats.intervals import Outcome, QuorumVerdict, RunVerdict
 from specguard.tree.keys import GOAL, SAFETY, kind, resolve_goal
+from specguard.utils.text import interval_text
 
 if TYPE_CHECKING:
     from specguard.stats.compare import Baseline
@@ -71,7 +72,7 @@ class GoalCheck:
         """The figures as ``(name, value)`` pairs for JUnit XML properties."""
         lo, hi = self.interval
         names = ("kind", "success", "threshold", "successes", "episodes", "runs_met", "runs", "train_seconds", "cached")
-        return [(n, getattr(self, n)) for n in names] + [("interval", f"[{lo:.4f}, {hi:.4f}]")]
+        return [(n, getattr(self, n)) for n in names] + [("interval", interval_text((lo, hi), digits=4))]
 
     def message(self) -> str:
         verb = {Outcome.PASSED: "met", Outcome.FAILED: "missed", Outcome.UNDECIDED: "could not be decided for"}[
@@ -84,7 +85,7 @@ class GoalCheck:
         rate = "safe (no violation) in" if safety else "success"
         lines = [
             f"{what} of spec {self.spec!r} {verb} its threshold",
-            f"  {rate} {self.success:.0%} ({self.successes}/{self.episodes}), interval [{lo:.2f}, {hi:.2f}], "
+            f"  {rate} {self.success:.0%} ({self.successes}/{self.episodes}), interval {interval_text((lo, hi))}, "
             f"threshold >= {self.threshold:g}",
             f"  runs: {self.runs_met} of {self.runs} met ({self.required} required); seeds {seeds}",
             "  per seed: "

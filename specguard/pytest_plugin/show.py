@@ -19,12 +19,9 @@ from specguard.engine.sb3 import collect_steps, collection_unit
 from specguard.engine.spec import Spec
 from specguard.tree.formula import formula
 from specguard.tree.nodes import Node
+from specguard.utils.text import bounds_text
 
 __all__ = ["has_goal_specs", "render_spec", "render_tree", "show_goal_spec_file"]
-
-
-def _interval(lo: float, hi: float) -> str:
-    return f"[{lo:g}, {hi:g}]"
 
 
 def render_tree(tree: Node) -> list[str]:
@@ -48,7 +45,7 @@ def _layout(spec: Spec) -> list[str]:
         lines = [f"observation: {len(names)} components (features, then the own state of nodes and annotations)"]
         width = max(len(n) for n in names)
         for name, lo, hi in zip(names, space.low.tolist(), space.high.tolist()):
-            lines.append(f"  {name:<{width}}  {_interval(lo, hi)}")
+            lines.append(f"  {name:<{width}}  {bounds_text(lo, hi)}")
         return lines
     finally:
         env.close()

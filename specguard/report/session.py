@@ -19,6 +19,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 from urllib.parse import quote
 
+from specguard.utils.text import interval_text, markdown_table
+
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
@@ -53,7 +55,7 @@ def _cells(row: Row) -> list[str]:
         row["group"],
         label(row["goal"]),
         f"{row['success']:.0%} ({row['successes']}/{row['episodes']})",
-        f"[{lo:.2f}, {hi:.2f}]",
+        interval_text((lo, hi)),
         f">= {row['threshold']:g}",
         f"{row['runs_met']}/{row['runs']}",
         _per_seed(row),
@@ -106,13 +108,13 @@ def markdown(rows: Sequence[Row], *, plot: str | None = None, gifs: Mapping[str,
         "",
         ", ".join(f"{n} {v}" for v, n in sorted(counts.items())) + f" ({len(rows)} goals)",
         "",
-        "| " + " | ".join(header) + " |",
-        "|" + "---|" * len(header),
     ]
+    table = []
     for r in _ordered(rows):
         cells = _cells(r) + ([""] if compared and not r.get("comparison") else [])
         cells[1] = f"`{r['goal']}` (safe)" if is_safety_key(r["goal"]) else f"`{cells[1]}`"
-        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+        table.append(cells)
+    lines += markdown_table(header, table)
     failing = [r for r in _ordered(rows) if r["verdict"] in ("failed", "undecided")]
     if failing:
         lines += ["", "### Failing goals", ""]

@@ -28,8 +28,6 @@ itself changed since the baseline or only its result did.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -37,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from specguard.error import SpecError
+from specguard.utils.files import write_atomic
 
 __all__ = ["Baseline", "BaselineError", "Comparison", "compare", "load_baseline", "save_baseline"]
 
@@ -116,14 +115,10 @@ def compare(before: Runs, after: Runs, alpha: float = 0.05) -> Comparison:
 
 def save_baseline(path: Path, rows: Mapping[str, Runs], specs: Mapping[str, str] | None = None) -> None:
     """Write ``{key: [(successes, episodes), ...]}`` (and each key's spec identity) atomically to ``path``."""
-    path.parent.mkdir(parents=True, exist_ok=True)
     specs = specs or {}
     goals = {k: {"runs": [list(r) for r in runs], "spec": specs.get(k)} for k, runs in rows.items()}
     data = {"format": FORMAT, "goals": goals}
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", dir=path.parent)
-    with os.fdopen(fd, "w") as f:
-        json.dump(data, f, indent=1, sort_keys=True)
-    os.replace(tmp, path)
+    write_atomic(path, json.dumps(data, indent=1, sort_keys=True))
 
 
 def load_baseline(path: Path) -> Baseline:

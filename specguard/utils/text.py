@@ -1,10 +1,18 @@
-"""Text every door writes the same way: plain tables, adapted weights."""
+"""Text every door writes the same way: plain and Markdown tables, intervals, bounds, adapted weights."""
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 
-__all__ = ["per_seed_text", "render_table", "weights_text"]
+__all__ = [
+    "bounds_text",
+    "interval_text",
+    "markdown_cell",
+    "markdown_table",
+    "per_seed_text",
+    "render_table",
+    "weights_text",
+]
 
 
 def render_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
@@ -42,3 +50,47 @@ def per_seed_text(seeds: Iterable[tuple[int, Mapping[str, Sequence[float]]]]) ->
         'seed 0 p (0.75, 0.25)'
     """
     return ", ".join(f"seed {seed} {weights_text(weights)}" for seed, weights in seeds if weights)
+
+
+def interval_text(interval: Sequence[float], digits: int = 2) -> str:
+    """A confidence interval of a success rate: ``[0.88, 1.00]`` (``digits`` decimals, both ends alike).
+
+    Example:
+        >>> interval_text((0.8843, 1.0)), interval_text((0.8843, 1.0), digits=4)
+        ('[0.88, 1.00]', '[0.8843, 1.0000]')
+    """
+    lo, hi = interval
+    return f"[{lo:.{digits}f}, {hi:.{digits}f}]"
+
+
+def bounds_text(lo: float, hi: float) -> str:
+    """A feature's range or a box side as written in errors and ``specguard show``: ``[-1, 1]``, ``[-inf, 0.5]``.
+
+    Example:
+        >>> bounds_text(-1.0, float("inf"))
+        '[-1, inf]'
+    """
+    return f"[{lo:g}, {hi:g}]"
+
+
+def markdown_cell(text: object) -> str:
+    r"""``text`` safe inside a Markdown table cell: ``\`` and ``|`` escaped, line breaks as spaces.
+
+    Example:
+        >>> print(markdown_cell("a|b\nc"))
+        a\|b c
+    """
+    return " ".join(str(text).replace("\\", "\\\\").replace("|", "\\|").splitlines())
+
+
+def markdown_table(header: Sequence[object], rows: Sequence[Sequence[object]]) -> list[str]:
+    r"""A Markdown table, every cell through :func:`markdown_cell`.
+
+    Example:
+        >>> print("\n".join(markdown_table(["spec", "root"], [["w", "86% | 4/5"]])))
+        | spec | root |
+        |---|---|
+        | w | 86% \| 4/5 |
+    """
+    lines = ["| " + " | ".join(markdown_cell(h) for h in header) + " |", "|" + "---|" * len(header)]
+    return lines + ["| " + " | ".join(markdown_cell(c) for c in row) + " |" for row in rows]
