@@ -8,7 +8,9 @@ import matplotlib
 import pytest
 
 from specguard.report.gifs import Gif
-from specguard.report.session import curves_figure, markdown, plot_curves, table_lines, write_reports
+from specguard.report.plots import curves_figure, plot_curves
+from specguard.report.session import session_markdown as markdown
+from specguard.report.session import table_lines, write_reports
 
 
 def curve(*rates, evaluation=None):

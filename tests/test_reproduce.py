@@ -15,8 +15,9 @@ import pytest
 import specguard as sg
 from example_specs import pendulum
 from specguard.cli.main import main
-from specguard.cli.reproduce import TITLE, sections, sized
 from specguard.engine.fingerprint import versions
+from specguard.engine.reproduction import sized
+from specguard.report.reproduction import TITLE, sections
 
 REPO = Path(__file__).resolve().parents[1]
 

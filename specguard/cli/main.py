@@ -4,7 +4,8 @@
 specs (or trees) a Python file defines; ``specguard run PATH[::NAME]`` trains
 them within their budgets and prints the per-goal table; ``specguard reproduce
 PATH...`` trains every spec of case-study files on several seeds and writes a
-Markdown table and plots (:mod:`specguard.cli.reproduce`). A file's specs are its
+Markdown table and plots (:mod:`specguard.engine.reproduction`,
+:mod:`specguard.report.reproduction`). A file's specs are its
 module-level ``Spec`` objects (named by variable) and the values of its
 module-level dicts of specs (named by key); ``show`` also lists goal trees.
 
@@ -216,9 +217,10 @@ def _case_scale(text: str) -> tuple[str, float]:
 
 
 def _reproduce(args: argparse.Namespace, argv: Sequence[str]) -> int:
-    from specguard.cli.reproduce import load_case, reproduce, write_markdown
     from specguard.engine.progress import print_event
+    from specguard.engine.reproduction import load_case, reproduce
     from specguard.engine.run import resolve_workers
+    from specguard.report.reproduction import write_markdown
 
     cases = [load_case(path) for path in args.targets]
     command = "specguard " + " ".join(argv)
