@@ -438,7 +438,7 @@ class _ForgingExecutor:
             "episodes": 4,
             "successes": {"pendulum": 9},
             "train_seconds": 0.1,
-            "stopped_early": False,
+            "hit_wall_clock": False,
             "curve": [],
             "met_early": False,
             "weights": {},

@@ -9,9 +9,9 @@ from example_specs import pendulum
 from specguard.engine.judging import judge as _judge
 from specguard.engine.results import RunResult
 from specguard.engine.spec_result import SpecResult
-from specguard.pytest_plugin.gate import check_goal
+from specguard.pytest_plugin.gate import gate_goal
 from specguard.stats.compare import Baseline
-from specguard.stats.intervals import Outcome
+from specguard.stats.intervals import GoalOutcome
 from specguard.tree.keys import ROOT
 
 
@@ -43,14 +43,14 @@ def spec(tree="b", expect=None, **budget):
 
 def test_passed():
     s = spec()
-    check = check_goal(result_of(s, [(30, 30), (30, 30)]), s, "pendulum", "g")
+    check = gate_goal(result_of(s, [(30, 30), (30, 30)]), s, "pendulum", "g")
     assert check.outcome == "passed" and check.hint is None
     assert check.message().startswith("goal 'pendulum' of spec 'pendulum' met its threshold")
 
 
 def test_failed_sparse_goal_hints_at_a_distance():
     s = spec()
-    check = check_goal(result_of(s, [(0, 30), (30, 30)]), s, "pendulum", "g")
+    check = gate_goal(result_of(s, [(0, 30), (30, 30)]), s, "pendulum", "g")
     assert check.outcome == "failed"
     assert check.hint == "sparse goal never reached in 1/2 seeds: consider a Distance annotation on 'pendulum'"
     assert "per seed: seed 0: 0/30 (missed), seed 1: 30/30 (met)" in check.message()
@@ -58,21 +58,21 @@ def test_failed_sparse_goal_hints_at_a_distance():
 
 def test_shaped_goal_gets_another_hint():
     s = spec("c", expect={"position": 0.8})
-    check = check_goal(result_of(s, [(0, 30), (30, 30)]), s, "pendulum/position", "g")
+    check = gate_goal(result_of(s, [(0, 30), (30, 30)]), s, "pendulum/position", "g")
     assert check.hint.startswith("goal never reached in 1/2 seeds")
 
 
 def test_undecided_runs_leave_the_goal_undecided():
     s = spec(max_eval_episodes=30)
-    check = check_goal(result_of(s, [(25, 30), (30, 30)]), s, "pendulum", "g")
-    assert check.outcome is Outcome.UNDECIDED
+    check = gate_goal(result_of(s, [(25, 30), (30, 30)]), s, "pendulum", "g")
+    assert check.outcome is GoalOutcome.UNDECIDED
     assert "could not be decided" in check.message()
     assert check.hint.startswith("runs stayed undecided after 30 evaluation episodes")
 
 
 def test_crashed_seeds_fail_and_are_listed():
     s = spec()
-    check = check_goal(result_of(s, [(30, 30)], errors={1: "seed 1 exploded"}), s, "pendulum", "g")
+    check = gate_goal(result_of(s, [(30, 30)], errors={1: "seed 1 exploded"}), s, "pendulum", "g")
     assert check.outcome == "failed" and check.runs == 2
     assert "seed 1 failed: seed 1 exploded" in check.message()
     assert check.to_row()["errors"] == {"1": "seed 1 exploded"}
@@ -93,7 +93,7 @@ def test_competing_subgoals_hint_at_weights():
     ]
     result = SpecResult(spec="pendulum", runs=runs, goals={})
     result.goals = _judge(s, runs, 0)
-    check = check_goal(result, s, "pendulum", "g")
+    check = gate_goal(result, s, "pendulum", "g")
     assert check.hint == (
         "subgoals compete: 'pendulum/stabilization' is reached in 100% of episodes, 'pendulum/position' in 33%; "
         "consider a Distance on 'pendulum/position' or a larger weight for it"
@@ -138,11 +138,11 @@ def test_never_reached_suggests_a_distance_only_for_a_reachable_goal():
 
     with pytest.raises(UnreachableGoal):  # an impossible goal never reaches training ...
         sg.make_env(cartpole, sg.Goal("far", x=(10, None)))
-    hint = check_goal(result_of(inside, [(0, 30), (0, 30)]), inside, "edge_zone", "g").hint
+    hint = gate_goal(result_of(inside, [(0, 30), (0, 30)]), inside, "edge_zone", "g").hint
     assert hint == "sparse goal never reached in 2/2 seeds: consider a Distance annotation on 'edge_zone'"
     # ... and should a result for one arrive (an old cache), the hint says impossible, not "add a Distance".
     far = sg.Spec(cartpole, sg.Goal("far", x=(10, None)), budget=budget, expect=0.5)
-    hint = check_goal(result_of(far, [(0, 30), (0, 30)]), far, "far", "g").hint
+    hint = gate_goal(result_of(far, [(0, 30), (0, 30)]), far, "far", "g").hint
     assert hint.startswith("goal impossible, not just never reached: goal box x in [10, inf] lies outside")
     assert "Distance" not in hint
 
@@ -176,7 +176,7 @@ def safety_result(spec, safe_per_seed, episodes=30):
 
 def test_a_missed_safety_threshold_speaks_of_violations():
     s = safety_spec({"fast": 0.8})
-    check = check_goal(safety_result(s, [0, 10]), s, "pendulum:fast", "g")
+    check = gate_goal(safety_result(s, [0, 10]), s, "pendulum:fast", "g")
     assert check.outcome == "failed" and check.kind == "safety"
     assert check.hint == (
         "'pendulum:fast' was violated in 83% of evaluation episodes; in every episode of 1/2 seeds (an episode with "
@@ -193,13 +193,13 @@ def test_a_missed_safety_threshold_speaks_of_violations():
 
 def test_a_passing_or_undecided_safety_rate():
     s = safety_spec({"pendulum:fast": 0.8, "pendulum": 0.5}, max_eval_episodes=30)
-    passed = check_goal(safety_result(s, [30, 30]), s, "pendulum:fast", "g")
+    passed = gate_goal(safety_result(s, [30, 30]), s, "pendulum:fast", "g")
     assert passed.outcome == "passed" and passed.hint is None
     assert passed.message().startswith("safety rate 'pendulum:fast' of spec 'pendulum' met its threshold")
-    undecided = check_goal(safety_result(s, [26, 30]), s, "pendulum:fast", "g")
-    assert undecided.outcome is Outcome.UNDECIDED
+    undecided = gate_goal(safety_result(s, [26, 30]), s, "pendulum:fast", "g")
+    assert undecided.outcome is GoalOutcome.UNDECIDED
     assert undecided.hint.startswith("runs stayed undecided after 30 evaluation episodes")
-    goal = check_goal(safety_result(s, [30, 30]), s, "pendulum", "g")
+    goal = gate_goal(safety_result(s, [30, 30]), s, "pendulum", "g")
     assert goal.kind == "goal" and dict(goal.junit_properties())["kind"] == "goal"
 
 

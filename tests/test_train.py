@@ -83,7 +83,7 @@ def test_baseline_trains_on_the_initial_env_and_reports_goals():
 def test_wall_clock_cap_stops_training():
     spec = tiny_spec(budget=sg.Budget(timesteps=100_000, eval_episodes=1, wall_clock_s=0.5))
     result, _ = train_run(spec, seed=0)
-    assert result.stopped_early and result.timesteps < 100_000
+    assert result.hit_wall_clock and result.timesteps < 100_000
 
 
 # -- safety rates: episodes without a violation, counted beside the goals ------------------------------------

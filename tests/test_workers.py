@@ -21,7 +21,7 @@ from typing import Any
 import cloudpickle
 import pytest
 
-from specguard.engine.protocol import Done, Failure, Outcome, Report, Task
+from specguard.engine.protocol import Done, Failure, TaskOutcome, Report, Task
 from specguard.engine.signals import stopping_all_tasks
 from specguard.engine.workers import parse_workers, resolve_workers, run_tasks
 
@@ -155,7 +155,7 @@ def _pid_exited(pid: int) -> bool:
     return "\nState:\tZ" in status
 
 
-def _failure(outcome: Outcome) -> Failure:
+def _failure(outcome: TaskOutcome) -> Failure:
     assert isinstance(outcome, Failure), outcome
     return outcome
 
@@ -293,7 +293,7 @@ def test_sigterm_handler_is_restored_and_non_main_threads_leave_signals_alone() 
     assert run_tasks([Task(0, sleep_then_return, (1, 0.0))], max_workers=1)[0].key == 0
     assert signal.getsignal(signal.SIGTERM) is before
 
-    result: list[dict[int, Outcome]] = []
+    result: list[dict[int, TaskOutcome]] = []
     errors: list[BaseException] = []
 
     def target() -> None:
@@ -438,9 +438,9 @@ def test_auto_shares_the_cores():
 def test_each_outcome_reaches_the_caller_as_its_task_ends(tmp_path):
     # Task 1 ends only once the parent has been told of task 0: an outcome held back to the batch's end fails it.
     marker = tmp_path / "task 0 ended"
-    seen: list[tuple[int, Outcome]] = []
+    seen: list[tuple[int, TaskOutcome]] = []
 
-    def on_outcome(key: int, outcome: Outcome) -> None:
+    def on_outcome(key: int, outcome: TaskOutcome) -> None:
         seen.append((key, outcome))
         if key == 0:
             marker.write_text("")

@@ -41,7 +41,7 @@ from specguard.contract.trees import (
     FEATURES,
     MAX_EXAMPLES,
     Broken,
-    Case,
+    Example,
     context,
     extended_states,
     fail,
@@ -91,7 +91,7 @@ def check_observations_in_space(cls: type, max_examples: int = MAX_EXAMPLES) -> 
     Own state (stages, counters) must stay within the bounds its slots declare.
     """
 
-    def body(case: Case) -> None:
+    def body(case: Example) -> None:
         assert case.trajectory is not None and case.actions is not None
         env = replay_env(case.tree, case.trajectory)
         for t, step in enumerate(play(env, case.actions)):
@@ -113,7 +113,7 @@ def check_observations_in_space(cls: type, max_examples: int = MAX_EXAMPLES) -> 
 def check_rewards_are_finite_sums_of_terms(cls: type, max_examples: int = MAX_EXAMPLES) -> None:
     """Every reward is a finite Python float equal to the sum of info["reward_terms"] (both evaluators)."""
 
-    def body(case: Case) -> None:
+    def body(case: Example) -> None:
         assert case.trajectory is not None and case.actions is not None
         for evaluator in ("reference", "flat"):
             for t, step in enumerate(play(replay_env(case.tree, case.trajectory, evaluator), case.actions)):
@@ -138,7 +138,7 @@ def check_core_reward_telescopes(cls: type, max_examples: int = MAX_EXAMPLES) ->
     children's memberships) come from the reference requirements.
     """
 
-    def body(case: Case) -> None:
+    def body(case: Example) -> None:
         assert case.trajectory is not None and case.actions is not None
         req, xs = extended_states(case.tree, case.trajectory, case.actions)
         acts = case.actions
@@ -178,7 +178,7 @@ def check_markov(cls: type, max_examples: int = MAX_EXAMPLES) -> None:
     keeps outside its declared own state is hidden state, and breaks it.
     """
 
-    def body(case: Case) -> None:
+    def body(case: Example) -> None:
         assert case.trajectory is not None and case.actions is not None
         pristine = cloudpickle.dumps(case.tree)  # every transition gets a fresh copy of the tree
         steps = play(replay_env(case.tree, case.trajectory), case.actions)
@@ -232,7 +232,7 @@ def _differences(x: dict[str, Any], y: dict[str, Any], xname: str, yname: str, t
 def check_reset_restores_own_state(cls: type, max_examples: int = MAX_EXAMPLES) -> None:
     """Reset after an episode gives what the first reset and a fresh env give, and the episode replays identically."""
 
-    def body(case: Case) -> None:
+    def body(case: Example) -> None:
         assert case.trajectory is not None and case.actions is not None
         pristine = cloudpickle.dumps(case.tree)
         env = replay_env(case.tree, case.trajectory)
@@ -263,7 +263,7 @@ def check_termination_includes_children(cls: type, max_examples: int = MAX_EXAMP
     termination and with every single child (and all of them) ended.
     """
 
-    def body(case: Case) -> None:
+    def body(case: Example) -> None:
         assert case.trajectory is not None and case.actions is not None
         req, xs = extended_states(case.tree, case.trajectory, case.actions)
         for path, node in case.tree.walk():
@@ -294,7 +294,7 @@ def check_flat_matches_reference(cls: type, max_examples: int = MAX_EXAMPLES) ->
     box or fast form must say what the methods say.
     """
 
-    def body(case: Case) -> None:
+    def body(case: Example) -> None:
         assert case.trajectory is not None and case.actions is not None
         flat = compile_tree(case.tree, FEATURES).evaluator()
         ref = ReferenceEvaluator(case.tree, FEATURES)
@@ -368,7 +368,7 @@ def check_description_is_exact(cls: type, max_examples: int = MAX_EXAMPLES) -> N
     """
     kept: list[tuple[Node, bytes, list[str]]] = []
 
-    def body(case: Case) -> None:
+    def body(case: Example) -> None:
         texts = _texts(case.tree)
         for text in texts:
             if not isinstance(text, str) or ADDRESS.search(text):
@@ -381,18 +381,18 @@ def check_description_is_exact(cls: type, max_examples: int = MAX_EXAMPLES) -> N
         if len(kept) < 100:  # every example, but a bound on the pickles handed over
             kept.append((case.tree, cloudpickle.dumps(case.tree), texts))
 
-    run_property(check_description_is_exact, cls, max_examples, body, trees_with(cls).map(Case))
+    run_property(check_description_is_exact, cls, max_examples, body, trees_with(cls).map(Example))
     kept.sort(key=lambda k: len(k[2][-2]))  # smallest tree first: the one a failure shows
     for seed, fresh in _fresh_texts([blob for _, blob, _ in kept]).items():
         if isinstance(fresh, str):
-            fail(check_description_is_exact, cls, Case(kept[0][0]), f"a fresh interpreter failed:\n{fresh}")
+            fail(check_description_is_exact, cls, Example(kept[0][0]), f"a fresh interpreter failed:\n{fresh}")
         for (tree, _, texts), there in zip(kept, fresh):
             if there != texts:
                 diff = [f"{a!r} here, {b!r} there" for a, b in zip(texts, there) if a != b][:1]
                 fail(
                     check_description_is_exact,
                     cls,
-                    Case(tree),
+                    Example(tree),
                     f"in a fresh interpreter (PYTHONHASHSEED={seed}) the texts differ: " + "; ".join(diff),
                 )
 
@@ -400,7 +400,7 @@ def check_description_is_exact(cls: type, max_examples: int = MAX_EXAMPLES) -> N
 def check_refinement_preserves_root_goal(cls: type, max_examples: int = MAX_EXAMPLES) -> None:
     """A refinement cls.refinements(leaf) has the leaf's root membership in every state, in both evaluators."""
 
-    def body(case: Case) -> None:
+    def body(case: Example) -> None:
         assert case.trajectory is not None and case.leaf is not None
         evaluators: dict[str, Any] = {
             "leaf, flat": compile_tree(case.leaf, FEATURES).evaluator(),

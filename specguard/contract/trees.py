@@ -1,6 +1,6 @@
 """The examples the contract checks run on, and how their failures read (support of :mod:`specguard.contract.checks`).
 
-An example (:class:`Case`) is a random goal tree over :data:`FEATURES` that
+An example (:class:`Example`) is a random goal tree over :data:`FEATURES` that
 contains the class under test, a trajectory of float32 states and the actions
 taken. :func:`run_property` runs a check's property with Hypothesis
 (derandomized, so CI sees the same examples every time) and turns the shrunk
@@ -28,7 +28,7 @@ from specguard.tree.builtin_annotations import Constraint, Distance
 from specguard.tree.nodes import All, Goal
 from specguard.validation import PATH_SEPARATOR
 
-__all__ = ["FEATURES", "Broken", "Case", "cases", "fail", "refinement_cases", "run_property", "trees_with"]
+__all__ = ["FEATURES", "Broken", "Example", "cases", "fail", "refinement_cases", "run_property", "trees_with"]
 
 FEATURES = ("a", "b", "c")
 """The features of the random trees and trajectories."""
@@ -38,7 +38,7 @@ MAX_EXAMPLES = 40
 Check = Callable[..., None]
 
 
-class Case(NamedTuple):
+class Example(NamedTuple):
     """One example: a tree and, for most checks, a trajectory ``s_0 .. s_T`` with the actions ``a_0 .. a_{T-1}``."""
 
     tree: Node
@@ -114,23 +114,23 @@ def f32(rows: Sequence[Sequence[float]]) -> list[list[float]]:
 
 
 @st.composite
-def cases(draw: st.DrawFn, cls: type, max_size: int = 10) -> Case:
+def cases(draw: st.DrawFn, cls: type, max_size: int = 10) -> Example:
     """A tree containing ``cls``, a trajectory of 2 to ``max_size`` states and an action (0-2) per step."""
     tree = draw(trees_with(cls))
     trajectory = f32(draw(sgst.trajectories(FEATURES, max_size=max_size)))
     n = len(trajectory) - 1
-    return Case(tree, trajectory, draw(st.lists(st.integers(0, 2), min_size=n, max_size=n)))
+    return Example(tree, trajectory, draw(st.lists(st.integers(0, 2), min_size=n, max_size=n)))
 
 
 @st.composite
-def refinement_cases(draw: st.DrawFn, cls: type[Node]) -> Case:
+def refinement_cases(draw: st.DrawFn, cls: type[Node]) -> Example:
     """A ``Goal`` leaf, a refinement of it by ``cls`` (as the tree) and 1 to 8 states (as the trajectory)."""
     leaf = _goal(draw, "leaf")
     refinements = cls.refinements(leaf)
     assume(refinements is not None)
     assert refinements is not None
     states = f32(draw(st.lists(sgst.states(FEATURES), min_size=1, max_size=8)))
-    return Case(draw(refinements), states, None, leaf)
+    return Example(draw(refinements), states, None, leaf)
 
 
 # -- running a property and reporting its counterexample --------------------------
@@ -141,7 +141,7 @@ def value_text(v: float) -> str:
     return str(np.float32(v)) if float(np.float32(v)) == v else repr(v)
 
 
-def _example(case: Case) -> list[str]:
+def _example(case: Example) -> list[str]:
     lines = ["tree:", *(f"    {line}" for line in case.tree.pretty().splitlines())]
     if case.leaf is not None:
         lines[1:1] = [f"    (a refinement of the leaf {case.leaf.describe()})"]
@@ -154,7 +154,7 @@ def _example(case: Case) -> list[str]:
     return lines
 
 
-def fail(check: Check, cls: type, case: Case, detail: str) -> NoReturn:
+def fail(check: Check, cls: type, case: Example, detail: str) -> NoReturn:
     """Raise the :class:`AssertionError` of ``check`` on ``cls``: the invariant, the example, what breaks it."""
     invariant = (check.__doc__ or check.__name__).strip().splitlines()[0]
     lines = [f"{check.__name__} failed for {cls.__name__}.", f"Invariant: {invariant}", "", *_example(case)]
@@ -162,7 +162,7 @@ def fail(check: Check, cls: type, case: Case, detail: str) -> NoReturn:
 
 
 def run_property(
-    check: Check, cls: type, max_examples: int, body: Callable[[Case], None], examples: Any = None
+    check: Check, cls: type, max_examples: int, body: Callable[[Example], None], examples: Any = None
 ) -> None:
     """Run ``body`` on examples (default: :func:`cases`); a :class:`Broken` or any error fails ``check`` readably.
 
@@ -181,7 +181,7 @@ def run_property(
         phases=(Phase.explicit, Phase.reuse, Phase.generate, Phase.target, Phase.shrink),  # no explain: slow
     )
     @given(cases(cls) if examples is None else examples)
-    def prop(case: Case) -> None:
+    def prop(case: Example) -> None:
         try:
             body(case)
         except Broken as e:

@@ -57,7 +57,7 @@ __all__ = [
 ]
 
 SECRET_ENV = "SPECGUARD_CACHE_KEY"
-FORMAT = 4  # 3: runs record met_early (anytime verdicts); 4: adapted weights
+FORMAT = 5  # 3: runs record met_early (anytime verdicts); 4: adapted weights; 5: stopped_early is hit_wall_clock
 MODEL = "model.zip"
 NORMALIZER = "vecnormalize.pkl"
 RESULT = "result.json"

@@ -28,7 +28,7 @@ import uuid
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
-from specguard.engine.protocol import Failure, Outcome, Position, Task, TaskRunner, outcome_of
+from specguard.engine.protocol import Failure, TaskOutcome, Position, Task, TaskRunner, outcome_of
 from specguard.engine.signals import SigtermGuard, raise_if_stopping
 from specguard.engine.workers import run_tasks
 from specguard.error import SpecError
@@ -58,8 +58,8 @@ class Executor(Protocol):
         *,
         on_line: Callable[[int, str], None] | None = None,
         stop_on: Callable[[Failure], bool] | None = None,
-        on_outcome: Callable[[int, Outcome], None] | None = None,
-    ) -> dict[int, Outcome]: ...
+        on_outcome: Callable[[int, TaskOutcome], None] | None = None,
+    ) -> dict[int, TaskOutcome]: ...
 
     def close(self) -> None: ...
 
@@ -104,8 +104,8 @@ class LocalExecutor:
         *,
         on_line: Callable[[int, str], None] | None = None,
         stop_on: Callable[[Failure], bool] | None = None,
-        on_outcome: Callable[[int, Outcome], None] | None = None,
-    ) -> dict[int, Outcome]:
+        on_outcome: Callable[[int, TaskOutcome], None] | None = None,
+    ) -> dict[int, TaskOutcome]:
         return run_tasks(tasks, max_workers=self.workers, on_line=on_line, stop_on=stop_on, on_outcome=on_outcome)
 
     def close(self) -> None:
@@ -161,8 +161,8 @@ class DaskExecutor:
         *,
         on_line: Callable[[int, str], None] | None = None,
         stop_on: Callable[[Failure], bool] | None = None,
-        on_outcome: Callable[[int, Outcome], None] | None = None,
-    ) -> dict[int, Outcome]:
+        on_outcome: Callable[[int, TaskOutcome], None] | None = None,
+    ) -> dict[int, TaskOutcome]:
         from distributed import Queue
 
         if not tasks:
@@ -175,7 +175,7 @@ class DaskExecutor:
             for t in tasks
         }
         self.submitted += len(futures)
-        outcomes: dict[int, Outcome] = {}
+        outcomes: dict[int, TaskOutcome] = {}
         pending = set(futures)
         guard = SigtermGuard()
         guard.install()
@@ -216,7 +216,7 @@ class DaskExecutor:
                 on_line(key, line)
 
     @staticmethod
-    def _outcome(future: Any, key: int, where: Position) -> Outcome:
+    def _outcome(future: Any, key: int, where: Position) -> TaskOutcome:
         if future.status == "finished":
             return outcome_of(key, future.result())
         error = future.exception()

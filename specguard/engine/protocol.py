@@ -20,7 +20,7 @@ import cloudpickle
 __all__ = [
     "Done",
     "Failure",
-    "Outcome",
+    "TaskOutcome",
     "Position",
     "Report",
     "Task",
@@ -83,7 +83,7 @@ class Done:
     value: Any
 
 
-Outcome = Done | Failure
+TaskOutcome = Done | Failure
 
 
 @dataclass
@@ -154,7 +154,7 @@ class TaskRunner:
             return ("error", self.at.phase, self.at.step, one_line(e), traceback.format_exc(), pickled_exception(e))
 
 
-def outcome_of(key: int, message: tuple[Any, ...]) -> Outcome:
+def outcome_of(key: int, message: tuple[Any, ...]) -> TaskOutcome:
     """The outcome a :class:`TaskRunner` message stands for."""
     if message[0] == "done":
         return Done(key=key, value=message[1])

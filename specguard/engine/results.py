@@ -28,7 +28,7 @@ class RunResult:
         successes: per node path, evaluation episodes whose last state lies in the goal;
             then per safety key (``path:name``), evaluation episodes without a violation.
         train_seconds: wall-clock training time.
-        stopped_early: training hit the budget's wall-clock cap.
+        hit_wall_clock: training hit the budget's wall-clock cap.
         curve: success per goal (and safety rate per safety key) over training
             episodes (stochastic policy),
             ``[{"timesteps": t, "episodes": n, "success": {key: rate}}, ...]``;
@@ -50,7 +50,7 @@ class RunResult:
     episodes: int
     successes: dict[str, int]
     train_seconds: float
-    stopped_early: bool = False
+    hit_wall_clock: bool = False
     curve: list[dict[str, Any]] = field(default_factory=list)
     met_early: bool = False
     weights: dict[str, list[float]] = field(default_factory=dict)
@@ -107,7 +107,7 @@ def check_run_result(result: Any, seed: int, paths: Collection[str]) -> None:
             raise ValueError(f"successes[{path!r}] = {k!r} is not an integer in [0, episodes={episodes}]")
     if not isinstance(result["train_seconds"], (int, float)) or isinstance(result["train_seconds"], bool):
         raise ValueError("train_seconds is not a number")
-    for flag in ("stopped_early", "met_early"):
+    for flag in ("hit_wall_clock", "met_early"):
         if not isinstance(result[flag], bool):
             raise ValueError(f"{flag} is not a boolean")
     if not isinstance(result["curve"], list) or not all(isinstance(p, dict) for p in result["curve"]):

@@ -9,7 +9,7 @@ from specguard.engine.cache import Cache, try_acquire, wait_for
 from specguard.engine.executors import Executor
 from specguard.engine.fingerprint import fingerprint_spec, versions
 from specguard.engine.progress import ProgressEvent, decode_update
-from specguard.engine.protocol import Failure, Outcome, Task
+from specguard.engine.protocol import Failure, TaskOutcome, Task
 from specguard.engine.results import RunResult
 from specguard.engine.spec import Spec
 from specguard.engine.spec_result import SpecResult
@@ -104,7 +104,7 @@ class Runs:
             tasks.append(Task(seed, train_task, (self.spec, seed, keyed)))
         trained: dict[int, RunResult] = {}
 
-        def finished(seed: int, outcome: Outcome) -> None:
+        def finished(seed: int, outcome: TaskOutcome) -> None:
             # As each seed ends, not after the batch: a finished run is stored even if a later seed
             # is interrupted (Ctrl-C, SIGTERM) or the spec is stopped.
             if isinstance(outcome, Failure):

@@ -25,7 +25,7 @@ import gymnasium as gym
 
 from specguard.build.env import make_baseline_env, make_env
 from specguard.engine.auto_weights import WeightAdapter
-from specguard.engine.progress import decode_update, encode_update, format_event
+from specguard.engine.progress import ProgressEvent, decode_update, encode_update
 from specguard.engine.protocol import Report
 from specguard.engine.results import RunResult
 from specguard.engine.sb3 import ALGORITHMS, algorithm_class
@@ -133,7 +133,7 @@ class _GoalCurve:
         self._counts: dict[str, int] = {}
         self._episodes = 0
         self._next = self.every
-        self.stopped_early = False
+        self.hit_wall_clock = False
         self.met_early = False
 
     def on_step(self, num_timesteps: int, dones: Any, infos: list[dict[str, Any]]) -> bool:
@@ -159,7 +159,7 @@ class _GoalCurve:
                 self.met_early = True
                 return False
         if self.deadline is not None and time.perf_counter() > self.deadline:
-            self.stopped_early = True
+            self.hit_wall_clock = True
             return False
         return True
 
@@ -190,14 +190,15 @@ class _GoalCurve:
 def train_run(
     spec: Spec,
     seed: int,
-    progress: Callable[[str], None] | None = None,
+    progress: Callable[[ProgressEvent], None] | None = None,
     *,
     report: Report | None = None,
 ) -> tuple[RunResult, Any]:
     """Train and evaluate one run of ``spec`` with ``seed``.
 
-    ``progress``, if given, receives a formatted line (:mod:`specguard.engine.progress`)
-    at each of the learning curve's points (every tenth of the budget). ``report``, if given,
+    ``progress``, if given, receives a :class:`~specguard.engine.progress.ProgressEvent`
+    at each of the learning curve's points (every tenth of the budget), as
+    ``run_spec``'s ``progress`` does (``print_event`` prints it). ``report``, if given,
     receives ``(phase, step, line)`` as the run moves through building the
     env, training and evaluation (worker processes pass it to the parent).
 
@@ -222,7 +223,7 @@ def train_run(
         if report is not None:
             report(phase, step, line)
         if progress is not None and line is not None:
-            progress(format_event(decode_update(spec.label, seed, line)))
+            progress(decode_update(spec.label, seed, line))
 
     emit("build", None, None)
     try:
@@ -336,7 +337,7 @@ def train_run(
         episodes=episodes,
         successes=counts,
         train_seconds=train_seconds,
-        stopped_early=curve.stopped_early,
+        hit_wall_clock=curve.hit_wall_clock,
         curve=curve.points,
         met_early=curve.met_early,
         weights={} if adapter is None else adapter.in_force_lists(),

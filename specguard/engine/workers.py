@@ -50,7 +50,7 @@ from typing import Any
 
 import cloudpickle
 
-from specguard.engine.protocol import Failure, Outcome, Position, Task, TaskRunner, one_line, outcome_of
+from specguard.engine.protocol import Failure, TaskOutcome, Position, Task, TaskRunner, one_line, outcome_of
 from specguard.engine.signals import STOP_POLL_S, SigtermGuard, raise_if_stopping
 
 __all__ = ["parse_workers", "resolve_workers", "run_tasks"]
@@ -169,7 +169,7 @@ def _died(child: _Child) -> Failure:
     return child.at.failure(child.task.key, f"worker process died ({how})")
 
 
-def _read(child: _Child, on_line: Callable[[int, str], None] | None, limit: int | None) -> Outcome | None:
+def _read(child: _Child, on_line: Callable[[int, str], None] | None, limit: int | None) -> TaskOutcome | None:
     """Read up to ``limit`` (None: all) messages that are already there; return the outcome if it came."""
     count = 0
     while not child.eof and (limit is None or count < limit) and child.conn.poll():
@@ -234,8 +234,8 @@ def run_tasks(
     max_workers: int,
     on_line: Callable[[int, str], None] | None = None,
     stop_on: Callable[[Failure], bool] | None = None,
-    on_outcome: Callable[[int, Outcome], None] | None = None,
-) -> dict[int, Outcome]:
+    on_outcome: Callable[[int, TaskOutcome], None] | None = None,
+) -> dict[int, TaskOutcome]:
     """Run every task in a spawned process of its own, at most ``max_workers`` at once.
 
     A task that raises, or whose process dies, becomes a :class:`Failure`; the others keep running.
@@ -272,7 +272,7 @@ def run_tasks(
     context = multiprocessing.get_context("spawn")  # torch and forked state do not mix
     pending = deque(tasks)
     children: list[_Child] = []
-    outcomes: dict[int, Outcome] = {}
+    outcomes: dict[int, TaskOutcome] = {}
     guard = SigtermGuard()
     guard.install()
 
@@ -325,5 +325,5 @@ def run_tasks(
         guard.close(stop_children)  # a SIGTERM during the cleanup is raised once the children are gone
 
 
-def _in_task_order(tasks: Sequence[Task], outcomes: dict[int, Outcome]) -> dict[int, Outcome]:
+def _in_task_order(tasks: Sequence[Task], outcomes: dict[int, TaskOutcome]) -> dict[int, TaskOutcome]:
     return {t.key: outcomes[t.key] for t in tasks if t.key in outcomes}

@@ -24,7 +24,7 @@ from typing import Any, TypeVar
 from specguard.error import InvalidSpec
 from specguard.tree.keys import ROOT, check_threshold
 
-__all__ = ["GOAL_FIXTURE", "Case", "goal_spec", "goal_specs"]
+__all__ = ["GOAL_FIXTURE", "SpecItem", "goal_spec", "goal_specs"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -108,7 +108,7 @@ def _check_declaration(where: str, expect: object, xfail: object) -> tuple[dict[
 
 
 @dataclass(frozen=True)
-class Case:
+class SpecItem:
     """One item of :func:`goal_specs`: a spec (by its key) and the goal the item asserts."""
 
     spec: str
@@ -153,13 +153,13 @@ def goal_specs(specs: Mapping[str, Any], *, marks: Mapping[str, Any] | None = No
         extra = (marks or {}).get(key, ())
         extra = list(extra) if isinstance(extra, (list, tuple)) else [extra]
         for goal in spec.thresholds:
-            case = Case(key, goal, spec.xfail.get(goal))
+            case = SpecItem(key, goal, spec.xfail.get(goal))
             cases.append(pytest.param(case, id=case.id, marks=extra))
     unknown = sorted(set(marks or {}) - set(specs))
     if unknown:
         raise InvalidSpec("goal_specs(marks=...)", f"names specs {unknown} that are not among {list(specs)}")
 
-    def test(specguard_goal: Case) -> Any:
+    def test(specguard_goal: SpecItem) -> Any:
         return specs[specguard_goal.spec]
 
     marked = pytest.mark.usefixtures(GOAL_FIXTURE)(test)

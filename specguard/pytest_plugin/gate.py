@@ -14,14 +14,14 @@ from typing import TYPE_CHECKING, Any
 from specguard.engine.spec import Spec
 from specguard.engine.spec_result import SpecResult
 from specguard.extend import SHAPING, Node
-from specguard.stats.intervals import Outcome, QuorumVerdict, RunVerdict
+from specguard.stats.intervals import GoalOutcome, QuorumVerdict, RunVerdict
 from specguard.tree.keys import GOAL, SAFETY, kind, resolve_goal
 from specguard.utils.text import interval_text
 
 if TYPE_CHECKING:
     from specguard.stats.compare import Baseline
 
-__all__ = ["GoalCheck", "check_goal", "check_item", "with_thresholds"]
+__all__ = ["GoalCheck", "gate_goal", "check_item", "with_thresholds"]
 
 
 @dataclass
@@ -42,7 +42,7 @@ class GoalCheck:
     spec: str
     goal: str
     threshold: float
-    outcome: Outcome
+    outcome: GoalOutcome
     success: float
     interval: tuple[float, float]
     successes: int
@@ -75,7 +75,7 @@ class GoalCheck:
         return [(n, getattr(self, n)) for n in names] + [("interval", interval_text((lo, hi), digits=4))]
 
     def message(self) -> str:
-        verb = {Outcome.PASSED: "met", Outcome.FAILED: "missed", Outcome.UNDECIDED: "could not be decided for"}[
+        verb = {GoalOutcome.PASSED: "met", GoalOutcome.FAILED: "missed", GoalOutcome.UNDECIDED: "could not be decided for"}[
             self.outcome
         ]
         lo, hi = self.interval
@@ -170,12 +170,12 @@ def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[RunVerdict])
             )
     if RunVerdict.UNDECIDED in verdicts:
         return _undecided_hint(spec)
-    if any(r.stopped_early for r in runs):
+    if any(r.hit_wall_clock for r in runs):
         return "training stopped at the budget's wall-clock cap in some seeds"
     return None
 
 
-def check_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalCheck:
+def gate_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalCheck:
     """The figures and outcome of goal (or safety key) ``path``, which must have a threshold in ``spec``."""
     verdict = result.goals[path]
     per_seed = [
@@ -192,11 +192,11 @@ def check_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalChe
         for r, v in zip(result.runs, verdict.runs)
     ]
     if verdict.verdict is QuorumVerdict.PASSED:
-        outcome = Outcome.PASSED
+        outcome = GoalOutcome.PASSED
     elif not result.errors and RunVerdict.MISSED not in verdict.runs and verdict.runs:
-        outcome = Outcome.UNDECIDED
+        outcome = GoalOutcome.UNDECIDED
     else:
-        outcome = Outcome.FAILED
+        outcome = GoalOutcome.FAILED
     return GoalCheck(
         group=group,
         spec=spec.label,
@@ -215,7 +215,7 @@ def check_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalChe
         cached=bool(result.cached) and all(result.cached.values()),
         errors=dict(result.errors),
         spec_key=result.spec_key,
-        hint=None if outcome is Outcome.PASSED else _hint(spec, path, result, verdict.runs),
+        hint=None if outcome is GoalOutcome.PASSED else _hint(spec, path, result, verdict.runs),
         kind=kind(path),
     )
 
@@ -258,7 +258,7 @@ def check_item(
     """
     checks = []
     for path in paths:
-        check = check_goal(result, spec, path, group)
+        check = gate_goal(result, spec, path, group)
         if baseline is not None and check.key not in baseline[0].runs:
             check.comparison = f"not compared: baseline {baseline[1]!r} has no figures for it"
         elif baseline is not None and check.runs_counts:
@@ -268,8 +268,8 @@ def check_item(
             check.comparison = comparison.describe()
             if baseline[0].spec_changed(check.key, check.spec_key):
                 check.comparison += f" (the spec changed since baseline {baseline[1]!r})"
-            if comparison.dropped and check.outcome is Outcome.PASSED:
-                check.outcome = Outcome.FAILED
+            if comparison.dropped and check.outcome is GoalOutcome.PASSED:
+                check.outcome = GoalOutcome.FAILED
                 rate = "safety rate" if check.kind == SAFETY else "success"
                 check.hint = f"{rate} {check.comparison} against baseline {baseline[1]!r}"
         checks.append(check)

@@ -18,7 +18,7 @@ from typing import Any
 
 import pytest
 
-from specguard.pytest_plugin.declare import GOAL_FIXTURE, Case
+from specguard.pytest_plugin.declare import GOAL_FIXTURE, SpecItem
 
 MARKER = "goal_spec"
 PROPERTY = "specguard"
@@ -286,7 +286,7 @@ def _group(item: pytest.Item) -> str:
     assert isinstance(item, pytest.Function)
     callspec = getattr(item, "callspec", None)
     case = callspec.params.get(GOAL_FIXTURE) if callspec is not None else None
-    if isinstance(case, Case):
+    if isinstance(case, SpecItem):
         return f"{item.path.name}::{item.originalname}[{case.spec}]"
     ids = list(getattr(callspec, "_idlist", []))
     params = list(callspec.params) if callspec is not None else []
@@ -309,7 +309,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         param = item.callspec.params.get(GOAL_FIXTURE) if hasattr(item, "callspec") else None
         reasons: dict[Any, str] = marker.kwargs.get("xfail") or {}
         goal = param
-        if isinstance(param, Case):  # sg.goal_specs: the spec's own xfail
+        if isinstance(param, SpecItem):  # sg.goal_specs: the spec's own xfail
             goal, reasons = param.goal, ({param.goal: param.xfail} if param.xfail else {})
         if goal is not None and goal in reasons:
             item.add_marker(pytest.mark.xfail(reason=reasons[goal], raises=GoalMissed, strict=False))
@@ -381,7 +381,7 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     from specguard.engine.spec import Spec
     from specguard.error import SpecError
     from specguard.pytest_plugin.gate import check_item, with_thresholds
-    from specguard.stats.intervals import Outcome
+    from specguard.stats.intervals import GoalOutcome
 
     state = pyfuncitem.config.stash[_SESSION]
     where = f"{pyfuncitem.path.name}::{pyfuncitem.name}"
@@ -392,7 +392,7 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     if not isinstance(spec, Spec):
         pytest.fail(f"{where}: a goal spec must return a specguard.Spec, got {type(spec).__name__}", pytrace=False)
     goal = pyfuncitem.funcargs.get(GOAL_FIXTURE)
-    if isinstance(goal, Case):  # sg.goal_specs: the spec's own thresholds, this item's goal
+    if isinstance(goal, SpecItem):  # sg.goal_specs: the spec's own thresholds, this item's goal
         goal = goal.goal
     error: str | None = None
     try:
@@ -414,9 +414,9 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
             state.specs.setdefault(row["group"], _scaled(state, spec))  # the spec as trained: its cache entries
         pyfuncitem.user_properties.append((PROPERTY, json.dumps(row)))
         pyfuncitem.user_properties += [(f"{PROPERTY}.{check.goal}.{k}", v) for k, v in check.junit_properties()]
-        if check.outcome is Outcome.FAILED:
+        if check.outcome is GoalOutcome.FAILED:
             failures.append(check.message())
-        elif check.outcome is Outcome.UNDECIDED:
+        elif check.outcome is GoalOutcome.UNDECIDED:
             undecided.append(check.message())
     if failures or (undecided and state.options.undecided == "fail"):
         text = "\n\n".join(failures + undecided)

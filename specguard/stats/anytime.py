@@ -62,9 +62,6 @@ __all__ = [
     "parse_checkpoints",
 ]
 
-DEFAULT_CHECKPOINTS = 10
-"""Checkpoints ``pytest --goal-specs`` judges runs at unless told otherwise: every tenth of the budget."""
-
 EpisodeCounts = Callable[[int, int], dict[str, int]]
 """``evaluate(start, count)``: the counts per key of episodes ``start .. start + count - 1``."""
 

@@ -33,7 +33,7 @@ import enum
 import functools
 from collections.abc import Sequence
 
-__all__ = ["Outcome", "QuorumVerdict", "RunVerdict", "quorum_verdict", "run_verdict", "success_interval"]
+__all__ = ["GoalOutcome", "QuorumVerdict", "RunVerdict", "quorum_verdict", "run_verdict", "success_interval"]
 
 
 class RunVerdict(str, enum.Enum):
@@ -52,7 +52,7 @@ class QuorumVerdict(str, enum.Enum):
     OPEN = "open"  # neither is settled yet: more runs could decide it
 
 
-class Outcome(str, enum.Enum):
+class GoalOutcome(str, enum.Enum):
     """A test item's goal at the end: passed, failed, or undecided (failed only through undecided runs)."""
 
     PASSED = "passed"
