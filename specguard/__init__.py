@@ -91,28 +91,35 @@ def __dir__() -> list[str]:
     return sorted(set(globals()) | set(_EXPORTS))
 
 
-if TYPE_CHECKING:
-    from specguard.build.compiled import CompiledTree, compile_tree
-    from specguard.build.env import GoalInfo, SpecEnv, make_baseline_env, make_env
-    from specguard.build.initial_env import InitialEnv
-    from specguard.engine.budget import Budget
-    from specguard.engine.cache import Cache
-    from specguard.engine.run import run_spec
-    from specguard.engine.spec import Spec
-    from specguard.engine.spec_result import GoalVerdict, SpecResult
-    from specguard.error import (
-        EvaluationError,
-        FingerprintError,
-        InitialEnvError,
-        InvalidSpec,
-        SpecError,
-        StateMappingError,
-        UnknownFeature,
-        UnreachableGoal,
-        VersionMismatch,
-    )
-    from specguard.extend import Annotation, Node
-    from specguard.pytest_plugin.declare import goal_spec, goal_specs
-    from specguard.tree.builtin_annotations import Constraint, Distance
-    from specguard.tree.formula import formula
-    from specguard.tree.nodes import All, Goal
+if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
+    from specguard.build.compiled import CompiledTree as CompiledTree
+    from specguard.build.compiled import compile_tree as compile_tree
+    from specguard.build.env import GoalInfo as GoalInfo
+    from specguard.build.env import SpecEnv as SpecEnv
+    from specguard.build.env import make_baseline_env as make_baseline_env
+    from specguard.build.env import make_env as make_env
+    from specguard.build.initial_env import InitialEnv as InitialEnv
+    from specguard.engine.budget import Budget as Budget
+    from specguard.engine.cache import Cache as Cache
+    from specguard.engine.run import run_spec as run_spec
+    from specguard.engine.spec import Spec as Spec
+    from specguard.engine.spec_result import GoalVerdict as GoalVerdict
+    from specguard.engine.spec_result import SpecResult as SpecResult
+    from specguard.error import EvaluationError as EvaluationError
+    from specguard.error import FingerprintError as FingerprintError
+    from specguard.error import InitialEnvError as InitialEnvError
+    from specguard.error import InvalidSpec as InvalidSpec
+    from specguard.error import SpecError as SpecError
+    from specguard.error import StateMappingError as StateMappingError
+    from specguard.error import UnknownFeature as UnknownFeature
+    from specguard.error import UnreachableGoal as UnreachableGoal
+    from specguard.error import VersionMismatch as VersionMismatch
+    from specguard.extend import Annotation as Annotation
+    from specguard.extend import Node as Node
+    from specguard.pytest_plugin.declare import goal_spec as goal_spec
+    from specguard.pytest_plugin.declare import goal_specs as goal_specs
+    from specguard.tree.builtin_annotations import Constraint as Constraint
+    from specguard.tree.builtin_annotations import Distance as Distance
+    from specguard.tree.formula import formula as formula
+    from specguard.tree.nodes import All as All
+    from specguard.tree.nodes import Goal as Goal

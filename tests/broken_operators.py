@@ -7,7 +7,7 @@ and one check of :mod:`specguard.contract.checks` must catch it (``CAUGHT_BY``).
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, ClassVar
 
 import specguard as sg
 from specguard.extend import ChildWeights, Context, Node, Slot, check_children
@@ -62,6 +62,49 @@ class HiddenSequence(_Combiner):
         while self.progress[0] < len(self.nodes) and ctx.inside[self.progress[0]]:
             self.progress[0] += 1
         return self.progress[0] == len(self.nodes)
+
+
+_STAGES: dict[str, int] = {}  # ModuleStateSequence's episode state, by node name, outside every tree
+
+
+class ModuleStateSequence(_Combiner):
+    """A sequence whose stage lives in a module-level dict, restarted whenever no stage holds: in no observation.
+
+    Written as an outside author might from the operator API alone. Every copy of
+    the tree shares the stage, so transitions replayed in the trajectory's order
+    see it evolve exactly as the env did.
+    """
+
+    kind = "ModuleStateSequence"
+
+    def child_weights(self) -> tuple[ChildWeights, ...]:
+        return (ChildWeights(core=0.0, shaping=0.0, safety=1.0),) * len(self.nodes)
+
+    def _stage(self) -> int:
+        return _STAGES.get(self.name, 0)
+
+    def _set_stage(self, stage: int) -> None:
+        _STAGES[self.name] = stage
+
+    def contains(self, ctx: Context) -> bool:
+        stage = self._stage() if any(ctx.inside) else 0  # outside every stage: start over
+        while stage < len(self.nodes) and ctx.inside[stage]:
+            stage += 1
+        self._set_stage(stage)
+        return stage == len(self.nodes)
+
+
+class ClassStateSequence(ModuleStateSequence):
+    """The same sequence with its stage kept on the class: shared by every instance, in no observation."""
+
+    kind = "ClassStateSequence"
+    stages: ClassVar[dict[str, int]] = {}
+
+    def _stage(self) -> int:
+        return type(self).stages.get(self.name, 0)
+
+    def _set_stage(self, stage: int) -> None:
+        type(self).stages[self.name] = stage
 
 
 class DropsTermination(_Combiner):
@@ -163,6 +206,8 @@ class LooseRefinement(_Combiner):
 CAUGHT_BY = {
     PaysEveryStep: "check_core_reward_telescopes",
     HiddenSequence: "check_markov",
+    ModuleStateSequence: "check_markov",
+    ClassStateSequence: "check_markov",
     DropsTermination: "check_termination_includes_children",
     AddressInDescribe: "check_description_is_exact",
     UnorderedDescribe: "check_description_is_exact",

@@ -21,7 +21,7 @@ from typing import Any
 import cloudpickle
 import pytest
 
-from specguard.engine.protocol import Done, Failure, TaskOutcome, Report, Task
+from specguard.engine.protocol import Done, Failure, Report, Task, TaskOutcome
 from specguard.engine.signals import stopping_all_tasks
 from specguard.engine.workers import parse_workers, resolve_workers, run_tasks
 

@@ -175,7 +175,11 @@ def check_markov(cls: type, max_examples: int = MAX_EXAMPLES) -> None:
     ``compile_tree(tree, F).step_batch(obs_t, a_t, features_t+1)``, on a fresh
     copy of the tree, must give the env's reward, ``info["goals"]``,
     termination and the next observation's own state. Episode state a node
-    keeps outside its declared own state is hidden state, and breaks it.
+    keeps outside its declared own state is hidden state, and breaks it,
+    wherever it is kept: on the node, on its class or at module level (which
+    every copy of the tree shares). So the transitions are evaluated last to
+    first, not in the order the env lived them, and each one twice: state that
+    follows the evaluations along cannot reproduce the env's.
     """
 
     def body(case: Example) -> None:
@@ -184,15 +188,16 @@ def check_markov(cls: type, max_examples: int = MAX_EXAMPLES) -> None:
         steps = play(replay_env(case.tree, case.trajectory), case.actions)
         n = len(FEATURES)
         used = compile_tree(case.tree, FEATURES)
-        for t in range(1, len(steps)):
+        for t in reversed(range(1, len(steps))):  # against the trajectory's order: hidden state cannot follow
             before, after, action = steps[t - 1], steps[t], case.actions[t - 1]
             env = {"reward": after.reward, "terminated": after.terminated, "goals": after.info["goals"]}
             env["own state"] = after.obs[n:].tolist()
-            alone = _alone(compile_tree(cloudpickle.loads(pristine), FEATURES), before.obs, action, after.obs[:n])
             where = f"{step_name(t)}, evaluated alone from the observation {before.obs.tolist()}"
-            diffs = _differences(env, alone, "env", "alone", 1e-6)
-            if diffs:
-                raise Broken(f"{where}: " + "; ".join(diffs))
+            for attempt in ("", " a second time"):  # the second evaluation sees whatever the first one left
+                alone = _alone(compile_tree(cloudpickle.loads(pristine), FEATURES), before.obs, action, after.obs[:n])
+                diffs = _differences(env, alone, "env", "alone", 1e-6)
+                if diffs:
+                    raise Broken(f"{where}{attempt}: " + "; ".join(diffs))
             # The same transition on the tree the env ran: state kept in the nodes shows up here.
             diffs = _differences(_alone(used, before.obs, action, after.obs[:n]), alone, "used", "fresh", TOL)
             if diffs:

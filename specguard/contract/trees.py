@@ -15,7 +15,7 @@ from typing import Any, NamedTuple, NoReturn
 import numpy as np
 from hypothesis import HealthCheck, Phase, assume, given, settings
 from hypothesis import strategies as st
-from hypothesis.errors import HypothesisException
+from hypothesis.errors import FlakyFailure, HypothesisException
 
 from specguard import strategies as sgst
 from specguard.build.env import SpecEnv
@@ -191,7 +191,18 @@ def run_property(
         except Exception as e:
             fail(check, cls, case, f"evaluating the example raised {type(e).__name__}: {e}")
 
-    prop()
+    try:
+        prop()
+    except FlakyFailure as e:
+        # A failure that did not repeat on the same example: the operator's results depend on more than
+        # the tree and the states (state kept on its class or at module level, across examples too).
+        first = next((x for x in e.exceptions if isinstance(x, AssertionError)), None)
+        if first is None:
+            raise
+        raise AssertionError(
+            f"{first}\n(It did not repeat when the same example ran again: {cls.__name__}'s results depend on "
+            "something outside the tree and the states, such as state kept on its class or at module level.)"
+        ) from None
 
 
 def step_name(t: int) -> str:

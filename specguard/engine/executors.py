@@ -28,7 +28,7 @@ import uuid
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
-from specguard.engine.protocol import Failure, TaskOutcome, Position, Task, TaskRunner, outcome_of
+from specguard.engine.protocol import Failure, Position, Task, TaskOutcome, TaskRunner, outcome_of
 from specguard.engine.signals import SigtermGuard, raise_if_stopping
 from specguard.engine.workers import run_tasks
 from specguard.error import SpecError

@@ -20,10 +20,10 @@ import cloudpickle
 __all__ = [
     "Done",
     "Failure",
-    "TaskOutcome",
     "Position",
     "Report",
     "Task",
+    "TaskOutcome",
     "TaskRunner",
     "one_line",
     "outcome_of",

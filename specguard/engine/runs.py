@@ -9,7 +9,7 @@ from specguard.engine.cache import Cache, try_acquire, wait_for
 from specguard.engine.executors import Executor
 from specguard.engine.fingerprint import fingerprint_spec, versions
 from specguard.engine.progress import ProgressEvent, decode_update
-from specguard.engine.protocol import Failure, TaskOutcome, Task
+from specguard.engine.protocol import Failure, Task, TaskOutcome
 from specguard.engine.results import RunResult
 from specguard.engine.spec import Spec
 from specguard.engine.spec_result import SpecResult

@@ -50,7 +50,7 @@ from typing import Any
 
 import cloudpickle
 
-from specguard.engine.protocol import Failure, TaskOutcome, Position, Task, TaskRunner, one_line, outcome_of
+from specguard.engine.protocol import Failure, Position, Task, TaskOutcome, TaskRunner, one_line, outcome_of
 from specguard.engine.signals import STOP_POLL_S, SigtermGuard, raise_if_stopping
 
 __all__ = ["parse_workers", "resolve_workers", "run_tasks"]

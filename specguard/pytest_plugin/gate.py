@@ -21,7 +21,7 @@ from specguard.utils.text import interval_text
 if TYPE_CHECKING:
     from specguard.stats.compare import Baseline
 
-__all__ = ["GoalCheck", "gate_goal", "check_item", "with_thresholds"]
+__all__ = ["GoalCheck", "check_item", "gate_goal", "with_thresholds"]
 
 
 @dataclass
@@ -75,9 +75,11 @@ class GoalCheck:
         return [(n, getattr(self, n)) for n in names] + [("interval", interval_text((lo, hi), digits=4))]
 
     def message(self) -> str:
-        verb = {GoalOutcome.PASSED: "met", GoalOutcome.FAILED: "missed", GoalOutcome.UNDECIDED: "could not be decided for"}[
-            self.outcome
-        ]
+        verb = {
+            GoalOutcome.PASSED: "met",
+            GoalOutcome.FAILED: "missed",
+            GoalOutcome.UNDECIDED: "could not be decided for",
+        }[self.outcome]
         lo, hi = self.interval
         seeds = ", ".join(str(s["seed"]) for s in self.per_seed) or "none"
         safety = self.kind == SAFETY
