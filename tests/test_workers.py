@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import cloudpickle
+import numpy as np
 import pytest
 
 from specguard.engine.workers import (
@@ -423,14 +424,15 @@ def test_child_exits_by_itself_when_its_parent_is_killed(tmp_path: Path) -> None
             os.kill(child_pid, signal.SIGKILL)
 
 
-@pytest.mark.parametrize(("value", "parsed"), [("auto", "auto"), (3, 3), ("2", 2), (" 4 ", 4)])
+@pytest.mark.parametrize(("value", "parsed"), [("auto", "auto"), (3, 3), ("2", 2), (" 4 ", 4), (np.int64(2), 2)])
 def test_parse_workers(value, parsed):
     assert parse_workers(value) == parsed
 
 
-@pytest.mark.parametrize("value", [0, -1, "0", "two", 1.5, True, None, ""])
+@pytest.mark.parametrize("value", [0, -1, "0", "two", 1.5, True, None, "", "05"])
 def test_parse_workers_refuses(value):
-    with pytest.raises(ValueError, match=r"expected an integer >= 1 or 'auto', got "):
+    # "05" went through str.isdigit here while checkpoint counts refused it: one rule now (validation.parse_count)
+    with pytest.raises(ValueError, match=r"expected an integer >= 1 \(or 'auto': one per usable core\), got "):
         parse_workers(value)
 
 

@@ -53,6 +53,8 @@ from typing import Any
 
 import cloudpickle
 
+from specguard.validation import parse_count
+
 __all__ = [
     "Done",
     "Failure",
@@ -111,18 +113,14 @@ def raise_if_stopping() -> None:
 
 
 def parse_workers(value: object) -> int | str:
-    """The one worker-count rule: ``"auto"`` or an integer >= 1 (digit strings accepted, as from options).
+    """The one worker-count rule: ``"auto"`` or a count (:func:`specguard.validation.parse_count`).
 
     Raises:
         ValueError: anything else, with what was expected.
     """
     if value == "auto":
         return "auto"
-    if isinstance(value, str) and value.strip().isdigit():
-        value = int(value)
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ValueError(f"expected an integer >= 1 or 'auto', got {value!r}")
-    return value
+    return parse_count(value, "or 'auto': one per usable core")
 
 
 def resolve_workers(value: object, *, share: int = 1) -> int:

@@ -154,14 +154,12 @@ def _parse_options(config: pytest.Config) -> _Options:
         ini = next(i for o, i, *_ in _SETTINGS if o == option)
         return _setting(config, option, ini)
 
+    from specguard.validation import parse_positive
+
     try:
-        scale = float(get("--goal-specs-budget-scale"))
-        if not scale > 0:
-            raise ValueError
-    except ValueError:
-        raise pytest.UsageError(
-            f"--goal-specs-budget-scale: expected a number > 0, got {get('--goal-specs-budget-scale')!r}"
-        ) from None
+        scale = parse_positive(get("--goal-specs-budget-scale"))
+    except ValueError as e:
+        raise pytest.UsageError(f"--goal-specs-budget-scale: {e}") from None
     from specguard.engine.workers import resolve_workers
     from specguard.stats.anytime import parse_checkpoints
 
