@@ -26,6 +26,7 @@ from specguard.engine.budget import Budget
 from specguard.error import InvalidSpec
 from specguard.tree.keys import ROOT, check_threshold, resolve_goal
 from specguard.tree.nodes import Node
+from specguard.validation import check_count
 
 __all__ = ["ALGORITHMS", "Spec"]
 
@@ -102,14 +103,9 @@ class Spec:
             )
         if not isinstance(self.hyperparameters, Mapping):
             raise InvalidSpec(f"{label}.hyperparameters", f"expected a mapping, got {self.hyperparameters!r}")
-        if isinstance(self.n_envs, bool) or not isinstance(self.n_envs, int) or self.n_envs < 1:
-            raise InvalidSpec(f"{label}.n_envs", f"expected an integer >= 1, got {self.n_envs!r}")
-        assert self.budget.max_seeds is not None
-        if self.quorum is not None and not (isinstance(self.quorum, int) and 1 <= self.quorum <= self.budget.max_seeds):
-            raise InvalidSpec(
-                f"{label}.quorum",
-                f"expected an integer in [1, budget.max_seeds={self.budget.max_seeds}], got {self.quorum!r}",
-            )
+        object.__setattr__(self, "n_envs", check_count(label, "n_envs", self.n_envs, "parallel environments per run"))
+        if self.quorum is not None:
+            object.__setattr__(self, "quorum", self._checked_quorum(label))
         if not (isinstance(self.confidence, Real) and 0.0 < self.confidence < 1.0):
             raise InvalidSpec(f"{label}.confidence", f"expected a number in (0, 1), got {self.confidence!r}")
         if self.undecided not in UNDECIDED_OUTCOMES:
@@ -156,6 +152,16 @@ class Spec:
         """Runs that must meet each threshold."""
         assert self.budget.max_seeds is not None
         return self.quorum if self.quorum is not None else self.budget.max_seeds
+
+    def _checked_quorum(self, label: str) -> int:
+        """A quorum is a count of runs (validation.check_count) that the budget can train."""
+        quorum = check_count(label, "quorum", self.quorum, "runs that must meet each threshold")
+        assert self.budget.max_seeds is not None
+        if quorum > self.budget.max_seeds:
+            raise InvalidSpec(
+                label, f"expected quorum <= budget.max_seeds={self.budget.max_seeds} (the runs trained), got {quorum}"
+            )
+        return quorum
 
     def _resolve_xfail(self, label: str) -> dict[str, str]:
         if not isinstance(self.xfail, Mapping):
