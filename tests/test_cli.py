@@ -130,8 +130,8 @@ def test_a_file_that_raises_on_import(tmp_path, capsys):
     ],
 )
 def test_bad_option_values_are_usage_errors(spec_file, option, message, capsys):
-    with pytest.raises(SystemExit) as exit_info:
-        main(["run", str(spec_file), *option])
+    with pytest.raises(SystemExit) as exit_info:  # --no-cache: were the option taken, nothing is written here
+        main(["run", str(spec_file), "--no-cache", "--quiet", *option])
     assert exit_info.value.code == 2
     assert message in capsys.readouterr().err
 
@@ -144,9 +144,10 @@ def test_bad_option_values_are_usage_errors(spec_file, option, message, capsys):
         (["--case-scale", "pendulum=inf"], "argument --case-scale: expected a finite number > 0, got 'inf'"),
     ],
 )
-def test_bad_reproduce_options_are_usage_errors(spec_file, option, message, capsys):
+def test_bad_reproduce_options_are_usage_errors(spec_file, option, message, capsys, tmp_path):
+    out = ["--out", str(tmp_path / "r.md"), "--cache-dir", str(tmp_path / "cache"), "--quiet"]  # were it taken
     with pytest.raises(SystemExit) as exit_info:
-        main(["reproduce", str(spec_file), *option])
+        main(["reproduce", str(spec_file), *out, *option])
     assert exit_info.value.code == 2
     assert message in capsys.readouterr().err
 
