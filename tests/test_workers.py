@@ -33,6 +33,7 @@ from specguard.engine.workers import (
     run_tasks,
     stopping_all_tasks,
 )
+from specguard.error import InvalidSpec
 
 cloudpickle.register_pickle_by_value(sys.modules[__name__])
 
@@ -432,8 +433,22 @@ def test_parse_workers(value, parsed):
 @pytest.mark.parametrize("value", [0, -1, "0", "two", 1.5, True, None, "", "05"])
 def test_parse_workers_refuses(value):
     # "05" went through str.isdigit here while checkpoint counts refused it: one rule now (validation.parse_count)
-    with pytest.raises(ValueError, match=r"expected an integer >= 1 \(or 'auto': one per usable core\), got "):
+    message = r"^workers: expected an integer >= 1 \(or 'auto': one per usable core\), got "
+    with pytest.raises(InvalidSpec, match=message):
         parse_workers(value)
+    with pytest.raises(InvalidSpec, match=message):  # one error type, a SpecError: each door makes it its usage error
+        resolve_workers(value, share=2)
+
+
+def test_run_spec_resolves_workers_by_the_same_function(tmp_path):
+    import specguard as sg
+    import specguard.engine.run
+    from example_specs import pendulum
+
+    assert specguard.engine.run.resolve_workers is resolve_workers  # re-exported, not a second rule
+    spec = sg.Spec(pendulum.initial_env, pendulum.trees["w"], budget=sg.Budget(timesteps=10), expect=0.5)
+    with pytest.raises(sg.SpecError, match=r"workers: expected an integer >= 1 .*got True"):
+        sg.run_spec(spec, workers=True, cache_dir=tmp_path)  # refused before anything trains
 
 
 def test_auto_shares_the_cores():

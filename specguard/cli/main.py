@@ -24,7 +24,7 @@ from typing import Any
 
 from specguard.engine.spec import Spec
 from specguard.engine.specfiles import load_objects
-from specguard.error import SpecError
+from specguard.error import InvalidSpec, SpecError
 from specguard.tree.nodes import Node
 
 __all__ = ["main"]
@@ -60,7 +60,7 @@ def _prepare_json(text: str) -> Path:
 
 def _run(args: argparse.Namespace) -> int:
     from specguard.engine.executors import make_executor
-    from specguard.engine.run import resolve_workers
+    from specguard.engine.workers import resolve_workers
 
     specs = load_objects(args.target)
     json_path = _prepare_json(args.json) if args.json else None  # before training, which may take hours
@@ -104,8 +104,8 @@ def _workers(text: str) -> int | str:
 
     try:
         return parse_workers(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e)) from None
+    except InvalidSpec as e:
+        raise argparse.ArgumentTypeError(e.message) from None
 
 
 def _executor(text: str) -> str:
@@ -216,7 +216,7 @@ def _case_scale(text: str) -> tuple[str, float]:
 def _reproduce(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from specguard.cli.reproduce import load_case, reproduce, write_markdown
     from specguard.engine.progress import print_event
-    from specguard.engine.run import resolve_workers
+    from specguard.engine.workers import resolve_workers
 
     cases = [load_case(path) for path in args.targets]
     command = "specguard " + " ".join(argv)

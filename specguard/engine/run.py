@@ -29,8 +29,7 @@ from specguard.engine.fingerprint import check_versions, fingerprint_spec, versi
 from specguard.engine.progress import ProgressEvent, decode_update, print_event
 from specguard.engine.spec import Spec
 from specguard.engine.train import RunResult, TrainingError
-from specguard.engine.workers import Failure, Outcome, Report, Task
-from specguard.engine.workers import resolve_workers as workers_for
+from specguard.engine.workers import Failure, Outcome, Report, Task, resolve_workers
 from specguard.error import SpecError
 from specguard.stats.intervals import QuorumVerdict, RunVerdict, quorum_verdict, run_verdict, success_interval
 from specguard.tree.keys import GOAL, kind, label, result_keys
@@ -39,18 +38,6 @@ from specguard.utils.text import render_table, weights_text
 __all__ = ["GoalVerdict", "SpecResult", "resolve_workers", "run_spec"]
 
 Progress = Callable[[ProgressEvent], None]
-
-
-def resolve_workers(workers: int | str) -> int:
-    """``"auto"`` is the number of usable cores; otherwise an integer >= 1.
-
-    Raises:
-        SpecError: anything else.
-    """
-    try:
-        return workers_for(workers)
-    except ValueError as e:
-        raise SpecError(f"workers: {e}") from None
 
 
 @dataclass

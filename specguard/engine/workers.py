@@ -53,6 +53,7 @@ from typing import Any
 
 import cloudpickle
 
+from specguard.error import InvalidSpec
 from specguard.validation import parse_count
 
 __all__ = [
@@ -116,11 +117,16 @@ def parse_workers(value: object) -> int | str:
     """The one worker-count rule: ``"auto"`` or a count (:func:`specguard.validation.parse_count`).
 
     Raises:
-        ValueError: anything else, with what was expected.
+        InvalidSpec: anything else, with what was expected (a ``SpecError``,
+            which each door makes its own usage error: the CLI's and the
+            pytest plugin's option errors; ``run_spec`` raises it as it is).
     """
     if value == "auto":
         return "auto"
-    return parse_count(value, "or 'auto': one per usable core")
+    try:
+        return parse_count(value, "or 'auto': one per usable core")
+    except ValueError as e:
+        raise InvalidSpec("workers", str(e)) from None
 
 
 def resolve_workers(value: object, *, share: int = 1) -> int:
@@ -130,7 +136,7 @@ def resolve_workers(value: object, *, share: int = 1) -> int:
     oversubscribe the cores between them.
 
     Raises:
-        ValueError: see :func:`parse_workers`.
+        InvalidSpec: see :func:`parse_workers`.
     """
     parsed = parse_workers(value)
     if parsed != "auto":
