@@ -15,7 +15,7 @@ from specguard.engine.run import SpecResult
 from specguard.engine.spec import Spec
 from specguard.extend import SHAPING, Node
 from specguard.stats.intervals import Outcome, QuorumVerdict, RunVerdict
-from specguard.tree.keys import GOAL, SAFETY, kind, resolve_goal
+from specguard.tree.keys import GOAL, SAFETY, kind, require_thresholds, resolve_goal
 
 if TYPE_CHECKING:
     from specguard.stats.compare import Baseline
@@ -223,19 +223,16 @@ def with_thresholds(spec: Spec, expect: dict[Any, float] | None, goal: object) -
     """The spec with a decorator's thresholds (if any) and the goal paths one item asserts.
 
     Raises:
-        InvalidSpec: a goal the tree lacks; SpecError: nothing to check.
+        InvalidSpec: a goal the tree lacks, or nothing to check.
     """
     import dataclasses
-
-    from specguard.error import SpecError
 
     where = f"Spec {spec.label!r}"
     if expect:
         thresholds = {resolve_goal(spec.tree, g, where): t for g, t in expect.items()}
         xfail = {g: r for g, r in spec.xfail.items() if g in thresholds}  # the decorator's own xfail marks items
         spec = dataclasses.replace(spec, expect=thresholds, xfail=xfail)
-    if not spec.thresholds:
-        raise SpecError(f"{where}: no thresholds to check; give expect= to the Spec or to @goal_spec")
+    require_thresholds(where, spec.thresholds)
     return spec, [resolve_goal(spec.tree, goal, where)] if goal is not None else list(spec.thresholds)
 
 
