@@ -31,6 +31,7 @@ __all__ = [
     "check_name",
     "check_positive",
     "check_weight",
+    "child_path",
     "function_text",
     "is_count",
     "is_positive",
@@ -41,6 +42,20 @@ __all__ = [
 
 PATH_SEPARATOR = "/"
 ANNOTATION_SEPARATOR = ":"
+
+
+def child_path(parent: str, name: str) -> str:
+    """The path of the node ``name`` below the node whose path is ``parent``: ``parent/name``.
+
+    The one place a node path is built: tree walks, compiled envs, reference
+    rewards, contract checks, weights and reports all key their nodes by it. A
+    root has no parent: ``child_path("", name)`` is ``name``.
+
+    Example:
+        >>> child_path("pendulum", "position"), child_path("", "pendulum")
+        ('pendulum/position', 'pendulum')
+    """
+    return f"{parent}{PATH_SEPARATOR}{name}" if parent else name
 
 
 def check_name(kind: str, name: object) -> str:

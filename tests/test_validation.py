@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import ast
 import math
 import re
 from fractions import Fraction
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,6 +21,7 @@ from specguard.validation import (
     check_name,
     check_positive,
     check_weight,
+    child_path,
     function_text,
     number_text,
     parse_count,
@@ -149,3 +152,75 @@ def test_positive_option_text_refuses_infinity_and_zero(text):
     # "1e999" reads as inf and "1e-999" as 0: neither is a usable scale
     with pytest.raises(ValueError, match=rf"^expected a finite number > 0 \(a scale\), got {re.escape(repr(text))}$"):
         parse_positive(text, "a scale")
+
+
+# -- node paths: built in one place ------------------------------------------------------------------------------
+
+
+def test_child_paths():
+    assert child_path("pendulum", "position") == "pendulum/position"
+    assert child_path("pendulum/position", "x") == "pendulum/position/x"
+    assert child_path("", "pendulum") == "pendulum"  # a root has no parent: its path is its name
+
+
+def test_tree_paths_are_child_paths():
+    tree = sg.All(sg.All(sg.Goal("x", a=0), name="l"), sg.Goal("y", a=1), name="root")
+    assert [p for p, _ in tree.walk()] == [
+        "root",
+        child_path("root", "l"),
+        child_path(child_path("root", "l"), "x"),
+        child_path("root", "y"),
+    ]
+
+
+ROOT_DIR = Path(__file__).resolve().parent.parent
+SOURCES = sorted((ROOT_DIR / "specguard").rglob("*.py")) + sorted(
+    (ROOT_DIR / "plugins/specguard_plugins").rglob("*.py")
+)
+
+
+def _is_separator(node: ast.AST) -> bool:
+    if isinstance(node, ast.Constant):
+        return node.value == "/"
+    return (
+        isinstance(node, ast.FormattedValue) and isinstance(node.value, ast.Name) and node.value.id == "PATH_SEPARATOR"
+    )
+
+
+def _is_name_of_a_node(node: ast.AST) -> bool:
+    value = node.value if isinstance(node, ast.FormattedValue) else node
+    return isinstance(value, ast.Attribute) and value.attr == "name"
+
+
+def hand_built_paths(source: str) -> list[int]:
+    """Lines that join a path variable, the separator and a node's name by hand: ``f"{path}/{c.name}"``,
+    ``f"{path}{PATH_SEPARATOR}{c.name}"``, ``path + "/" + c.name``."""
+    lines = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.JoinedStr):
+            parts = node.values
+            for first, sep, last in zip(parts, parts[1:], parts[2:]):
+                if (
+                    isinstance(first, ast.FormattedValue)
+                    and isinstance(first.value, ast.Name)
+                    and _is_separator(sep)
+                    and _is_name_of_a_node(last)
+                ):
+                    lines.append(node.lineno)
+        elif isinstance(node, ast.BinOp) and isinstance(node.op, ast.Add) and _is_name_of_a_node(node.right):
+            left = node.left
+            if isinstance(left, ast.BinOp) and isinstance(left.left, ast.Name) and _is_separator(left.right):
+                lines.append(node.lineno)
+    return lines
+
+
+def test_the_hand_built_path_finder_finds_them():
+    assert hand_built_paths('f"{path}/{c.name}"\nf"{p}{PATH_SEPARATOR}{self.name}"\npath + "/" + c.name') == [1, 2, 3]
+    assert hand_built_paths('child_path(path, c.name)\nf"{folder.name}/{png.name}"\nf"{k}/{n}"') == []
+
+
+@pytest.mark.parametrize("path", SOURCES, ids=lambda p: str(p.relative_to(ROOT_DIR)))
+def test_every_child_path_is_built_by_child_path(path):
+    # tree walks, compiled envs, reference rewards, contract checks, auto weights, formulas and the gate's hints
+    # each built parent/child themselves; validation.child_path is the one place now
+    assert hand_built_paths(path.read_text()) == [], f"{path}: build node paths with validation.child_path"

@@ -16,6 +16,7 @@ from specguard.engine.spec import Spec
 from specguard.extend import SHAPING, Node
 from specguard.stats.intervals import Outcome, QuorumVerdict, RunVerdict
 from specguard.tree.keys import GOAL, SAFETY, kind, require_thresholds, resolve_goal
+from specguard.validation import child_path
 
 if TYPE_CHECKING:
     from specguard.stats.compare import Baseline
@@ -158,9 +159,8 @@ def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[RunVerdict])
     node = _node(spec.tree, path)
     episodes = sum(r.episodes for r in runs)
     if node.children and episodes:
-        rates = {
-            f"{path}/{c.name}": sum(r.successes[f"{path}/{c.name}"] for r in runs) / episodes for c in node.children
-        }
+        kids = [child_path(path, c.name) for c in node.children]
+        rates = {kid: sum(r.successes[kid] for r in runs) / episodes for kid in kids}
         best, worst = max(rates, key=rates.__getitem__), min(rates, key=rates.__getitem__)
         if rates[best] - rates[worst] >= 0.3:
             return (

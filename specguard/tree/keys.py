@@ -44,7 +44,7 @@ from typing import TYPE_CHECKING, Any
 
 from specguard.error import InvalidSpec
 from specguard.extend import SAFETY, annotation_key
-from specguard.validation import ANNOTATION_SEPARATOR
+from specguard.validation import ANNOTATION_SEPARATOR, PATH_SEPARATOR
 
 if TYPE_CHECKING:
     from specguard.extend import Node
@@ -244,7 +244,7 @@ def resolve_goal(tree: Node, key: object, where: str) -> str:
         raise InvalidSpec(where, f"expected a node path or name as goal, got {key!r}")
     if key in paths or key in safety:
         return key
-    named = [p for p in paths if p.rsplit("/", 1)[-1] == key]
+    named = [p for p in paths if p.rsplit(PATH_SEPARATOR, 1)[-1] == key]
     named += [k for k in safety if k.rsplit(ANNOTATION_SEPARATOR, 1)[-1] == key]
     if len(named) == 1:
         return named[0]
