@@ -451,6 +451,14 @@ def test_run_spec_resolves_workers_by_the_same_function(tmp_path):
         sg.run_spec(spec, workers=True, cache_dir=tmp_path)  # refused before anything trains
 
 
+def test_reproduce_resolves_workers_by_the_same_function():
+    from specguard.cli.reproduce import reproduce
+
+    # it clamped with max(1, workers): 0 and -3 trained one spec at a time, "auto" raised a TypeError
+    with pytest.raises(InvalidSpec, match=r"workers: expected an integer >= 1 .*got 0"):
+        reproduce([], workers=0)
+
+
 def test_auto_shares_the_cores():
     cores = resolve_workers("auto")
     assert cores >= 1

@@ -38,7 +38,7 @@ from specguard.engine.progress import ProgressEvent
 from specguard.engine.run import SpecResult, run_spec
 from specguard.engine.spec import Spec
 from specguard.engine.specfiles import import_file, load_objects
-from specguard.engine.workers import stopping_all_tasks
+from specguard.engine.workers import resolve_workers, stopping_all_tasks
 from specguard.error import SpecError
 from specguard.stats.intervals import success_interval
 from specguard.utils.text import per_seed_text
@@ -97,7 +97,7 @@ def reproduce(
     seeds: int = 5,
     budget_scale: float = 1.0,
     case_scales: Mapping[str, float] | None = None,
-    workers: int = 2,
+    workers: int | str = 2,
     cache_dir: str | Path | None = ".specguard/cache",
     progress: Callable[[ProgressEvent], None] | None = None,
     command: str = "",
@@ -109,8 +109,10 @@ def reproduce(
     at the first miss); a spec whose seeds fail keeps its errors in its result.
 
     Raises:
-        SpecError: ``case_scales`` names a case that is not given.
+        SpecError: ``case_scales`` names a case that is not given, or ``workers`` is
+            not a worker count (:func:`specguard.engine.workers.resolve_workers`).
     """
+    workers = resolve_workers(workers)
     names = [case.name for case in cases]
     unknown = sorted(set(case_scales or {}) - set(names))
     if unknown:
@@ -125,7 +127,7 @@ def reproduce(
 
     jobs = [(case, key, sized(spec, seeds, scales[case.name])) for case in cases for key, spec in case.specs.items()]
     results: dict[str, dict[str, SpecResult]] = {case.name: {} for case in cases}
-    pool = ThreadPoolExecutor(max_workers=max(1, workers))
+    pool = ThreadPoolExecutor(max_workers=workers)
     try:
         futures = {
             (case.name, key): pool.submit(run_spec, spec, workers=1, cache_dir=cache_dir, progress=tell)

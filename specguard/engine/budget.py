@@ -23,11 +23,10 @@ import math
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
-from numbers import Integral
 from typing import Any
 
 from specguard.error import InvalidSpec
-from specguard.validation import check_count, check_positive
+from specguard.validation import check_count, check_positive, is_count
 
 __all__ = ["Budget", "trained_timesteps"]
 
@@ -136,7 +135,7 @@ def _collect_steps(algorithm: str, hyperparameters: Mapping[str, Any]) -> int:
         if isinstance(freq, (tuple, list)):
             freq = freq[0] if len(freq) == 2 and str(freq[1]) == "step" else 1
         value = freq
-    if isinstance(value, bool) or not isinstance(value, Integral) or value < 1:
+    if not is_count(value):
         return 1  # the algorithm rejects it when training, with its own message
     return int(value)
 
