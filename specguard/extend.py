@@ -56,7 +56,7 @@ from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 from specguard.error import InvalidSpec
-from specguard.validation import ANNOTATION_SEPARATOR, PATH_SEPARATOR
+from specguard.validation import ANNOTATION_SEPARATOR, child_path
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterator
@@ -367,7 +367,7 @@ class Node:
 
     def walk(self, prefix: str = "") -> Iterator[tuple[str, Node]]:
         """Yield ``(path, node)`` for this node and its descendants, depth first, parents first."""
-        path = f"{prefix}{PATH_SEPARATOR}{self.name}" if prefix else self.name
+        path = child_path(prefix, self.name)
         yield path, self
         for child in self.children:
             yield from child.walk(path)

@@ -15,9 +15,10 @@ Example:
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable
 from numbers import Integral, Real
-from typing import Any
+from typing import Any, TypeGuard
 
 from specguard.error import InvalidSpec
 
@@ -26,15 +27,35 @@ __all__ = [
     "PATH_SEPARATOR",
     "check_budget",
     "check_callable",
+    "check_count",
     "check_name",
     "check_positive",
     "check_weight",
+    "child_path",
     "function_text",
+    "is_count",
+    "is_positive",
     "number_text",
+    "parse_count",
+    "parse_positive",
 ]
 
 PATH_SEPARATOR = "/"
 ANNOTATION_SEPARATOR = ":"
+
+
+def child_path(parent: str, name: str) -> str:
+    """The path of the node ``name`` below the node whose path is ``parent``: ``parent/name``.
+
+    The one place a node path is built: tree walks, compiled envs, reference
+    rewards, contract checks, weights and reports all key their nodes by it. A
+    root has no parent: ``child_path("", name)`` is ``name``.
+
+    Example:
+        >>> child_path("pendulum", "position"), child_path("", "pendulum")
+        ('pendulum/position', 'pendulum')
+    """
+    return f"{parent}{PATH_SEPARATOR}{name}" if parent else name
 
 
 def check_name(kind: str, name: object) -> str:
@@ -71,41 +92,90 @@ def check_weight(where: str, weight: object) -> float | None:
     return value
 
 
+def _meaning(meaning: str) -> str:
+    return f" ({meaning})" if meaning else ""
+
+
+def is_count(value: object) -> TypeGuard[Integral]:
+    """The one rule for a count: an integer ``>= 1``.
+
+    numpy integers are integers; a bool is not a count (``True`` is no way to write 1).
+    """
+    return isinstance(value, Integral) and not isinstance(value, bool) and int(value) >= 1
+
+
+def is_positive(value: object) -> TypeGuard[Real]:
+    """The one rule for a positive number: a finite real ``> 0`` (numpy numbers too, never a bool)."""
+    return isinstance(value, Real) and not isinstance(value, bool) and math.isfinite(value) and float(value) > 0
+
+
+def check_count(where: str, argument: str, value: object, meaning: str = "") -> int:
+    """An integer ``>= 1`` (:func:`is_count`) as an ``int``; ``meaning`` says what it counts in the message.
+
+    Raises:
+        InvalidSpec: naming ``where``, ``argument`` and the value given.
+    """
+    if not is_count(value):
+        raise InvalidSpec(where, f"expected {argument} to be an integer >= 1{_meaning(meaning)}, got {value!r}")
+    return int(value)
+
+
 def check_positive(where: str, argument: str, value: object, meaning: str = "") -> float:
-    """A finite number ``> 0`` as a float; ``meaning`` says what it is for in the message."""
-    if isinstance(value, bool) or not isinstance(value, Real):
-        raise InvalidSpec(where, f"expected {argument} to be a number, got {value!r}")
-    if not math.isfinite(value) or value <= 0:
+    """A finite number ``> 0`` (:func:`is_positive`) as a float; ``meaning`` says what it is for in the message.
+
+    Raises:
+        InvalidSpec: naming ``where``, ``argument`` and the value given.
+    """
+    if not is_positive(value):
         raise InvalidSpec(
             where,
-            f"expected {argument} > 0{f' ({meaning})' if meaning else ''}, got {value!r}",
+            f"expected {argument} to be a finite number > 0{_meaning(meaning)}, got {value!r}",
             hint=f"{argument} must be a positive finite number",
         )
     return float(value)
 
 
-def parse_count(text: str | int, meaning: str = "") -> int:
-    """An integer ``>= 1`` from an option's text; ``meaning`` says what it is for in the message.
+_COUNT_TEXT = re.compile(r"[1-9][0-9]*")
+"""How an option writes a count: ASCII digits without sign, separator or leading zero."""
+
+
+def parse_count(text: object, meaning: str = "") -> int:
+    """An integer ``>= 1`` (:func:`is_count`) from an option's text, or given as an integer.
+
+    The text is decimal digits without sign, ``_`` or leading zero (``"05"``
+    is refused, as a typo or an octal number would be); blanks around it are ignored.
 
     Raises:
-        ValueError: anything else, saying what was expected.
+        ValueError: anything else, saying what was expected; each door (an
+            option of the CLI or of the pytest plugin) makes it its own usage error.
     """
-    try:
-        value = int(str(text).strip())
-    except ValueError:
-        value = 0
-    if value < 1 or str(text).strip() != str(value):
-        raise ValueError(f"expected an integer >= 1{f' ({meaning})' if meaning else ''}, got {str(text)!r}")
-    return value
+    value = int(text.strip()) if isinstance(text, str) and _COUNT_TEXT.fullmatch(text.strip()) else text
+    if not is_count(value):
+        raise ValueError(f"expected an integer >= 1{_meaning(meaning)}, got {text!r}")
+    return int(value)
+
+
+def parse_positive(text: object, meaning: str = "") -> float:
+    """A finite number ``> 0`` (:func:`is_positive`) from an option's text, or given as a number.
+
+    Raises:
+        ValueError: anything else (``inf`` and ``nan`` included), saying what
+            was expected; each door makes it its own usage error.
+    """
+    value: object = text
+    if isinstance(text, str):
+        try:
+            value = float(text)
+        except ValueError:
+            value = None
+    if not is_positive(value):
+        raise ValueError(f"expected a finite number > 0{_meaning(meaning)}, got {text!r}")
+    return float(value)
 
 
 def check_budget(where: str, budget: object) -> int:
     """An integer ``>= 1``: the violations allowed per episode."""
-    if isinstance(budget, bool) or not isinstance(budget, Integral) or budget < 1:
-        raise InvalidSpec(
-            where, f"expected budget to be an integer >= 1 (violations allowed per episode), got {budget!r}"
-        )
-    return int(budget)
+    return check_count(where, "budget", budget, "violations allowed per episode")
 
 
 def check_callable(where: str, fn: object, signature: str) -> Callable[..., Any]:

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import math
+
+import numpy as np
 import pytest
 
 import specguard as sg
@@ -21,14 +24,14 @@ def test_scaled_keeps_everything_but_timesteps():
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
-        ({"timesteps": 0}, r"Budget.timesteps: expected an integer >= 1, got 0"),
-        ({"timesteps": -5}, r"Budget.timesteps: expected an integer >= 1, got -5"),
-        ({"timesteps": 1.5}, r"Budget.timesteps: expected an integer >= 1, got 1.5"),
-        ({"timesteps": 10, "min_seeds": 0}, r"Budget.min_seeds: expected an integer >= 1, got 0"),
+        ({"timesteps": 0}, r"Budget: expected timesteps to be an integer >= 1, got 0"),
+        ({"timesteps": -5}, r"Budget: expected timesteps to be an integer >= 1, got -5"),
+        ({"timesteps": 1.5}, r"Budget: expected timesteps to be an integer >= 1, got 1.5"),
+        ({"timesteps": 10, "min_seeds": 0}, r"Budget: expected min_seeds to be an integer >= 1, got 0"),
         ({"timesteps": 10, "min_seeds": 3, "max_seeds": 2}, r"Budget.max_seeds: expected max_seeds >= min_seeds"),
-        ({"timesteps": 10, "eval_episodes": 0}, r"Budget.eval_episodes: expected an integer >= 1, got 0"),
+        ({"timesteps": 10, "eval_episodes": 0}, r"Budget: expected eval_episodes to be an integer >= 1, got 0"),
         ({"timesteps": 10, "eval_episodes": 10, "max_eval_episodes": 5}, r"Budget.max_eval_episodes"),
-        ({"timesteps": 10, "wall_clock_s": -1}, r"Budget.wall_clock_s: expected a number of seconds > 0"),
+        ({"timesteps": 10, "wall_clock_s": -1}, r"Budget: expected wall_clock_s to be a finite number > 0 \(seconds"),
     ],
 )
 def test_bad_budgets(kwargs, message):
@@ -37,5 +40,16 @@ def test_bad_budgets(kwargs, message):
 
 
 def test_bad_scale():
-    with pytest.raises(sg.InvalidSpec, match=r"budget scale: expected a number > 0, got 0"):
+    with pytest.raises(sg.InvalidSpec, match=r"Budget.scaled: expected factor to be a finite number > 0 \(the budget"):
         sg.Budget(timesteps=10).scaled(0)
+
+
+def test_budgets_reach_the_shared_rules():
+    # counts are validation.check_count, seconds and scales validation.check_positive
+    assert sg.Budget(timesteps=np.int64(10), min_seeds=np.int32(3)) == sg.Budget(timesteps=10, min_seeds=3)
+    with pytest.raises(sg.InvalidSpec, match=r"expected checkpoints to be an integer >= 1, got True"):
+        sg.Budget(timesteps=10, checkpoints=True)
+    with pytest.raises(sg.InvalidSpec, match=r"expected wall_clock_s to be a finite number > 0 .*got inf"):
+        sg.Budget(timesteps=10, wall_clock_s=math.inf)
+    with pytest.raises(sg.InvalidSpec, match=r"expected factor to be a finite number > 0 .*got inf"):
+        sg.Budget(timesteps=10).scaled(math.inf)

@@ -118,12 +118,38 @@ def test_a_file_that_raises_on_import(tmp_path, capsys):
     assert "Goal 'g', feature 'x': expected lo <= hi" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("option", [["--workers", "0"], ["--budget-scale", "-1"]])
-def test_bad_option_values_are_usage_errors(spec_file, option, capsys):
-    with pytest.raises(SystemExit) as exit_info:
-        main(["run", str(spec_file), *option])
+@pytest.mark.parametrize(
+    ("option", "message"),
+    [
+        (["--workers", "0"], "argument --workers: expected an integer >= 1 (or 'auto': one per usable core), got '0'"),
+        (["--budget-scale", "-1"], "argument --budget-scale: expected a finite number > 0, got '-1'"),
+        # each option reaches its shared rule (validation.parse_count, validation.parse_positive)
+        (["--workers", "05"], "argument --workers: expected an integer >= 1 (or 'auto': one per usable core), got '05"),
+        (["--checkpoints", "05"], "argument --checkpoints: expected an integer >= 1 (1: train every run's whole"),
+        (["--budget-scale", "inf"], "argument --budget-scale: expected a finite number > 0, got 'inf'"),
+    ],
+)
+def test_bad_option_values_are_usage_errors(spec_file, option, message, capsys):
+    with pytest.raises(SystemExit) as exit_info:  # --no-cache: were the option taken, nothing is written here
+        main(["run", str(spec_file), "--no-cache", "--quiet", *option])
     assert exit_info.value.code == 2
-    assert "expected" in capsys.readouterr().err
+    assert message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("option", "message"),
+    [
+        (["--seeds", "05"], "argument --seeds: expected an integer >= 1, got '05'"),
+        (["--budget-scale", "nan"], "argument --budget-scale: expected a finite number > 0, got 'nan'"),
+        (["--case-scale", "pendulum=inf"], "argument --case-scale: expected a finite number > 0, got 'inf'"),
+    ],
+)
+def test_bad_reproduce_options_are_usage_errors(spec_file, option, message, capsys, tmp_path):
+    out = ["--out", str(tmp_path / "r.md"), "--cache-dir", str(tmp_path / "cache"), "--quiet"]  # were it taken
+    with pytest.raises(SystemExit) as exit_info:
+        main(["reproduce", str(spec_file), *out, *option])
+    assert exit_info.value.code == 2
+    assert message in capsys.readouterr().err
 
 
 @pytest.fixture

@@ -32,8 +32,8 @@ def test_a_number_means_the_root():
     ("kwargs", "message"),
     [
         ({"expect": {"a": 1.0}}, r"expect\['a'\]: a threshold of 1 can never be met"),
-        ({"expect": {}}, r"expected expect to be \{goal: min success\} or a number"),
-        ({"expect": {"a": 0.5}, "xfail": {"b": "why"}}, r"xfail names goals \['b'\] that expect does not list"),
+        ({"expect": {}}, r"expected at least one threshold, got \{\}: there is nothing to assert"),
+        ({"expect": {"a": 0.5}, "xfail": {"b": "why"}}, r"expected xfail to name goals that expect gives a threshold"),
         ({"xfail": 3}, r"expected xfail to be \{goal: reason\} or a list of goals, got 3"),
     ],
 )
@@ -94,5 +94,5 @@ def test_goal_specs_needs_thresholds():
     from example_specs import pendulum
 
     spec = sg.Spec(pendulum.initial_env, pendulum.trees["w"], budget=sg.Budget(timesteps=10))
-    with pytest.raises(sg.InvalidSpec, match=r"goal_specs\['w'\]: expected a spec with thresholds"):
+    with pytest.raises(sg.InvalidSpec, match=r"goal_specs\['w'\]: expected at least one threshold, got \{\}"):
         sg.goal_specs({"w": spec})

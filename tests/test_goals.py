@@ -10,7 +10,16 @@ import pytest
 import specguard as sg
 from example_specs import pendulum
 from specguard.pytest_plugin.gate import with_thresholds
-from specguard.tree.keys import ROOT, check_threshold, resolve_goal
+from specguard.tree.keys import (
+    ROOT,
+    XFAIL_REASON,
+    check_expect,
+    check_threshold,
+    check_xfail,
+    check_xfail_thresholded,
+    require_thresholds,
+    resolve_goal,
+)
 
 TREE = sg.All(
     sg.All(sg.Goal("x", a=(0, 1)), name="left"),
@@ -92,6 +101,104 @@ def test_root_key_survives_pickling():
 
 def _a_test():
     """A function for @goal_spec to decorate (pytest marks only functions that look like tests)."""
+
+
+# -- expect and xfail: one reading for Spec and @goal_spec ------------------------------------------------------
+
+
+def test_expect_is_a_mapping_or_one_number_for_the_root():
+    assert check_expect("Here", 0.5) == {ROOT: 0.5}
+    assert check_expect("Here", {"a": 0, "p/b": 0.25, ROOT: 0.5}) == {"a": 0.0, "p/b": 0.25, ROOT: 0.5}
+    assert check_expect("Here", {}) == {}  # no thresholds: a Spec that only measures, or gets them from @goal_spec
+
+
+@pytest.mark.parametrize(
+    ("expect", "message"),
+    [
+        ("high", r"Here: expected expect to be \{goal: min success\} or a number, got 'high'"),
+        (True, r"Here: expected expect to be \{goal: min success\} or a number, got True"),
+        (None, r"Here: expected expect to be \{goal: min success\} or a number, got None"),
+        ([0.5], r"Here: expected expect to be \{goal: min success\} or a number, got \[0.5\]"),
+        ({3: 0.5}, r"Here: expected goal names or paths as keys of expect, got 3"),
+        ({"a": 1.5}, r"Here.expect\['a'\]: expected a success rate in \[0, 1\), got 1.5"),
+    ],
+)
+def test_bad_expect(expect, message):
+    with pytest.raises(sg.InvalidSpec, match=message):
+        check_expect("Here", expect)
+
+
+def test_xfail_is_a_mapping_of_reasons_or_a_list_of_goals():
+    assert check_xfail("Here", None) == {}
+    assert check_xfail("Here", ["a", ROOT]) == {"a": XFAIL_REASON, ROOT: XFAIL_REASON}
+    assert check_xfail("Here", ("a",)) == {"a": XFAIL_REASON}
+    assert check_xfail("Here", {"p/a": "the paper's local optimum"}) == {"p/a": "the paper's local optimum"}
+
+
+@pytest.mark.parametrize(
+    ("xfail", "message"),
+    [
+        (3, r"Here: expected xfail to be \{goal: reason\} or a list of goals, got 3"),
+        ("a", r"Here: expected xfail to be \{goal: reason\} or a list of goals, got 'a'"),
+        ([3], r"Here: expected goal names or paths as keys of xfail, got 3"),
+        ([["a"]], r"Here: expected goal names or paths as keys of xfail, got \['a'\]"),  # not a TypeError
+        ({3: "why"}, r"Here: expected goal names or paths as keys of xfail, got 3"),
+        ({"a": 3}, r"Here.xfail\['a'\]: expected the reason as non-empty text, got 3"),
+        ({"a": " "}, r"Here.xfail\['a'\]: expected the reason as non-empty text, got ' '"),
+    ],
+)
+def test_bad_xfail(xfail, message):
+    with pytest.raises(sg.InvalidSpec, match=message):
+        check_xfail("Here", xfail)
+
+
+def test_xfail_names_only_thresholded_goals():
+    check_xfail_thresholded("Here", {"a": "why"}, {"a": 0.5, "b": 0.5})
+    check_xfail_thresholded("Here", {}, {})
+    message = r"Here: expected xfail to name goals that expect gives a threshold to \(\['a'\]\), got \['b'\]"
+    with pytest.raises(sg.InvalidSpec, match=message):
+        check_xfail_thresholded("Here", {"a": "why", "b": "why"}, {"a": 0.5})
+
+
+def test_what_is_asserted_has_thresholds():
+    require_thresholds("Here", {"a": 0.5})
+    with pytest.raises(sg.InvalidSpec, match=r"Here: expected at least one threshold, got \{\}: there is nothing to"):
+        require_thresholds("Here", {})
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"expect": "high"}, r"expected expect to be \{goal: min success\} or a number, got 'high'"),
+        ({"expect": {3: 0.5}}, r"expected goal names or paths as keys of expect, got 3"),
+        ({"expect": 0.5, "xfail": 3}, r"expected xfail to be \{goal: reason\} or a list of goals, got 3"),
+        # @goal_spec took any reason and any key, as str(...): an empty reason, 3 as a reason, the goal 3
+        ({"expect": {"pendulum": 0.5}, "xfail": {"pendulum": ""}}, r"expected the reason as non-empty text, got ''"),
+        ({"expect": {"pendulum": 0.5}, "xfail": {"pendulum": 3}}, r"expected the reason as non-empty text, got 3"),
+        ({"expect": {"pendulum": 0.5}, "xfail": [3]}, r"expected goal names or paths as keys of xfail, got 3"),
+        ({"expect": {"pendulum": 0.5}, "xfail": ["root"]}, r"expected xfail to name goals that expect gives a"),
+    ],
+)
+def test_spec_and_goal_spec_read_expect_and_xfail_alike(kwargs, message):
+    with pytest.raises(sg.InvalidSpec, match=message):
+        spec(**kwargs)
+    declared = sg.goal_spec(**kwargs)(_a_test)
+    assert re.search(message, declared.pytestmark[-1].kwargs["error"])
+
+
+def test_an_empty_expect_measures_in_a_spec_and_is_refused_by_goal_spec():
+    # A Spec may take its thresholds from @goal_spec, or only measure (specguard run);
+    # @goal_spec(expect=None) already means "the Spec's own", so an empty expect there asserts nothing.
+    assert spec(expect={}).thresholds == {}
+    declared = sg.goal_spec(expect={})(_a_test)
+    assert "expected at least one threshold, got {}" in declared.pytestmark[-1].kwargs["error"]
+
+
+def test_a_spec_takes_xfail_as_a_list_of_goals_too():
+    assert spec(expect={"pendulum": 0.5}, xfail=["pendulum"]).xfail == {"pendulum": XFAIL_REASON}
+    assert sg.goal_spec(expect={"pendulum": 0.5}, xfail=["pendulum"])(_a_test).pytestmark[-1].kwargs["xfail"] == {
+        "pendulum": XFAIL_REASON
+    }
 
 
 # -- safety rates: keys path:name of safety annotations, resolved by the same function --------------------------

@@ -152,7 +152,7 @@ def test_annotate_with_a_non_annotation():
 
 @pytest.mark.parametrize("scale", [0, -1.0, math.inf, math.nan])
 def test_scale_must_be_positive(scale):
-    with pytest.raises(sg.InvalidSpec, match=r"Distance 'distance': expected scale > 0"):
+    with pytest.raises(sg.InvalidSpec, match=r"Distance 'distance': expected scale to be a finite number > 0"):
         sg.Distance(dist, scale=scale)
 
 

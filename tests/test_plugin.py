@@ -434,13 +434,19 @@ def test_checkpoints_make_the_budget_a_ceiling(pytester):
             "--goal-specs-undecided=maybe",
             "--goal-specs-undecided: expected one of fail, xfail, pass, got 'maybe'",
         ),
-        ("--goal-specs-budget-scale=0", "--goal-specs-budget-scale: expected a number > 0, got '0'"),
+        ("--goal-specs-budget-scale=0", "--goal-specs-budget-scale: expected a finite number > 0, got '0'"),
+        # inf passed the option check and then failed every item (validation.parse_positive now)
+        ("--goal-specs-budget-scale=inf", "--goal-specs-budget-scale: expected a finite number > 0, got 'inf'"),
         (
             "--goal-specs-checkpoints=0",
             "--goal-specs-checkpoints: expected an integer >= 1 (1: train every run's whole budget), got '0'",
         ),
         ("--goal-specs-checkpoints=2.5", "--goal-specs-checkpoints: expected an integer >= 1*got '2.5'"),
-        ("--goal-specs-workers=none", "--goal-specs-workers: expected an integer >= 1 or 'auto', got 'none'"),
+        (
+            "--goal-specs-workers=none",
+            "--goal-specs-workers: expected an integer >= 1 (or 'auto': one per usable core), got 'none'",
+        ),
+        ("--goal-specs-workers=05", "--goal-specs-workers: expected an integer >= 1 (or 'auto'*), got '05'"),
         ("--goal-specs-compare=nosuch", "--goal-specs-compare: baseline '*nosuch.json' does not exist*"),
     ],
 )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 import specguard as sg
@@ -35,19 +36,30 @@ def test_quorum_defaults_to_every_run():
             {"expect": {"height": 0.5}},
             r"expect\['height'\]: no node is named 'height'; the tree's goals are pendulum, pendulum/position",
         ),
-        ({"expect": "high"}, r"Spec 'pendulum'.expect: expected"),
+        ({"expect": "high"}, r"Spec 'pendulum': expected expect to be \{goal: min success\} or a number, got 'high'"),
         ({"algorithm": "PPO2"}, r"Spec 'pendulum'.algorithm: unknown algorithm 'PPO2'; expected one of PPO, A2C"),
-        ({"n_envs": 0}, r"Spec 'pendulum'.n_envs: expected an integer >= 1, got 0"),
-        ({"quorum": 3}, r"Spec 'pendulum'.quorum: expected an integer in \[1, budget.max_seeds=2\], got 3"),
+        ({"n_envs": 0}, r"Spec 'pendulum': expected n_envs to be an integer >= 1 \(parallel environments"),
+        ({"quorum": 3}, r"Spec 'pendulum': expected quorum <= budget.max_seeds=2 \(the runs trained\), got 3"),
+        ({"quorum": 0}, r"Spec 'pendulum': expected quorum to be an integer >= 1 \(runs that must meet"),
         ({"confidence": 1.0}, r"Spec 'pendulum'.confidence: expected a number in \(0, 1\)"),
         ({"undecided": "xfail"}, r"Spec 'pendulum'.undecided: expected one of \('fail', 'pass'\)"),
         ({"hyperparameters": [1]}, r"Spec 'pendulum'.hyperparameters: expected a mapping"),
-        ({"name": "mine", "n_envs": -1}, r"Spec 'mine'.n_envs"),
+        ({"name": "mine", "n_envs": -1}, r"Spec 'mine': expected n_envs"),
     ],
 )
 def test_bad_specs(kwargs, message):
     with pytest.raises(sg.InvalidSpec, match=message):
         spec(**kwargs)
+
+
+def test_counts_reach_the_shared_rule():
+    # validation.check_count: numpy integers are integers, a bool is not a count
+    s = spec(n_envs=np.int64(4), quorum=np.int64(2))
+    assert (s.n_envs, s.quorum) == (4, 2) and type(s.n_envs) is int and type(s.quorum) is int
+    with pytest.raises(sg.InvalidSpec, match=r"expected quorum to be an integer >= 1 .*got True"):
+        spec(quorum=True)
+    with pytest.raises(sg.InvalidSpec, match=r"expected n_envs to be an integer >= 1 .*got 2.0"):
+        spec(n_envs=2.0)
 
 
 def test_ambiguous_names_ask_for_a_path():
@@ -83,7 +95,7 @@ def test_xfail_names_thresholded_goals_and_resolves_them():
     )
     assert spec.xfail == {"pendulum/position": "the paper's local optimum"}
     with pytest.raises(
-        sg.InvalidSpec, match=r"xfail\['stabilization'\]: expected a goal that expect gives a threshold"
+        sg.InvalidSpec, match=r"expected xfail to name goals that expect gives a threshold to \(\['pendulum'\]\), got"
     ):
         sg.Spec(
             pendulum.initial_env,
@@ -92,7 +104,7 @@ def test_xfail_names_thresholded_goals_and_resolves_them():
             expect=0.5,
             xfail={"stabilization": "x"},
         )
-    with pytest.raises(sg.InvalidSpec, match=r"xfail\['pendulum'\]: expected the reason as text, got 3"):
+    with pytest.raises(sg.InvalidSpec, match=r"xfail\['pendulum'\]: expected the reason as non-empty text, got 3"):
         sg.Spec(
             pendulum.initial_env, pendulum.trees["b"], budget=sg.Budget(timesteps=10), expect=0.5, xfail={"pendulum": 3}
         )

@@ -19,11 +19,13 @@ from pathlib import Path
 from typing import Any
 
 import cloudpickle
+import numpy as np
 import pytest
 
 from specguard.engine.protocol import Done, Failure, Report, Task, TaskOutcome
 from specguard.engine.signals import stopping_all_tasks
 from specguard.engine.workers import parse_workers, resolve_workers, run_tasks
+from specguard.error import InvalidSpec
 
 cloudpickle.register_pickle_by_value(sys.modules[__name__])
 
@@ -416,15 +418,38 @@ def test_child_exits_by_itself_when_its_parent_is_killed(tmp_path: Path) -> None
             os.kill(child_pid, signal.SIGKILL)
 
 
-@pytest.mark.parametrize(("value", "parsed"), [("auto", "auto"), (3, 3), ("2", 2), (" 4 ", 4)])
+@pytest.mark.parametrize(("value", "parsed"), [("auto", "auto"), (3, 3), ("2", 2), (" 4 ", 4), (np.int64(2), 2)])
 def test_parse_workers(value, parsed):
     assert parse_workers(value) == parsed
 
 
-@pytest.mark.parametrize("value", [0, -1, "0", "two", 1.5, True, None, ""])
+@pytest.mark.parametrize("value", [0, -1, "0", "two", 1.5, True, None, "", "05"])
 def test_parse_workers_refuses(value):
-    with pytest.raises(ValueError, match=r"expected an integer >= 1 or 'auto', got "):
+    # "05" went through str.isdigit here while checkpoint counts refused it: one rule now (validation.parse_count)
+    message = r"^workers: expected an integer >= 1 \(or 'auto': one per usable core\), got "
+    with pytest.raises(InvalidSpec, match=message):
         parse_workers(value)
+    with pytest.raises(InvalidSpec, match=message):  # one error type, a SpecError: each door makes it its usage error
+        resolve_workers(value, share=2)
+
+
+def test_run_spec_resolves_workers_by_the_same_function(tmp_path):
+    import specguard as sg
+    import specguard.engine.run
+    from example_specs import pendulum
+
+    assert specguard.engine.run.resolve_workers is resolve_workers  # re-exported, not a second rule
+    spec = sg.Spec(pendulum.initial_env, pendulum.trees["w"], budget=sg.Budget(timesteps=10), expect=0.5)
+    with pytest.raises(sg.SpecError, match=r"workers: expected an integer >= 1 .*got True"):
+        sg.run_spec(spec, workers=True, cache_dir=tmp_path)  # refused before anything trains
+
+
+def test_reproduce_resolves_workers_by_the_same_function():
+    from specguard.engine.reproduction import reproduce
+
+    # it clamped with max(1, workers): 0 and -3 trained one spec at a time, "auto" raised a TypeError
+    with pytest.raises(InvalidSpec, match=r"workers: expected an integer >= 1 .*got 0"):
+        reproduce([], workers=0)
 
 
 def test_auto_shares_the_cores():

@@ -50,7 +50,7 @@ from specguard.extend import (
 )
 from specguard.build.initial_env import state_type
 from specguard.build.reference import FLOAT_MAX, check_distance, distance_value
-from specguard.validation import PATH_SEPARATOR
+from specguard.validation import child_path
 
 __all__ = ["CompiledTree", "Evaluator", "compile_tree"]
 
@@ -342,7 +342,7 @@ def compile_tree(
         for child, w in zip(node.children, kid_weights):
             # A child's term of role r is scaled by this node's core weight and the child's weight for r.
             passed = ChildWeights(*(c * core_w * x for c, x in zip((coef.core, coef.shaping, coef.safety), w)))
-            k, child_box = visit(child, f"{path}{PATH_SEPARATOR}{child.name}", passed)
+            k, child_box = visit(child, child_path(path, child.name), passed)
             children[me].append(k)
             kid_boxes.append(child_box)
         box, lo, hi = _box_rows(node, path, kid_boxes, index, features)

@@ -22,7 +22,7 @@ from typing import Any, NamedTuple
 from specguard.error import EvaluationError
 from specguard.extend import Annotation, Context, Node, Slot, annotation_key, component_weights
 from specguard.build.initial_env import state_type
-from specguard.validation import PATH_SEPARATOR
+from specguard.validation import child_path
 
 __all__ = [
     "ExtendedState",
@@ -205,7 +205,7 @@ def process(node: Node, path: str | None = None, *, root: bool = True) -> Requir
     """Algorithm 1: the requirements of ``node``, children first, then annotations, then root specifics."""
     path = node.name if path is None else path
     # Step 1: leaf or operator (a leaf is an operator without children).
-    kids = [process(c, f"{path}{PATH_SEPARATOR}{c.name}", root=False) for c in node.children]
+    kids = [process(c, child_path(path, c.name), root=False) for c in node.children]
     req = _operator(path, node, kids)
     # Step 2: annotations, in order. The core keeps its default weight; each
     # annotation brings its own (SPEC.md "Reward components and weights").

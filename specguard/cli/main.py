@@ -25,7 +25,7 @@ from typing import Any
 
 from specguard.engine.spec import Spec
 from specguard.engine.specfiles import load_objects
-from specguard.error import SpecError
+from specguard.error import InvalidSpec, SpecError
 from specguard.tree.nodes import Node
 from specguard.utils.files import write_atomic
 
@@ -62,7 +62,7 @@ def _prepare_json(text: str) -> Path:
 
 def _run(args: argparse.Namespace) -> int:
     from specguard.engine.executors import make_executor
-    from specguard.engine.run import resolve_workers
+    from specguard.engine.workers import resolve_workers
 
     specs = load_objects(args.target)
     json_path = _prepare_json(args.json) if args.json else None  # before training, which may take hours
@@ -106,8 +106,8 @@ def _workers(text: str) -> int | str:
 
     try:
         return parse_workers(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e)) from None
+    except InvalidSpec as e:
+        raise argparse.ArgumentTypeError(e.message) from None
 
 
 def _executor(text: str) -> str:
@@ -129,13 +129,12 @@ def _checkpoints(text: str) -> int:
 
 
 def _scale(text: str) -> float:
+    from specguard.validation import parse_positive
+
     try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}") from None
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}")
-    return value
+        return parse_positive(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -219,7 +218,7 @@ def _case_scale(text: str) -> tuple[str, float]:
 def _reproduce(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from specguard.engine.progress import print_event
     from specguard.engine.reproduction import load_case, reproduce
-    from specguard.engine.run import resolve_workers
+    from specguard.engine.workers import resolve_workers
     from specguard.report.reproduction import write_markdown
 
     cases = [load_case(path) for path in args.targets]

@@ -55,7 +55,7 @@ from specguard.contract.trees import (
 )
 from specguard.extend import Annotation, Node, annotation_key
 from specguard.tree.nodes import Goal
-from specguard.validation import PATH_SEPARATOR
+from specguard.validation import child_path
 
 __all__ = [
     "CHECKS",
@@ -274,7 +274,7 @@ def check_termination_includes_children(cls: type, max_examples: int = MAX_EXAMP
         for path, node in case.tree.walk():
             if not isinstance(node, cls) or not node.children:
                 continue
-            kids = [process(c, f"{path}{PATH_SEPARATOR}{c.name}", root=False) for c in node.children]
+            kids = [process(c, child_path(path, c.name), root=False) for c in node.children]
             n = len(kids)
             for t, x in enumerate(xs):
                 ctx = context(req, path, node, x)

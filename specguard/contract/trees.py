@@ -26,7 +26,7 @@ from specguard.extend import Annotation, Context, Node
 from specguard.tree._draw import values
 from specguard.tree.builtin_annotations import Constraint, Distance
 from specguard.tree.nodes import All, Goal
-from specguard.validation import PATH_SEPARATOR
+from specguard.validation import child_path
 
 __all__ = ["FEATURES", "Broken", "Example", "cases", "fail", "refinement_cases", "run_property", "trees_with"]
 
@@ -257,5 +257,5 @@ def extended_states(tree: Node, trajectory: list[list[float]], actions: list[int
 
 def context(req: Requirements, path: str, node: Node, x: Any) -> Context:
     """The node's :class:`Context` in the extended state ``x``: its own state and its children's memberships."""
-    inside = tuple(req.goals[f"{path}{PATH_SEPARATOR}{c.name}"](x) for c in node.children)
+    inside = tuple(req.goals[child_path(path, c.name)](x) for c in node.children)
     return Context(x.s, tuple(x.states.get(path, ())), inside)

@@ -58,7 +58,7 @@ from collections import deque
 from collections.abc import Mapping, Sequence
 
 from specguard.extend import Node, adapted_annotations, annotation_key, component_weights
-from specguard.validation import PATH_SEPARATOR
+from specguard.validation import child_path
 
 __all__ = [
     "FLOOR",
@@ -96,7 +96,7 @@ def adapting_nodes(tree: Node) -> dict[str, tuple[str, ...]]:
     annotations (:func:`adapted_annotations`): the order of the weights.
     """
     return {
-        path: tuple(f"{path}{PATH_SEPARATOR}{c.name}" for c in node.children)
+        path: tuple(child_path(path, c.name) for c in node.children)
         + tuple(annotation_key(path, node.annotations[i]) for i in adapted_annotations(node))
         for path, node in tree.walk()
         if node.adapts_weights

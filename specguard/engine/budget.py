@@ -23,19 +23,13 @@ import math
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
-from numbers import Integral, Real
 from typing import Any
 
 from specguard.engine.sb3 import collect_parameter, collect_steps
 from specguard.error import InvalidSpec
+from specguard.validation import check_count, check_positive
 
 __all__ = ["Budget", "trained_timesteps"]
-
-
-def _positive_int(field: str, value: object) -> int:
-    if isinstance(value, bool) or not isinstance(value, Integral) or value < 1:
-        raise InvalidSpec(f"Budget.{field}", f"expected an integer >= 1, got {value!r}")
-    return int(value)
 
 
 @dataclass(frozen=True)
@@ -67,20 +61,20 @@ class Budget:
     checkpoints: int = 1
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "timesteps", _positive_int("timesteps", self.timesteps))
-        object.__setattr__(self, "min_seeds", _positive_int("min_seeds", self.min_seeds))
-        max_seeds = self.min_seeds if self.max_seeds is None else _positive_int("max_seeds", self.max_seeds)
+        object.__setattr__(self, "timesteps", check_count("Budget", "timesteps", self.timesteps))
+        object.__setattr__(self, "min_seeds", check_count("Budget", "min_seeds", self.min_seeds))
+        max_seeds = self.min_seeds if self.max_seeds is None else check_count("Budget", "max_seeds", self.max_seeds)
         if max_seeds < self.min_seeds:
             raise InvalidSpec(
                 "Budget.max_seeds",
                 f"expected max_seeds >= min_seeds, got max_seeds={max_seeds} < min_seeds={self.min_seeds}",
             )
         object.__setattr__(self, "max_seeds", max_seeds)
-        object.__setattr__(self, "eval_episodes", _positive_int("eval_episodes", self.eval_episodes))
+        object.__setattr__(self, "eval_episodes", check_count("Budget", "eval_episodes", self.eval_episodes))
         max_eval = (
             4 * self.eval_episodes
             if self.max_eval_episodes is None
-            else _positive_int("max_eval_episodes", self.max_eval_episodes)
+            else check_count("Budget", "max_eval_episodes", self.max_eval_episodes)
         )
         if max_eval < self.eval_episodes:
             raise InvalidSpec(
@@ -89,11 +83,9 @@ class Budget:
             )
         object.__setattr__(self, "max_eval_episodes", max_eval)
         if self.wall_clock_s is not None:
-            w = self.wall_clock_s
-            if isinstance(w, bool) or not isinstance(w, Real) or not math.isfinite(w) or w <= 0:
-                raise InvalidSpec("Budget.wall_clock_s", f"expected a number of seconds > 0 or None, got {w!r}")
-            object.__setattr__(self, "wall_clock_s", float(w))
-        object.__setattr__(self, "checkpoints", _positive_int("checkpoints", self.checkpoints))
+            wall_clock_s = check_positive("Budget", "wall_clock_s", self.wall_clock_s, "seconds, or None for no cap")
+            object.__setattr__(self, "wall_clock_s", wall_clock_s)
+        object.__setattr__(self, "checkpoints", check_count("Budget", "checkpoints", self.checkpoints))
 
     @property
     def evaluation_stages(self) -> list[int]:
@@ -115,8 +107,7 @@ class Budget:
 
         ``checkpoints``, if given, replaces the budget's own.
         """
-        if isinstance(factor, bool) or not isinstance(factor, Real) or not math.isfinite(factor) or factor <= 0:
-            raise InvalidSpec("budget scale", f"expected a number > 0, got {factor!r}")
+        check_positive("Budget.scaled", "factor", factor, "the budget scale")
         return Budget(
             timesteps=max(1, round(self.timesteps * factor)),
             min_seeds=self.min_seeds,
@@ -146,7 +137,7 @@ def trained_timesteps(
         >>> trained_timesteps(100_000, "PPO", {"n_steps": 1024}, n_envs=4)
         102400
     """
-    timesteps = budget.timesteps if isinstance(budget, Budget) else _positive_int("timesteps", budget)
+    timesteps = budget.timesteps if isinstance(budget, Budget) else check_count("trained_timesteps", "budget", budget)
     chunk = collect_steps(algorithm, hyperparameters or {}) * n_envs
     trained = math.ceil(timesteps / chunk) * chunk
     if trained > timesteps * (1 + ROUNDING_WARNING):

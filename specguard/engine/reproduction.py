@@ -33,6 +33,7 @@ from specguard.engine.signals import STOP_POLL_S, stopping_all_tasks
 from specguard.engine.spec import Spec
 from specguard.engine.spec_result import SpecResult
 from specguard.engine.specfiles import import_file, load_objects
+from specguard.engine.workers import resolve_workers
 from specguard.error import SpecError
 
 __all__ = ["CaseStudy", "Reproduction", "load_case", "machine", "reproduce", "sized"]
@@ -89,7 +90,7 @@ def reproduce(
     seeds: int = 5,
     budget_scale: float = 1.0,
     case_scales: Mapping[str, float] | None = None,
-    workers: int = 2,
+    workers: int | str = 2,
     cache_dir: str | Path | None = ".specguard/cache",
     progress: Callable[[ProgressEvent], None] | None = None,
     command: str = "",
@@ -101,8 +102,10 @@ def reproduce(
     at the first miss); a spec whose seeds fail keeps its errors in its result.
 
     Raises:
-        SpecError: ``case_scales`` names a case that is not given.
+        SpecError: ``case_scales`` names a case that is not given, or ``workers`` is
+            not a worker count (:func:`specguard.engine.workers.resolve_workers`).
     """
+    workers = resolve_workers(workers)
     names = [case.name for case in cases]
     unknown = sorted(set(case_scales or {}) - set(names))
     if unknown:
@@ -117,7 +120,7 @@ def reproduce(
 
     jobs = [(case, key, sized(spec, seeds, scales[case.name])) for case in cases for key, spec in case.specs.items()]
     results: dict[str, dict[str, SpecResult]] = {case.name: {} for case in cases}
-    pool = ThreadPoolExecutor(max_workers=max(1, workers))
+    pool = ThreadPoolExecutor(max_workers=workers)
     try:
         futures = {
             (case.name, key): pool.submit(run_spec, spec, workers=1, cache_dir=cache_dir, progress=tell)

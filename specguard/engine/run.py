@@ -28,24 +28,12 @@ from specguard.engine.progress import ProgressEvent, print_event
 from specguard.engine.runs import Runs
 from specguard.engine.spec import Spec
 from specguard.engine.spec_result import GoalVerdict, SpecResult
-from specguard.engine.workers import resolve_workers as workers_for
+from specguard.engine.workers import resolve_workers
 from specguard.error import SpecError
 
 __all__ = ["GoalVerdict", "SpecResult", "resolve_workers", "run_spec"]
 
 Progress = Callable[[ProgressEvent], None]
-
-
-def resolve_workers(workers: int | str) -> int:
-    """``"auto"`` is the number of usable cores; otherwise an integer >= 1.
-
-    Raises:
-        SpecError: anything else.
-    """
-    try:
-        return workers_for(workers)
-    except ValueError as e:
-        raise SpecError(f"workers: {e}") from None
 
 
 def _refuse_in_spawned_import() -> None:

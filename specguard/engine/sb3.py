@@ -10,9 +10,10 @@ Example:
 from __future__ import annotations
 
 from collections.abc import Mapping
-from numbers import Integral
 from pathlib import Path
 from typing import Any
+
+from specguard.validation import is_count
 
 __all__ = ["ALGORITHMS", "algorithm_class", "collect_parameter", "collect_steps", "collection_unit", "load_model"]
 
@@ -42,7 +43,7 @@ def collect_steps(algorithm: str, hyperparameters: Mapping[str, Any]) -> int:
         if isinstance(freq, (tuple, list)):
             freq = freq[0] if len(freq) == 2 and str(freq[1]) == "step" else 1
         value = freq
-    if isinstance(value, bool) or not isinstance(value, Integral) or value < 1:
+    if not is_count(value):
         return 1  # the algorithm rejects it when training, with its own message
     return int(value)
 

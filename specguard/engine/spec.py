@@ -25,8 +25,9 @@ from specguard.build.initial_env import InitialEnv
 from specguard.engine.budget import Budget
 from specguard.engine.sb3 import ALGORITHMS
 from specguard.error import InvalidSpec
-from specguard.tree.keys import ROOT, check_threshold, resolve_goal
+from specguard.tree.keys import check_expect, check_xfail, check_xfail_thresholded, resolve_goal
 from specguard.tree.nodes import Node
+from specguard.validation import check_count
 
 __all__ = ["Spec"]
 
@@ -42,7 +43,8 @@ class Spec:
         tree: the goal tree.
         budget: training and evaluation budget.
         expect: ``{node path or unique node name: minimum success}``, or one
-            number for the root goal. Empty: measure only.
+            number for the root goal (read by :func:`specguard.tree.keys.check_expect`).
+            Empty: measure only, or take the thresholds of ``@goal_spec(expect=...)``.
         algorithm: a stable-baselines3 algorithm name that fits the action space.
         hyperparameters: keyword arguments for the algorithm (``n_steps``, ...).
         n_envs: parallel environments per run (a ``DummyVecEnv``).
@@ -55,8 +57,9 @@ class Spec:
         baseline: train on the initial env's own reward, termination and
             observation, and evaluate the same goals (the paper's baseline).
         name: a label for reports; defaults to the root's name.
-        xfail: ``{goal: reason}`` for thresholded goals the spec is expected
-            to miss (e.g. a negative result of the paper): pytest reports them
+        xfail: ``{goal: reason}`` (or a list of goals, as for ``@goal_spec``)
+            for thresholded goals the spec is expected to miss (e.g. a
+            negative result of the paper): pytest reports them
             XFAIL (XPASS once they pass), ``specguard run`` does not count
             their miss as a failure. Under anytime verdicts their runs are
             never cut short: a goal not met keeps its run training.
@@ -93,14 +96,9 @@ class Spec:
             )
         if not isinstance(self.hyperparameters, Mapping):
             raise InvalidSpec(f"{label}.hyperparameters", f"expected a mapping, got {self.hyperparameters!r}")
-        if isinstance(self.n_envs, bool) or not isinstance(self.n_envs, int) or self.n_envs < 1:
-            raise InvalidSpec(f"{label}.n_envs", f"expected an integer >= 1, got {self.n_envs!r}")
-        assert self.budget.max_seeds is not None
-        if self.quorum is not None and not (isinstance(self.quorum, int) and 1 <= self.quorum <= self.budget.max_seeds):
-            raise InvalidSpec(
-                f"{label}.quorum",
-                f"expected an integer in [1, budget.max_seeds={self.budget.max_seeds}], got {self.quorum!r}",
-            )
+        object.__setattr__(self, "n_envs", check_count(label, "n_envs", self.n_envs, "parallel environments per run"))
+        if self.quorum is not None:
+            object.__setattr__(self, "quorum", self._checked_quorum(label))
         if not (isinstance(self.confidence, Real) and 0.0 < self.confidence < 1.0):
             raise InvalidSpec(f"{label}.confidence", f"expected a number in (0, 1), got {self.confidence!r}")
         if self.undecided not in UNDECIDED_OUTCOMES:
@@ -148,30 +146,22 @@ class Spec:
         assert self.budget.max_seeds is not None
         return self.quorum if self.quorum is not None else self.budget.max_seeds
 
+    def _checked_quorum(self, label: str) -> int:
+        """A quorum is a count of runs (validation.check_count) that the budget can train."""
+        quorum = check_count(label, "quorum", self.quorum, "runs that must meet each threshold")
+        assert self.budget.max_seeds is not None
+        if quorum > self.budget.max_seeds:
+            raise InvalidSpec(
+                label, f"expected quorum <= budget.max_seeds={self.budget.max_seeds} (the runs trained), got {quorum}"
+            )
+        return quorum
+
     def _resolve_xfail(self, label: str) -> dict[str, str]:
-        if not isinstance(self.xfail, Mapping):
-            raise InvalidSpec(f"{label}.xfail", f"expected {{goal: reason}}, got {self.xfail!r}")
-        resolved: dict[str, str] = {}
-        for key, reason in self.xfail.items():
-            where = f"{label}.xfail[{key!r}]"
-            path = resolve_goal(self.tree, key, where)
-            if path not in self.thresholds:
-                raise InvalidSpec(where, f"expected a goal that expect gives a threshold to: {list(self.thresholds)}")
-            if not isinstance(reason, str) or not reason.strip():
-                raise InvalidSpec(where, f"expected the reason as text, got {reason!r}")
-            resolved[path] = reason
+        reasons = check_xfail(label, self.xfail)
+        resolved = {resolve_goal(self.tree, k, f"{label}.xfail[{k!r}]"): reason for k, reason in reasons.items()}
+        check_xfail_thresholded(label, resolved, self.thresholds)
         return resolved
 
     def _resolve_thresholds(self, label: str) -> dict[str, float]:
-        expect: Any = self.expect
-        if isinstance(expect, Real) and not isinstance(expect, bool):
-            expect = {ROOT: expect}
-        if not isinstance(expect, Mapping):
-            raise InvalidSpec(
-                f"{label}.expect", f"expected {{node path or name: min success}} or a number, got {expect!r}"
-            )
-        resolved: dict[str, float] = {}
-        for key, value in expect.items():
-            where = f"{label}.expect[{key!r}]"
-            resolved[resolve_goal(self.tree, key, where)] = check_threshold(where, value)
-        return resolved
+        thresholds = check_expect(label, self.expect)
+        return {resolve_goal(self.tree, k, f"{label}.expect[{k!r}]"): t for k, t in thresholds.items()}

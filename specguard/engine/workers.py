@@ -52,6 +52,8 @@ import cloudpickle
 
 from specguard.engine.protocol import Failure, Position, Task, TaskOutcome, TaskRunner, one_line, outcome_of
 from specguard.engine.signals import STOP_POLL_S, SigtermGuard, raise_if_stopping
+from specguard.error import InvalidSpec
+from specguard.validation import parse_count
 
 __all__ = ["parse_workers", "resolve_workers", "run_tasks"]
 
@@ -66,18 +68,19 @@ _MAX_MESSAGES_PER_WAKEUP = 64
 
 
 def parse_workers(value: object) -> int | str:
-    """The one worker-count rule: ``"auto"`` or an integer >= 1 (digit strings accepted, as from options).
+    """The one worker-count rule: ``"auto"`` or a count (:func:`specguard.validation.parse_count`).
 
     Raises:
-        ValueError: anything else, with what was expected.
+        InvalidSpec: anything else, with what was expected (a ``SpecError``,
+            which each door makes its own usage error: the CLI's and the
+            pytest plugin's option errors; ``run_spec`` raises it as it is).
     """
     if value == "auto":
         return "auto"
-    if isinstance(value, str) and value.strip().isdigit():
-        value = int(value)
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ValueError(f"expected an integer >= 1 or 'auto', got {value!r}")
-    return value
+    try:
+        return parse_count(value, "or 'auto': one per usable core")
+    except ValueError as e:
+        raise InvalidSpec("workers", str(e)) from None
 
 
 def resolve_workers(value: object, *, share: int = 1) -> int:
@@ -87,7 +90,7 @@ def resolve_workers(value: object, *, share: int = 1) -> int:
     oversubscribe the cores between them.
 
     Raises:
-        ValueError: see :func:`parse_workers`.
+        InvalidSpec: see :func:`parse_workers`.
     """
     parsed = parse_workers(value)
     if parsed != "auto":

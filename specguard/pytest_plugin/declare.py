@@ -18,32 +18,16 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from numbers import Real
 from typing import Any, TypeVar
 
 from specguard.error import InvalidSpec
-from specguard.tree.keys import ROOT, check_threshold
+from specguard.tree.keys import ROOT, check_expect, check_xfail, check_xfail_thresholded, require_thresholds
 
 __all__ = ["GOAL_FIXTURE", "SpecItem", "goal_spec", "goal_specs"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
 GOAL_FIXTURE = "specguard_goal"  # the plugin's fixture the goal items are parametrised over
-
-
-def _check_expect(where: str, expect: object) -> dict[Any, float] | None:
-    if expect is None:
-        return None
-    if isinstance(expect, Real) and not isinstance(expect, bool):
-        expect = {ROOT: expect}
-    if not isinstance(expect, Mapping) or not expect:
-        raise InvalidSpec(where, f"expected expect to be {{goal: min success}} or a number, got {expect!r}")
-    out: dict[Any, float] = {}
-    for goal, value in expect.items():
-        if goal is not ROOT and not isinstance(goal, str):
-            raise InvalidSpec(where, f"expected goal names or paths as keys of expect, got {goal!r}")
-        out[goal] = check_threshold(f"{where}.expect[{goal!r}]", value)
-    return out
 
 
 def goal_spec(
@@ -83,27 +67,20 @@ def goal_spec(
 
 
 def _check_declaration(where: str, expect: object, xfail: object) -> tuple[dict[Any, float] | None, dict[Any, str]]:
-    """The decorator's thresholds and xfail reasons, checked.
+    """The decorator's thresholds and xfail reasons, read by the rules a Spec's own follow (:mod:`specguard.tree.keys`).
+
+    ``expect=None`` asserts the spec's own thresholds; given, it must hold at least one.
 
     Raises:
         InvalidSpec: naming the test and what is wrong.
     """
-    thresholds = _check_expect(where, expect)
-    if xfail is None:
-        reasons: dict[Any, str] = {}
-    elif isinstance(xfail, Mapping):
-        reasons = {str(k): str(v) for k, v in xfail.items()}
-    elif isinstance(xfail, Sequence) and not isinstance(xfail, str):
-        reasons = {str(k): "expected to miss its threshold" for k in xfail}
-    else:
-        raise InvalidSpec(where, f"expected xfail to be {{goal: reason}} or a list of goals, got {xfail!r}")
-    if thresholds is not None and ROOT in thresholds:
-        # One number asserts the root goal, which xfail calls "root".
-        reasons = {ROOT if k == "root" else k: v for k, v in reasons.items()}
+    thresholds = None if expect is None else check_expect(where, expect)
+    reasons = check_xfail(where, xfail)
     if thresholds is not None:
-        unknown = [g for g in reasons if g not in thresholds]
-        if unknown:
-            raise InvalidSpec(where, f"xfail names goals {unknown} that expect does not list: {list(thresholds)}")
+        require_thresholds(where, thresholds)
+        if ROOT in thresholds:  # one number asserts the root goal, whose item is called "root": so may its xfail be
+            reasons = {ROOT if k == "root" else k: v for k, v in reasons.items()}
+        check_xfail_thresholded(where, reasons, thresholds)
     return thresholds, reasons
 
 
@@ -148,8 +125,7 @@ def goal_specs(specs: Mapping[str, Any], *, marks: Mapping[str, Any] | None = No
         where = f"goal_specs[{key!r}]"
         if not isinstance(spec, Spec):
             raise InvalidSpec(where, f"expected a specguard.Spec, got {type(spec).__name__}")
-        if not spec.thresholds:
-            raise InvalidSpec(where, "expected a spec with thresholds (expect=...): there is nothing to assert")
+        require_thresholds(where, spec.thresholds)
         extra = (marks or {}).get(key, ())
         extra = list(extra) if isinstance(extra, (list, tuple)) else [extra]
         for goal in spec.thresholds:

@@ -15,8 +15,9 @@ from specguard.engine.spec import Spec
 from specguard.engine.spec_result import SpecResult
 from specguard.extend import SHAPING, Node
 from specguard.stats.intervals import GoalOutcome, QuorumVerdict, RunVerdict
-from specguard.tree.keys import GOAL, SAFETY, kind, resolve_goal
+from specguard.tree.keys import GOAL, SAFETY, kind, require_thresholds, resolve_goal
 from specguard.utils.text import interval_text
+from specguard.validation import child_path
 
 if TYPE_CHECKING:
     from specguard.stats.compare import Baseline
@@ -161,9 +162,8 @@ def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[RunVerdict])
     node = _node(spec.tree, path)
     episodes = sum(r.episodes for r in runs)
     if node.children and episodes:
-        rates = {
-            f"{path}/{c.name}": sum(r.successes[f"{path}/{c.name}"] for r in runs) / episodes for c in node.children
-        }
+        kids = [child_path(path, c.name) for c in node.children]
+        rates = {kid: sum(r.successes[kid] for r in runs) / episodes for kid in kids}
         best, worst = max(rates, key=rates.__getitem__), min(rates, key=rates.__getitem__)
         if rates[best] - rates[worst] >= 0.3:
             return (
@@ -226,19 +226,16 @@ def with_thresholds(spec: Spec, expect: dict[Any, float] | None, goal: object) -
     """The spec with a decorator's thresholds (if any) and the goal paths one item asserts.
 
     Raises:
-        InvalidSpec: a goal the tree lacks; SpecError: nothing to check.
+        InvalidSpec: a goal the tree lacks, or nothing to check.
     """
     import dataclasses
-
-    from specguard.error import SpecError
 
     where = f"Spec {spec.label!r}"
     if expect:
         thresholds = {resolve_goal(spec.tree, g, where): t for g, t in expect.items()}
         xfail = {g: r for g, r in spec.xfail.items() if g in thresholds}  # the decorator's own xfail marks items
         spec = dataclasses.replace(spec, expect=thresholds, xfail=xfail)
-    if not spec.thresholds:
-        raise SpecError(f"{where}: no thresholds to check; give expect= to the Spec or to @goal_spec")
+    require_thresholds(where, spec.thresholds)
     return spec, [resolve_goal(spec.tree, goal, where)] if goal is not None else list(spec.thresholds)
 
 

@@ -154,15 +154,14 @@ def _parse_options(config: pytest.Config) -> _Options:
         ini = next(i for o, i, *_ in _SETTINGS if o == option)
         return _setting(config, option, ini)
 
+    from specguard.validation import parse_positive
+
     try:
-        scale = float(get("--goal-specs-budget-scale"))
-        if not scale > 0:
-            raise ValueError
-    except ValueError:
-        raise pytest.UsageError(
-            f"--goal-specs-budget-scale: expected a number > 0, got {get('--goal-specs-budget-scale')!r}"
-        ) from None
+        scale = parse_positive(get("--goal-specs-budget-scale"))
+    except ValueError as e:
+        raise pytest.UsageError(f"--goal-specs-budget-scale: {e}") from None
     from specguard.engine.workers import resolve_workers
+    from specguard.error import InvalidSpec
     from specguard.stats.anytime import parse_checkpoints
 
     try:
@@ -173,8 +172,8 @@ def _parse_options(config: pytest.Config) -> _Options:
     workerinput = getattr(config, "workerinput", None)
     try:  # under xdist, "auto" shares the cores among its workers
         workers = resolve_workers(get("--goal-specs-workers"), share=int((workerinput or {}).get("workercount", 1)))
-    except ValueError as e:
-        raise pytest.UsageError(f"--goal-specs-workers: {e}") from None
+    except InvalidSpec as e:
+        raise pytest.UsageError(f"--goal-specs-workers: {e.message}") from None
     undecided = get("--goal-specs-undecided")
     if undecided not in UNDECIDED:
         raise pytest.UsageError(f"--goal-specs-undecided: expected one of {', '.join(UNDECIDED)}, got {undecided!r}")

@@ -21,7 +21,7 @@ from __future__ import annotations
 from collections import Counter
 
 from specguard.extend import SAFETY, SHAPING, Annotation, ChildWeights, Node, adapted_annotations, component_weights
-from specguard.validation import number_text
+from specguard.validation import PATH_SEPARATOR, child_path, number_text
 
 __all__ = ["formula"]
 
@@ -48,7 +48,7 @@ def formula(tree: Node) -> str:
     """
     paths = list(tree.walk())
     counts = Counter(node.name for _, node in paths)
-    root_prefix = tree.name + "/"
+    root_prefix = tree.name + PATH_SEPARATOR
 
     def label(path: str, node: Node) -> str:
         if counts[node.name] == 1:
@@ -62,7 +62,7 @@ def formula(tree: Node) -> str:
         if node.own_reward and "core" in roles:
             core_parts.append(node.formula_term(name))
         for c, passed in zip(node.children, node.child_weights()):
-            core_parts.extend(_child(c, f"{path}/{c.name}", passed, roles))
+            core_parts.extend(_child(c, child_path(path, c.name), passed, roles))
         core_w, ann_w = component_weights(node)
         parts = [_weighted(core_w, " + ".join(core_parts))] if core_parts else []
         for a, w in zip(node.annotations, ann_w):

@@ -10,11 +10,12 @@ mapping of keys (``RunResult.successes``):
   violation.
 
 Names cannot contain ``/`` or ``:``, so the two kinds of keys never collide
-(:func:`is_safety_key`). ``Spec(expect=...)``, ``@sg.goal_spec(expect=...)``,
-the CLI and stored baselines all go through :func:`resolve_goal` and
-:func:`check_threshold`, so a name means the same goal or safety rate, and a
-threshold the same range, everywhere. Imports nothing heavy: the pytest plugin
-uses it at collection.
+(:func:`is_safety_key`). ``Spec(expect=..., xfail=...)``,
+``@sg.goal_spec(expect=..., xfail=...)``, the CLI and stored baselines all go
+through :func:`check_expect`, :func:`check_xfail`, :func:`resolve_goal` and
+:func:`check_threshold`, so ``expect`` and ``xfail`` take the same forms, a
+name means the same goal or safety rate, and a threshold the same range,
+everywhere. Imports nothing heavy: the pytest plugin uses it at collection.
 
 Example:
     >>> import specguard as sg
@@ -30,17 +31,20 @@ Example:
     'pendulum/up:spin (safe)'
     >>> check_threshold("expect['up']", 0.9)
     0.9
+    >>> check_expect("Spec 'p'", 0.8), check_xfail("Spec 'p'", ["up"])
+    ({root: 0.8}, {'up': 'expected to miss its threshold'})
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from numbers import Real
 from typing import TYPE_CHECKING, Any
 
 from specguard.error import InvalidSpec
 from specguard.extend import SAFETY, annotation_key
-from specguard.validation import ANNOTATION_SEPARATOR
+from specguard.validation import ANNOTATION_SEPARATOR, PATH_SEPARATOR
 
 if TYPE_CHECKING:
     from specguard.extend import Node
@@ -49,10 +53,15 @@ __all__ = [
     "GOAL",
     "ROOT",
     "SAFETY",
+    "XFAIL_REASON",
+    "check_expect",
     "check_threshold",
+    "check_xfail",
+    "check_xfail_thresholded",
     "is_safety_key",
     "kind",
     "label",
+    "require_thresholds",
     "resolve_goal",
     "result_keys",
     "safety_keys",
@@ -98,6 +107,91 @@ def check_threshold(where: str, value: object) -> float:
     if not 0.0 <= rate < 1.0:
         raise InvalidSpec(where, f"expected a success rate in [0, 1), got {value!r}")
     return rate
+
+
+XFAIL_REASON = "expected to miss its threshold"
+"""The reason of a goal that ``xfail`` lists without one."""
+
+
+def _check_goal_key(where: str, argument: str, goal: object) -> None:
+    if goal is not ROOT and not isinstance(goal, str):
+        raise InvalidSpec(where, f"expected goal names or paths as keys of {argument}, got {goal!r}")
+
+
+def check_expect(where: str, expect: object) -> dict[Any, float]:
+    """The one reading of ``expect``: ``{goal: threshold}`` from a mapping, or from one number (the :data:`ROOT` goal).
+
+    Keys stay as given (names, paths, safety keys): whoever has the tree
+    resolves them (:func:`resolve_goal`); values follow :func:`check_threshold`.
+    An empty mapping gives no thresholds and is allowed here: a ``Spec`` may
+    get its thresholds elsewhere (``@goal_spec(expect=...)``) or only measure
+    (``specguard run`` prints its table); where thresholds are asserted,
+    :func:`require_thresholds` asks for at least one.
+
+    Raises:
+        InvalidSpec: naming ``where`` (``Spec 'p'``, ``goal_spec 'test_x'``), the argument and the value.
+    """
+    if isinstance(expect, Real) and not isinstance(expect, bool):
+        expect = {ROOT: expect}
+    if not isinstance(expect, Mapping):
+        raise InvalidSpec(where, f"expected expect to be {{goal: min success}} or a number, got {expect!r}")
+    thresholds: dict[Any, float] = {}
+    for goal, value in expect.items():
+        _check_goal_key(where, "expect", goal)
+        thresholds[goal] = check_threshold(f"{where}.expect[{goal!r}]", value)
+    return thresholds
+
+
+def check_xfail(where: str, xfail: object) -> dict[Any, str]:
+    """The one reading of ``xfail``: ``{goal: reason}`` from a mapping, or from a list of goals (:data:`XFAIL_REASON`).
+
+    ``None`` lists none. Keys stay as given, as for :func:`check_expect`;
+    :func:`check_xfail_thresholded` then says they must have thresholds.
+
+    Raises:
+        InvalidSpec: a goal that is not a name or path, or a reason that is not non-empty text.
+    """
+    if xfail is None:
+        return {}
+    if isinstance(xfail, Sequence) and not isinstance(xfail, str):
+        for goal in xfail:
+            _check_goal_key(where, "xfail", goal)
+        xfail = dict.fromkeys(xfail, XFAIL_REASON)
+    if not isinstance(xfail, Mapping):
+        raise InvalidSpec(where, f"expected xfail to be {{goal: reason}} or a list of goals, got {xfail!r}")
+    reasons: dict[Any, str] = {}
+    for goal, reason in xfail.items():
+        _check_goal_key(where, "xfail", goal)
+        if not isinstance(reason, str) or not reason.strip():
+            raise InvalidSpec(f"{where}.xfail[{goal!r}]", f"expected the reason as non-empty text, got {reason!r}")
+        reasons[goal] = str.__str__(reason)
+    return reasons
+
+
+def check_xfail_thresholded(where: str, reasons: Mapping[Any, str], thresholds: Mapping[Any, float]) -> None:
+    """Every goal ``xfail`` lists has a threshold in ``expect``: a goal without one cannot miss it.
+
+    Both mappings key their goals alike (both as given, or both resolved by :func:`resolve_goal`).
+    """
+    unknown = [goal for goal in reasons if goal not in thresholds]
+    if unknown:
+        raise InvalidSpec(
+            where, f"expected xfail to name goals that expect gives a threshold to ({list(thresholds)}), got {unknown}"
+        )
+
+
+def require_thresholds(where: str, thresholds: Mapping[Any, float]) -> None:
+    """There is at least one threshold: what is asserted must have something to assert.
+
+    A ``Spec`` alone may have none (:func:`check_expect`); a goal spec, the
+    decorator's own ``expect`` and the items of ``sg.goal_specs`` may not.
+    """
+    if not thresholds:
+        raise InvalidSpec(
+            where,
+            f"expected at least one threshold, got {dict(thresholds)!r}: there is nothing to assert",
+            hint="give expect= to the Spec or to @goal_spec (@goal_spec without expect asserts the Spec's own)",
+        )
 
 
 def safety_keys(tree: Node) -> list[str]:
@@ -150,7 +244,7 @@ def resolve_goal(tree: Node, key: object, where: str) -> str:
         raise InvalidSpec(where, f"expected a node path or name as goal, got {key!r}")
     if key in paths or key in safety:
         return key
-    named = [p for p in paths if p.rsplit("/", 1)[-1] == key]
+    named = [p for p in paths if p.rsplit(PATH_SEPARATOR, 1)[-1] == key]
     named += [k for k in safety if k.rsplit(ANNOTATION_SEPARATOR, 1)[-1] == key]
     if len(named) == 1:
         return named[0]
