@@ -556,3 +556,23 @@ def test_baselines_live_beside_the_cache_dir_by_default(pytester):
     run(pytester, "--goal-specs", "--goal-specs-save", "main").assert_outcomes(passed=1)
     assert (pytester.path / "baselines" / "main.json").is_file()  # run() puts the cache at ./cache
     assert not (pytester.path / ".specguard").exists()
+
+
+def test_a_spec_error_inside_the_goal_spec_function_fails_its_item_in_one_line(pytester):
+    write(
+        pytester,
+        """
+        @sg.goal_spec(expect=0.5)
+        def test_builds_a_bad_goal(pendulum):
+            return sg.Spec(pendulum, sg.Goal("empty", x=(2.0, 1.0)))  # lo > hi: an InvalidSpec, raised here
+
+        @sg.goal_spec(expect=0.0)
+        def test_fine(pendulum, tree):
+            return tiny(pendulum, tree)
+        """,
+    )
+    out = run(pytester, "--goal-specs", "-p", "no:randomly")
+    out.assert_outcomes(passed=1, failed=1)
+    text = out.stdout.str()
+    assert "test_specs.py::test_builds_a_bad_goal[root]: Goal 'empty', feature 'x': expected lo <= hi" in text
+    assert "During handling" not in text and "Traceback" not in text and "specguard/tree/" not in text

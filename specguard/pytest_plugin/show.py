@@ -21,7 +21,10 @@ from specguard.tree.formula import formula
 from specguard.tree.nodes import Node
 from specguard.utils.text import bounds_text
 
-__all__ = ["has_goal_specs", "render_spec", "render_tree", "show_goal_spec_file"]
+__all__ = ["SHOWN", "SHOW_PROPERTY", "has_goal_specs", "render_spec", "render_tree", "show_goal_spec_file"]
+
+SHOW_PROPERTY = "specguard.show"  # the user property that carries a rendered spec to the summary
+SHOWN = "shown, not trained"  # the skip reason of a goal item under --goal-specs-show
 
 
 def render_tree(tree: Node) -> list[str]:

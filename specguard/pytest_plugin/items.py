@@ -1,0 +1,111 @@
+"""Goal-spec items: which spec an item belongs to, the spec it returns with its thresholds, and its outcome in pytest.
+
+The one sequence every goal item runs (a training item, and one under
+``--goal-specs-show``): call the test function with its fixtures, check that
+it returned a ``Spec``, apply the item's thresholds; a ``SpecError`` on the
+way fails the item with one line.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import warnings
+from collections.abc import Iterator, Sequence
+from typing import Any
+
+import pytest
+
+from specguard.pytest_plugin.declare import GOAL_FIXTURE, SpecItem
+
+__all__ = ["GoalMissed", "detailed", "goal_of", "group_of", "one_line_errors", "raise_outcome", "spec_of"]
+
+
+class GoalMissed(AssertionError):
+    """A goal missed its threshold (the failure an ``xfail`` goal expects)."""
+
+
+def group_of(item: pytest.Item) -> str:
+    """The item's spec: its test without the goal parameter (one training for all its goals)."""
+    assert isinstance(item, pytest.Function)
+    callspec = getattr(item, "callspec", None)
+    case = callspec.params.get(GOAL_FIXTURE) if callspec is not None else None
+    if isinstance(case, SpecItem):
+        return f"{item.path.name}::{item.originalname}[{case.spec}]"
+    ids = list(getattr(callspec, "_idlist", []))
+    params = list(callspec.params) if callspec is not None else []
+    if callspec is not None and GOAL_FIXTURE in params and len(ids) == len(params):
+        del ids[params.index(GOAL_FIXTURE)]
+    suffix = f"[{'-'.join(ids)}]" if ids else ""
+    return f"{item.path.name}::{item.originalname}{suffix}"
+
+
+def goal_of(item: pytest.Function) -> Any:
+    """The goal the item asserts (``None``: every threshold of its spec)."""
+    goal = item.funcargs.get(GOAL_FIXTURE)
+    return goal.goal if isinstance(goal, SpecItem) else goal  # sg.goal_specs: the spec's own thresholds
+
+
+def where(item: pytest.Item) -> str:
+    """The item as messages name it: ``file.py::test[goal]``."""
+    return f"{item.path.name}::{item.name}"
+
+
+def detailed(config: pytest.Config) -> bool:
+    """Whether the user asked for details: ``-v`` or ``--tb=long``."""
+    return bool(config.get_verbosity() > 0 or config.getoption("tbstyle", "auto") == "long")
+
+
+@contextlib.contextmanager
+def one_line_errors(item: pytest.Item) -> Iterator[None]:
+    """Fail ``item`` with one line for a ``SpecError`` raised inside (with its notes under ``-v``)."""
+    from specguard.error import SpecError
+
+    error: str | None = None
+    try:
+        yield
+    except SpecError as e:
+        error = f"{where(item)}: {e}"
+        if detailed(item.config):  # a worker's own traceback only when asked for
+            error += "".join(f"\n\n{note}" for note in getattr(e, "__notes__", ()))
+    if error is not None:  # one message, not a chain of two (this runs while the with-block's error unwinds)
+        raise pytest.fail.Exception(error, pytrace=False) from None
+
+
+def spec_of(item: pytest.Function, expect: Any) -> tuple[Any, list[str]]:
+    """Call the item's function with its fixtures and apply its thresholds: the ``Spec`` and the goals it asserts.
+
+    Fails the item when the function does not return a ``Spec``; call it inside
+    :func:`one_line_errors`, which turns a ``SpecError`` into the item's one line.
+    """
+    from specguard.engine.spec import Spec
+    from specguard.pytest_plugin.gate import with_thresholds
+
+    spec = item.obj(**{name: item.funcargs[name] for name in item._fixtureinfo.argnames})
+    if not isinstance(spec, Spec):
+        pytest.fail(
+            f"{where(item)}: a goal spec must return a specguard.Spec, got {type(spec).__name__}", pytrace=False
+        )
+    return with_thresholds(spec, expect, goal_of(item))
+
+
+def raise_outcome(item: pytest.Function, checks: Sequence[Any], undecided_as: str, result: Any) -> None:
+    """The item's pytest outcome from its goals' checks: pass, ``GoalMissed``, xfail, or pass with a warning.
+
+    ``undecided_as`` is the session's ``--goal-specs-undecided``: what a goal whose
+    runs stayed undecided does (fail, xfail or pass).
+    """
+    from specguard.stats.intervals import GoalOutcome
+
+    failures = [c.message() for c in checks if c.outcome is GoalOutcome.FAILED]
+    undecided = [c.message() for c in checks if c.outcome is GoalOutcome.UNDECIDED]
+    if failures or (undecided and undecided_as == "fail"):
+        text = "\n\n".join(failures + undecided)
+        if detailed(item.config) and result.tracebacks:
+            text += "".join(f"\n\nworker traceback (seed {k}):\n{tb}" for k, tb in sorted(result.tracebacks.items()))
+        raise GoalMissed(text)
+    if undecided and undecided_as == "xfail":
+        pytest.xfail("undecided: " + "\n\n".join(undecided))
+    if undecided:
+        warnings.warn(
+            "undecided goal spec passed by --goal-specs-undecided=pass:\n" + "\n".join(undecided), stacklevel=1
+        )

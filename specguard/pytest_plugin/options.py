@@ -1,0 +1,199 @@
+"""The plugin's options: the command-line flags, their ini settings, and the one parse of both per session.
+
+Every value goes through the rule the other doors use (:mod:`specguard.validation`,
+:func:`specguard.engine.workers.resolve_workers`, :func:`specguard.stats.anytime.parse_checkpoints`);
+a bad value is a ``pytest.UsageError`` before anything trains.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+__all__ = ["UNDECIDED", "Options", "add_options", "baseline_path", "parse_options"]
+
+UNDECIDED = ("fail", "xfail", "pass")
+
+
+@dataclasses.dataclass
+class Options:
+    """A session's goal-spec options, parsed and checked."""
+
+    enabled: bool
+    budget_scale: float
+    checkpoints: int
+    workers: int | str
+    cache_dir: str | None
+    undecided: str
+    report_dir: Path | None
+    save: str | None
+    compare: str | None
+    baseline_dir: Path
+    executor: str
+
+
+# (option, ini name, ini type, default, help)
+_SETTINGS: list[tuple[str, str, str, Any, str]] = [
+    (
+        "--goal-specs-budget-scale",
+        "goal_specs_budget_scale",
+        "string",
+        "1",
+        "multiply training timesteps (0.25: quick PR check)",
+    ),
+    (
+        "--goal-specs-checkpoints",
+        "goal_specs_checkpoints",
+        "string",
+        "10",
+        "judge runs at this many checkpoints and stop training once every threshold is met "
+        "(anytime verdicts); 1: train every run's whole budget",
+    ),
+    (
+        "--goal-specs-workers",
+        "goal_specs_workers",
+        "string",
+        "auto",
+        "parallel training processes per pytest process: N, or auto = the usable cores (shared among xdist workers)",
+    ),
+    ("--goal-specs-cache-dir", "goal_specs_cache_dir", "string", ".specguard/cache", "where trained runs are cached"),
+    (
+        "--goal-specs-undecided",
+        "goal_specs_undecided",
+        "string",
+        "fail",
+        "what a goal whose runs stayed undecided does: fail, xfail or pass (with a warning)",
+    ),
+    (
+        "--goal-specs-report",
+        "goal_specs_report",
+        "string",
+        "",
+        "write JSON, Markdown and PNG reports to this directory",
+    ),
+    (
+        "--goal-specs-executor",
+        "goal_specs_executor",
+        "string",
+        "local",
+        "where runs train: local (this machine) or a Dask scheduler address, tcp://host:8786",
+    ),
+    (
+        "--goal-specs-baseline-dir",
+        "goal_specs_baseline_dir",
+        "string",
+        "",
+        "where saved baselines live (default: 'baselines' beside the cache dir, .specguard/baselines)",
+    ),
+]
+
+
+def add_options(parser: pytest.Parser) -> None:
+    """Register the ``--goal-specs*`` options and their ini settings."""
+    group = parser.getgroup("specguard", "goal specs (specguard)")
+    group.addoption("--goal-specs", action="store_true", default=None, help="train goal specs and check their goals")
+    group.addoption(
+        "--goal-specs-show",
+        action="store_true",
+        default=False,
+        help="with --goal-specs: print every goal spec's tree, reward formula, observation layout and budget, "
+        "train nothing, and report its items skipped",
+    )
+    parser.addini("goal_specs", type="bool", default=False, help="run goal specs without --goal-specs")
+    for option, ini, kind, default, text in _SETTINGS:
+        group.addoption(option, default=None, help=f"{text} (ini: {ini}, default: {default or 'none'})")
+        parser.addini(ini, type=kind, default=default, help=text)  # type: ignore[arg-type]
+    group.addoption(
+        "--goal-specs-no-cache", action="store_true", default=False, help="neither read nor write the cache"
+    )
+    group.addoption(
+        "--goal-specs-save", metavar="NAME", default=None, help="store this session's results as baseline NAME"
+    )
+    group.addoption(
+        "--goal-specs-compare",
+        metavar="NAME",
+        nargs="?",
+        const="latest",
+        default=None,
+        help="fail goals whose success dropped against baseline NAME (default: the latest saved)",
+    )
+
+
+def _setting(config: pytest.Config, option: str, ini: str) -> str:
+    value = config.getoption(option.lstrip("-").replace("-", "_"))
+    return str(value if value is not None else config.getini(ini))
+
+
+def parse_options(config: pytest.Config) -> Options:
+    """The session's options from its command line and ini file.
+
+    Raises:
+        pytest.UsageError: a value breaks its rule (named, with the value).
+    """
+
+    def get(option: str) -> str:
+        ini = next(i for o, i, *_ in _SETTINGS if o == option)
+        return _setting(config, option, ini)
+
+    from specguard.validation import parse_positive
+
+    try:
+        scale = parse_positive(get("--goal-specs-budget-scale"))
+    except ValueError as e:
+        raise pytest.UsageError(f"--goal-specs-budget-scale: {e}") from None
+    from specguard.engine.workers import resolve_workers
+    from specguard.error import InvalidSpec
+    from specguard.stats.anytime import parse_checkpoints
+
+    try:
+        checkpoints = parse_checkpoints(get("--goal-specs-checkpoints"))
+    except ValueError as e:
+        raise pytest.UsageError(f"--goal-specs-checkpoints: {e}") from None
+
+    workerinput = getattr(config, "workerinput", None)
+    try:  # under xdist, "auto" shares the cores among its workers
+        workers = resolve_workers(get("--goal-specs-workers"), share=int((workerinput or {}).get("workercount", 1)))
+    except InvalidSpec as e:
+        raise pytest.UsageError(f"--goal-specs-workers: {e.message}") from None
+    undecided = get("--goal-specs-undecided")
+    if undecided not in UNDECIDED:
+        raise pytest.UsageError(f"--goal-specs-undecided: expected one of {', '.join(UNDECIDED)}, got {undecided!r}")
+    report = get("--goal-specs-report")
+    return Options(
+        enabled=bool(config.getoption("goal_specs") or config.getini("goal_specs")),
+        budget_scale=scale,
+        checkpoints=checkpoints,
+        workers=workers,
+        cache_dir=None if config.getoption("goal_specs_no_cache") else get("--goal-specs-cache-dir"),
+        undecided=undecided,
+        report_dir=Path(report) if report else None,
+        save=config.getoption("goal_specs_save"),
+        compare=config.getoption("goal_specs_compare"),
+        baseline_dir=Path(get("--goal-specs-baseline-dir") or Path(get("--goal-specs-cache-dir")).parent / "baselines"),
+        executor=_checked_executor(get("--goal-specs-executor")),
+    )
+
+
+def _checked_executor(text: str) -> str:
+    from specguard.engine.executors import ExecutorError, check_address
+
+    try:
+        return check_address(text)
+    except ExecutorError as e:
+        raise pytest.UsageError(f"--goal-specs-executor: {str(e).removeprefix('executor: ')}") from None
+
+
+def baseline_path(options: Options, name: str) -> Path:
+    """The file of baseline ``name`` (``latest``: the newest saved)."""
+    if name == "latest":
+        saved = sorted(options.baseline_dir.glob("*.json"), key=lambda p: p.stat().st_mtime)
+        if not saved:
+            raise pytest.UsageError(
+                f"--goal-specs-compare: no baseline saved in {str(options.baseline_dir)!r}; "
+                "store one first with --goal-specs-save NAME"
+            )
+        return saved[-1]
+    return options.baseline_dir / f"{name}.json"

@@ -1,0 +1,84 @@
+"""Recording goal items' figures as reports arrive (on the xdist controller too), and writing them out.
+
+The terminal table, the ``--goal-specs-report`` files and the ``--goal-specs-save`` baseline.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from specguard.pytest_plugin.session import Session
+
+__all__ = ["PROPERTY", "Recorder", "write_outputs"]
+
+PROPERTY = "specguard"  # the user property that carries a goal item's row
+
+
+def _verdict(report: pytest.TestReport) -> str:
+    if hasattr(report, "wasxfail"):
+        return "xpassed" if report.passed else "xfailed"
+    return report.outcome
+
+
+class Recorder:
+    """Collects the figures of goal items as reports arrive (on the xdist controller too) and reports them."""
+
+    def __init__(self, config: pytest.Config, state: Session) -> None:
+        self.config = config
+        self.state = state
+
+    def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
+        if report.when != "call":
+            return
+        for key, value in report.user_properties:
+            if key != PROPERTY:
+                continue
+            row = json.loads(str(value))
+            verdict = _verdict(report)
+            row["verdict"] = "undecided" if verdict == "passed" and row["outcome"] == "undecided" else verdict
+            self.state.rows.append(row)
+
+    def pytest_terminal_summary(self, terminalreporter: Any) -> None:
+        if not self.state.rows:
+            return
+        from specguard.report.session import table_lines
+
+        terminalreporter.write_sep("=", "specguard goal specs")
+        for line in table_lines(self.state.rows):
+            terminalreporter.write_line(line)
+        for path in write_outputs(self.config, self.state):
+            terminalreporter.write_line(f"specguard: wrote {path}")
+
+
+def write_outputs(config: pytest.Config, state: Session) -> list[Path]:
+    """Write the reports and the baseline this session asked for; the paths written."""
+    if hasattr(config, "workerinput"):  # an xdist worker: the controller writes
+        return []
+    written: list[Path] = []
+    if state.options.report_dir is not None:
+        from specguard.report.gifs import report_gifs
+        from specguard.report.session import write_reports
+
+        gifs = report_gifs(state.options.report_dir, state.rows, state.specs, state.options.cache_dir)
+        written += write_reports(state.options.report_dir, state.rows, gifs=gifs)
+        written += [gif.path for gif in gifs.values() if gif.path is not None]
+        terminal = config.pluginmanager.get_plugin("terminalreporter")
+        for group, gif in gifs.items():
+            if gif.path is None and terminal is not None:
+                terminal.write_line(f"specguard: {group}: {gif.text}")
+    if state.options.save:
+        from specguard.stats.compare import save_baseline
+
+        path = state.options.baseline_dir / f"{state.options.save}.json"
+        rows = [r for r in state.rows if r["runs_counts"]]
+        save_baseline(
+            path,
+            {f"{r['group']}::{r['goal']}": r["runs_counts"] for r in rows},
+            {f"{r['group']}::{r['goal']}": r["spec_key"] for r in rows if r.get("spec_key")},
+        )
+        written.append(path)
+    return written

@@ -1,0 +1,83 @@
+"""A pytest session's goal-spec state: its options, the one result per spec, and where progress goes."""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+
+from specguard.pytest_plugin.options import Options
+
+__all__ = ["Session", "run", "scaled", "terminal_progress"]
+
+
+@dataclasses.dataclass
+class Session:
+    """What a session keeps: options, the baseline compared with, the executor, results and report rows."""
+
+    options: Options
+    baseline: Any = None  # a specguard.stats.compare.Baseline
+    executor: Any = None  # a specguard.engine.executors.Executor, made once per session
+    memo: dict[str, Any] = dataclasses.field(default_factory=dict)
+    rows: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+    specs: dict[str, Any] = dataclasses.field(default_factory=dict)  # group -> its trained Spec, for report GIFs
+    progress: Callable[[Any], None] | None = None  # the run_spec sink: events to the terminal reporter
+
+
+def scaled(state: Session, spec: Any) -> Any:
+    """The spec as this session trains it: its budget scaled, judged at the session's checkpoints."""
+    return spec.scaled(state.options.budget_scale, checkpoints=state.options.checkpoints)
+
+
+def terminal_progress(config: pytest.Config) -> Callable[[Any], None]:
+    """The progress sink of a session: events as lines through pytest's terminal reporter.
+
+    Not captured (no ``-s`` needed), each on a line of its own. On a terminal,
+    every event (a line per tenth of each seed's budget); in a log (not a tty,
+    or no markup), only the line that ends each seed's run; under ``-q``, none.
+    """
+
+    def write(event: Any) -> None:
+        from specguard.engine.progress import format_event
+
+        if config.get_verbosity() < 0:
+            return
+        reporter = config.pluginmanager.get_plugin("terminalreporter")
+        if reporter is None:  # e.g. -p no:terminal: stderr, as `specguard run` does
+            if event.finished:
+                from specguard.engine.progress import print_event
+
+                print_event(event)
+            return
+        live = reporter.isatty and config.get_terminal_writer().hasmarkup
+        if not live and not event.finished:
+            return
+        capture = config.pluginmanager.get_plugin("capturemanager")
+        with capture.global_and_fixture_disabled() if capture is not None else contextlib.nullcontext():
+            reporter.ensure_newline()
+            reporter.write_line(format_event(event))
+
+    return write
+
+
+def run(state: Session, spec: Any) -> Any:
+    """The spec's result: trained (or read from the cache) once per session, shared by all its goal items."""
+    from specguard.engine.fingerprint import fingerprint_spec
+    from specguard.engine.run import run_spec
+
+    # Every goal item of a spec shares one result, under the spec's whole identity
+    # (seeds, quorum and `undecided` included), the one the cache and baselines use.
+    key = fingerprint_spec(spec).spec_key
+    if key not in state.memo:
+        state.memo[key] = run_spec(
+            spec,
+            workers=state.options.workers,
+            cache_dir=state.options.cache_dir,
+            progress=state.progress,
+            executor=state.executor or "local",
+        )
+        state.memo[key].spec_key = key
+    return state.memo[key]
