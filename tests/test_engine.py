@@ -412,7 +412,7 @@ class _ForgingExecutor:
         self.forge = forge
 
     def run(self, tasks, *, on_line=None, stop_on=None, on_outcome=None):
-        from specguard.engine.protocol import Done
+        from specguard.parallel.protocol import Done
 
         outcomes = {}
         for task in tasks:

@@ -10,7 +10,7 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.engine.executors import DaskExecutor, ExecutorError, LocalExecutor, check_address, make_executor
+from specguard.parallel.executors import DaskExecutor, ExecutorError, LocalExecutor, check_address, make_executor
 
 distributed = pytest.importorskip("distributed")
 

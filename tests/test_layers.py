@@ -7,6 +7,7 @@ design dependency). Parts, lowest first:
 - base: ``error``, ``validation``, ``version``, ``utils/``;
 - ``extend`` (the operator API), then ``tree/`` (the built-in nodes), then ``build/`` (the constructed env);
 - ``stats/`` (intervals, anytime looks, comparisons: numbers only);
+- ``parallel/`` (tasks in processes or on a cluster: generic, it knows nothing of specs);
 - the public tools over the core: ``strategies``, ``registry``, ``contract/``, ``testing``;
 - ``engine/`` (specs, training, runs, the cache);
 - ``report/`` (session reports, figures, GIFs);
@@ -43,13 +44,25 @@ ALLOWED: Mapping[str, frozenset[str]] = {
     "registry": BASE | {"extend", "tree", "registry"},
     "contract": CORE | {"strategies", "contract"},
     "testing": CORE | {"contract", "testing"},
-    "engine": TOOLS | {"stats", "engine"},
-    "report": TOOLS | {"stats", "engine", "report"},
-    "pytest_plugin": TOOLS | {"stats", "engine", "report", "pytest_plugin"},
-    "cli": TOOLS | {"stats", "engine", "report", "pytest_plugin", "cli"},
+    "parallel": BASE | {"parallel"},
+    "engine": TOOLS | {"stats", "parallel", "engine"},
+    "report": TOOLS | {"stats", "parallel", "engine", "report"},
+    "pytest_plugin": TOOLS | {"stats", "parallel", "engine", "report", "pytest_plugin"},
+    "cli": TOOLS | {"stats", "parallel", "engine", "report", "pytest_plugin", "cli"},
     "__main__": frozenset({"cli", "__main__"}),
 }
-NO_DEEP_LEARNING = ("extend", "tree", "build", "stats", "contract", "strategies", "registry", "testing", *tuple(BASE))
+NO_DEEP_LEARNING = (
+    "extend",
+    "tree",
+    "build",
+    "stats",
+    "parallel",
+    "contract",
+    "strategies",
+    "registry",
+    "testing",
+    *BASE,
+)
 DEEP_LEARNING = ("torch", "stable_baselines3")
 
 

@@ -1,4 +1,4 @@
-"""specguard.engine.workers: one spawned process per task, each failing alone, none left behind.
+"""specguard.parallel.workers: one spawned process per task, each failing alone, none left behind.
 
 The task functions below live in this module. ``tests/`` is not a package, so the module is
 registered with cloudpickle to be pickled by value: the spawned children get the functions
@@ -22,10 +22,10 @@ import cloudpickle
 import numpy as np
 import pytest
 
-from specguard.engine.protocol import Done, Failure, Report, Task, TaskOutcome
-from specguard.engine.signals import stopping_all_tasks
-from specguard.engine.workers import parse_workers, resolve_workers, run_tasks
 from specguard.error import InvalidSpec
+from specguard.parallel.protocol import Done, Failure, Report, Task, TaskOutcome
+from specguard.parallel.signals import stopping_all_tasks
+from specguard.parallel.workers import parse_workers, resolve_workers, run_tasks
 
 cloudpickle.register_pickle_by_value(sys.modules[__name__])
 
@@ -362,8 +362,8 @@ def write_pid_then_sleep(pid_file, *, report):
 PARENT = """
 import signal, sys
 import sg_worker_helper
-from specguard.engine.protocol import Task
-from specguard.engine.workers import run_tasks, parse_workers, resolve_workers
+from specguard.parallel.protocol import Task
+from specguard.parallel.workers import run_tasks, parse_workers, resolve_workers
 
 try:
     run_tasks([Task(0, sg_worker_helper.write_pid_then_sleep, (sys.argv[1],))], max_workers=1)

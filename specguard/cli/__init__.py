@@ -1,0 +1,1 @@
+"""The ``specguard`` command line: ``show``, ``run`` and ``reproduce``."""

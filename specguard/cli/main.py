@@ -61,8 +61,8 @@ def _prepare_json(text: str) -> Path:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from specguard.engine.executors import make_executor
-    from specguard.engine.workers import resolve_workers
+    from specguard.parallel.executors import make_executor
+    from specguard.parallel.workers import resolve_workers
 
     specs = load_objects(args.target)
     json_path = _prepare_json(args.json) if args.json else None  # before training, which may take hours
@@ -102,7 +102,7 @@ def _run_all(args: argparse.Namespace, specs: dict[str, Any], executor: Any) -> 
 
 
 def _workers(text: str) -> int | str:
-    from specguard.engine.workers import parse_workers
+    from specguard.parallel.workers import parse_workers
 
     try:
         return parse_workers(text)
@@ -111,7 +111,7 @@ def _workers(text: str) -> int | str:
 
 
 def _executor(text: str) -> str:
-    from specguard.engine.executors import ExecutorError, check_address
+    from specguard.parallel.executors import ExecutorError, check_address
 
     try:
         return check_address(text)
@@ -218,7 +218,7 @@ def _case_scale(text: str) -> tuple[str, float]:
 def _reproduce(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from specguard.engine.progress import print_event
     from specguard.engine.reproduction import load_case, reproduce
-    from specguard.engine.workers import resolve_workers
+    from specguard.parallel.workers import resolve_workers
     from specguard.report.reproduction import write_markdown
 
     cases = [load_case(path) for path in args.targets]

@@ -1,0 +1,1 @@
+"""Specs trained and judged: specs and budgets, training one seed, cache keys and the cache, ``run_spec``."""

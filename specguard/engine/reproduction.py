@@ -29,12 +29,12 @@ from specguard.engine.budget import Budget
 from specguard.engine.fingerprint import versions
 from specguard.engine.progress import ProgressEvent
 from specguard.engine.run import run_spec
-from specguard.engine.signals import STOP_POLL_S, stopping_all_tasks
 from specguard.engine.spec import Spec
 from specguard.engine.spec_result import SpecResult
 from specguard.engine.specfiles import import_file, load_objects
-from specguard.engine.workers import resolve_workers
 from specguard.error import SpecError
+from specguard.parallel.signals import STOP_POLL_S, stopping_all_tasks
+from specguard.parallel.workers import resolve_workers
 
 __all__ = ["CaseStudy", "Reproduction", "load_case", "machine", "reproduce", "sized"]
 
@@ -103,7 +103,7 @@ def reproduce(
 
     Raises:
         SpecError: ``case_scales`` names a case that is not given, or ``workers`` is
-            not a worker count (:func:`specguard.engine.workers.resolve_workers`).
+            not a worker count (:func:`specguard.parallel.workers.resolve_workers`).
     """
     workers = resolve_workers(workers)
     names = [case.name for case in cases]

@@ -22,14 +22,14 @@ from collections.abc import Callable
 from pathlib import Path
 
 from specguard.engine.cache import Cache
-from specguard.engine.executors import LOCAL, Executor, make_executor
 from specguard.engine.judging import judge, seeds_still_needed
 from specguard.engine.progress import ProgressEvent, print_event
 from specguard.engine.runs import Runs
 from specguard.engine.spec import Spec
 from specguard.engine.spec_result import GoalVerdict, SpecResult
-from specguard.engine.workers import resolve_workers
 from specguard.error import SpecError
+from specguard.parallel.executors import LOCAL, Executor, make_executor
+from specguard.parallel.workers import resolve_workers
 
 __all__ = ["GoalVerdict", "SpecResult", "resolve_workers", "run_spec"]
 
@@ -80,7 +80,7 @@ def run_spec(
         lock_timeout: seconds to wait for another process training the same run.
         executor: ``"local"`` (a process per seed on this machine, ``workers``
             at once), a Dask scheduler address (``"tcp://host:8786"``), or an
-            :class:`~specguard.engine.executors.Executor`. The cache stays on this
+            :class:`~specguard.parallel.executors.Executor`. The cache stays on this
             machine either way: only missing seeds are submitted.
 
     Returns:

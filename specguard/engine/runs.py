@@ -6,14 +6,14 @@ from collections.abc import Callable
 from typing import Any, Literal
 
 from specguard.engine.cache import Cache, try_acquire, wait_for
-from specguard.engine.executors import Executor
 from specguard.engine.fingerprint import fingerprint_spec, versions
 from specguard.engine.progress import ProgressEvent, decode_update
-from specguard.engine.protocol import Failure, Task, TaskOutcome
 from specguard.engine.results import RunResult
 from specguard.engine.spec import Spec
 from specguard.engine.spec_result import SpecResult
 from specguard.engine.train_task import describe_failure, is_spec_error, train_task
+from specguard.parallel.executors import Executor
+from specguard.parallel.protocol import Failure, Task, TaskOutcome
 from specguard.tree.keys import label, result_keys
 
 __all__ = ["Runs"]

@@ -26,11 +26,11 @@ import gymnasium as gym
 from specguard.build.env import make_baseline_env, make_env
 from specguard.engine.auto_weights import WeightAdapter
 from specguard.engine.progress import ProgressEvent, decode_update, encode_update
-from specguard.engine.protocol import Report
 from specguard.engine.results import RunResult
 from specguard.engine.sb3 import ALGORITHMS, algorithm_class
 from specguard.engine.spec import Spec
 from specguard.error import InvalidSpec, SpecError
+from specguard.parallel.protocol import Report
 from specguard.stats.anytime import checkpoint_steps, final_evaluation, interim_look
 
 __all__ = [

@@ -6,10 +6,10 @@ from collections.abc import Mapping
 from typing import Any
 
 from specguard.engine.fingerprint import check_versions
-from specguard.engine.protocol import Failure, Report
 from specguard.engine.spec import Spec
 from specguard.engine.train import TrainingError
 from specguard.error import SpecError
+from specguard.parallel.protocol import Failure, Report
 
 __all__ = ["describe_failure", "is_spec_error", "train_task"]
 

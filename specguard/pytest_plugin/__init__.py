@@ -1,0 +1,1 @@
+"""The pytest plugin (``pytest --goal-specs``): hooks in ``plugin``, the logic in plain modules beside it."""

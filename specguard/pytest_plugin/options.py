@@ -1,7 +1,7 @@
 """The plugin's options: the command-line flags, their ini settings, and the one parse of both per session.
 
 Every value goes through the rule the other doors use (:mod:`specguard.validation`,
-:func:`specguard.engine.workers.resolve_workers`, :func:`specguard.stats.anytime.parse_checkpoints`);
+:func:`specguard.parallel.workers.resolve_workers`, :func:`specguard.stats.anytime.parse_checkpoints`);
 a bad value is a ``pytest.UsageError`` before anything trains.
 """
 
@@ -144,8 +144,8 @@ def parse_options(config: pytest.Config) -> Options:
         scale = parse_positive(get("--goal-specs-budget-scale"))
     except ValueError as e:
         raise pytest.UsageError(f"--goal-specs-budget-scale: {e}") from None
-    from specguard.engine.workers import resolve_workers
     from specguard.error import InvalidSpec
+    from specguard.parallel.workers import resolve_workers
     from specguard.stats.anytime import parse_checkpoints
 
     try:
@@ -178,7 +178,7 @@ def parse_options(config: pytest.Config) -> Options:
 
 
 def _checked_executor(text: str) -> str:
-    from specguard.engine.executors import ExecutorError, check_address
+    from specguard.parallel.executors import ExecutorError, check_address
 
     try:
         return check_address(text)

@@ -53,7 +53,7 @@ def pytest_configure(config: pytest.Config) -> None:
         except BaselineError as e:
             raise pytest.UsageError(f"--goal-specs-compare: {e}") from None
     if options.enabled and options.executor != "local":
-        from specguard.engine.executors import ExecutorError, make_executor
+        from specguard.parallel.executors import ExecutorError, make_executor
 
         try:  # connect now: a cluster that does not answer is a usage error before anything trains
             state.executor = make_executor(options.executor, workers=1)

@@ -20,7 +20,7 @@ class Session:
 
     options: Options
     baseline: Any = None  # a specguard.stats.compare.Baseline
-    executor: Any = None  # a specguard.engine.executors.Executor, made once per session
+    executor: Any = None  # a specguard.parallel.executors.Executor, made once per session
     memo: dict[str, Any] = dataclasses.field(default_factory=dict)
     rows: list[dict[str, Any]] = dataclasses.field(default_factory=list)
     specs: dict[str, Any] = dataclasses.field(default_factory=dict)  # group -> its trained Spec, for report GIFs

@@ -1,0 +1,1 @@
+"""Numbers only: success intervals and verdicts, anytime looks and their correction, baseline comparisons."""

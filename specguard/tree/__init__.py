@@ -1,0 +1,1 @@
+"""The goal-tree language: ``Goal`` and ``All``, ``Distance`` and ``Constraint``, result keys, the reward formula."""

@@ -50,9 +50,9 @@ from typing import Any
 
 import cloudpickle
 
-from specguard.engine.protocol import Failure, Position, Task, TaskOutcome, TaskRunner, one_line, outcome_of
-from specguard.engine.signals import STOP_POLL_S, SigtermGuard, raise_if_stopping
 from specguard.error import InvalidSpec
+from specguard.parallel.protocol import Failure, Position, Task, TaskOutcome, TaskRunner, one_line, outcome_of
+from specguard.parallel.signals import STOP_POLL_S, SigtermGuard, raise_if_stopping
 from specguard.validation import parse_count
 
 __all__ = ["parse_workers", "resolve_workers", "run_tasks"]

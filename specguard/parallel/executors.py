@@ -1,12 +1,12 @@
 """Where runs train: the local process pool (default) or a Dask cluster, chosen by address.
 
 The engine hands an executor a batch of tasks (one per seed) and gets back one
-outcome per task: :class:`~specguard.engine.protocol.Done` or
-:class:`~specguard.engine.protocol.Failure`. The driver keeps the cache: it looks runs
+outcome per task: :class:`~specguard.parallel.protocol.Done` or
+:class:`~specguard.parallel.protocol.Failure`. The driver keeps the cache: it looks runs
 up before submitting, submits only missing seeds, and stores what comes back
 (results and model bytes), so cluster workers need no shared filesystem.
 
-* ``"local"``: :func:`specguard.engine.workers.run_tasks`, one spawned process per
+* ``"local"``: :func:`specguard.parallel.workers.run_tasks`, one spawned process per
   seed on this machine.
 * ``"tcp://host:8786"`` (any Dask scheduler address: ``tcp``, ``tls``, ``ws``,
   ``wss``, ``ucx``): the seeds run as tasks on that Dask cluster (a
@@ -28,10 +28,10 @@ import uuid
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
-from specguard.engine.protocol import Failure, Position, Task, TaskOutcome, TaskRunner, outcome_of
-from specguard.engine.signals import SigtermGuard, raise_if_stopping
-from specguard.engine.workers import run_tasks
 from specguard.error import SpecError
+from specguard.parallel.protocol import Failure, Position, Task, TaskOutcome, TaskRunner, outcome_of
+from specguard.parallel.signals import SigtermGuard, raise_if_stopping
+from specguard.parallel.workers import run_tasks
 
 __all__ = ["LOCAL", "DaskExecutor", "Executor", "ExecutorError", "LocalExecutor", "check_address", "make_executor"]
 
@@ -123,7 +123,7 @@ def _on_cluster(fn: Callable[..., Any], args: tuple[Any, ...], queue: str, key: 
 class DaskExecutor:
     """Tasks as Dask futures on the cluster whose scheduler is at ``address``.
 
-    A task that raises gives a :class:`~specguard.engine.protocol.Failure` with its
+    A task that raises gives a :class:`~specguard.parallel.protocol.Failure` with its
     phase, step and cause, as locally. A worker that dies mid-task is handled by
     Dask: the scheduler retries the task on another worker up to its
     ``distributed.scheduler.allowed-failures`` (default 3), then the seed fails
