@@ -56,3 +56,27 @@ def test_readme_operator_example_is_the_tested_file():
 @parametrize_with_checks([AtLeast])
 def test_readme_operator_passes_the_contract_kit(operator, check):
     check(operator)
+
+
+def test_readme_layout_names_every_module_under_its_part():
+    from pathlib import Path
+
+    import specguard
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    table = readme.split("### Layout", 1)[1].split("\n\n")[2]
+    rows = {}
+    for line in table.splitlines()[2:]:
+        part, modules = line.strip("|").split("|", 1)
+        rows[part.strip().strip("`").rstrip("/")] = modules
+    package = Path(specguard.__file__).parent
+    missing = []
+    for path in sorted(package.rglob("*.py")):
+        relative = path.relative_to(package)
+        if path.name == "__init__.py" or "__pycache__" in relative.parts:
+            continue
+        part = relative.parts[0] if len(relative.parts) > 1 else None
+        row = rows.get({"contract": "public tools", "utils": "base"}.get(part, part)) if part else table
+        if row is None or f"`{path.stem}`" not in row:
+            missing.append(str(relative))
+    assert missing == [], f"README's layout table does not list: {missing}"
