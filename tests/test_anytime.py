@@ -23,7 +23,8 @@ def test_stages_double_up_to_the_maximum():
     assert evaluation_stages(30, 120) == [30, 60, 120]
     assert evaluation_stages(30, 100) == [30, 60, 100]
     assert evaluation_stages(30, 30) == [30]
-    assert Budget(timesteps=10, eval_episodes=30).looks == 3  # one checkpoint: the final evaluation's stages
+    assert Budget(timesteps=10, eval_episodes=30, checkpoints=1).looks == 3  # the final evaluation's stages alone
+    assert Budget(timesteps=10, eval_episodes=30).looks == 12  # by default, 9 interim checkpoints too
     assert Budget(timesteps=10, eval_episodes=30, checkpoints=10).looks == 12
 
 

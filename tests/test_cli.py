@@ -22,7 +22,7 @@ SPEC_FILE = textwrap.dedent(
         sg.Goal("stabilization", omega=(-0.25, 0.25)),
         name="pendulum",
     )
-    budget = sg.Budget(timesteps=128, min_seeds=1, eval_episodes=2)
+    budget = sg.Budget(timesteps=128, min_seeds=1, eval_episodes=2, checkpoints=1)  # judged once
     tiny = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
     easy = sg.Spec(pendulum, tree, budget=budget, expect={"stabilization": 0.0}, hyperparameters=tiny)
     specs = {"hard": sg.Spec(pendulum, tree, budget=budget, expect={"pendulum": 0.99}, hyperparameters=tiny)}

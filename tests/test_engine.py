@@ -321,7 +321,7 @@ def test_a_safety_threshold_is_asserted_end_to_end(tmp_path):
     # A constraint nothing violates (|omega| <= 8 in Pendulum): its safety rate is 100%, met in both runs.
     never = sg.Constraint(lambda s, a: abs(s.omega) > 8.5, name="never")
     tree = sg.All(*pendulum.trees["b"].children, name="pendulum").annotate(never)
-    budget = sg.Budget(timesteps=128, min_seeds=2, max_seeds=4, eval_episodes=4)
+    budget = sg.Budget(timesteps=128, min_seeds=2, max_seeds=4, eval_episodes=4, checkpoints=1)
     s = sg.Spec(pendulum.initial_env, tree, budget=budget, hyperparameters=TINY, expect={"never": 0.3}, quorum=2)
     result = sg.run_spec(s, workers=2, cache_dir=None, progress=None)
     assert result.passed and result.goals["pendulum:never"].runs == ["met", "met"]

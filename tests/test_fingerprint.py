@@ -374,7 +374,8 @@ def test_a_user_operator_dataclass_is_keyed_by_its_description_and_its_code():
 
 def test_anytime_checkpoints_and_thresholds_are_part_of_a_runs_key_but_xfail_is_not():
     # Under anytime verdicts a run's result depends on its checkpoints and on its thresholds (it stops once met).
-    spec = sg.Spec(pendulum.initial_env, pendulum.trees["w"], budget=sg.Budget(timesteps=1000), expect=0.5)
+    once = sg.Budget(timesteps=1000, checkpoints=1)
+    spec = sg.Spec(pendulum.initial_env, pendulum.trees["w"], budget=once, expect=0.5)
     anytime = spec.scaled(1, checkpoints=10)
     stricter = dataclasses.replace(anytime, expect={"pendulum": 0.6})
     expected_miss = dataclasses.replace(anytime, xfail={"pendulum": "why"})

@@ -181,7 +181,7 @@ def test_a_run_whose_thresholds_are_not_met_trains_its_whole_budget():
 
 
 def test_one_checkpoint_trains_the_whole_budget_even_when_met():
-    budget = sg.Budget(timesteps=4096, eval_episodes=30)
+    budget = sg.Budget(timesteps=4096, eval_episodes=30, checkpoints=1)
     spec = sg.Spec(reached_initial(), sg.Goal("up", x=(0.5, None)), budget=budget, hyperparameters=TINY, expect=0.8)
     result, _ = train_run(spec, seed=0)
     assert not result.met_early and result.timesteps == 4096

@@ -163,7 +163,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="N",
         help="judge each run at N checkpoints and stop its training once every threshold is met "
-        "(anytime verdicts; default: the spec's budget, 1 unless set: the whole budget)",
+        "(anytime verdicts; default: the spec's own Budget.checkpoints, 10 unless set; 1: the whole budget)",
     )
     run.add_argument("--json", metavar="FILE", help="also write the results as JSON (missing directories are created)")
     run.add_argument("--quiet", action="store_true", help="no progress lines on stderr")

@@ -12,8 +12,8 @@ it and stops training once every threshold is met (:mod:`specguard.stats.anytime
 Example:
     >>> Budget(timesteps=50_000, min_seeds=2, max_seeds=4)  # doctest: +NORMALIZE_WHITESPACE
     Budget(timesteps=50000, min_seeds=2, max_seeds=4, eval_episodes=30, max_eval_episodes=120,
-           wall_clock_s=None, checkpoints=1)
-    >>> Budget(timesteps=50_000, checkpoints=10).looks
+           wall_clock_s=None, checkpoints=10)
+    >>> Budget(timesteps=50_000).looks
     12
 """
 
@@ -27,6 +27,7 @@ from typing import Any
 
 from specguard.engine.sb3 import collect_parameter, collect_steps
 from specguard.error import InvalidSpec
+from specguard.stats.anytime import DEFAULT_CHECKPOINTS
 from specguard.validation import check_count, check_positive
 
 __all__ = ["Budget", "trained_timesteps"]
@@ -45,11 +46,13 @@ class Budget:
         max_eval_episodes: evaluation episodes an undecided run may get in
             total before it is called (default: 4x ``eval_episodes``).
         wall_clock_s: optional cap in seconds on one run's training.
-        checkpoints: evaluation checkpoints of a run. 1: judged once, after
-            its whole budget. ``C > 1``: also judged after every ``C``-th of
-            the budget, and training stops at the first checkpoint where every
-            threshold is met (anytime verdicts); the verdicts' confidence is
-            corrected for the extra looks (:mod:`specguard.stats.anytime`).
+        checkpoints: evaluation checkpoints of a run (default
+            :data:`~specguard.stats.anytime.DEFAULT_CHECKPOINTS`, 10, at every
+            door). ``C > 1``: judged after every ``C``-th of the budget, and
+            training stops at the first checkpoint where every threshold is
+            met (anytime verdicts); the verdicts' confidence is corrected for
+            the extra looks (:mod:`specguard.stats.anytime`). 1: judged once,
+            after the whole budget.
     """
 
     timesteps: int
@@ -58,7 +61,7 @@ class Budget:
     eval_episodes: int = 30
     max_eval_episodes: int | None = None
     wall_clock_s: float | None = None
-    checkpoints: int = 1
+    checkpoints: int = DEFAULT_CHECKPOINTS
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "timesteps", check_count("Budget", "timesteps", self.timesteps))

@@ -24,7 +24,7 @@ class Options:
 
     enabled: bool
     budget_scale: float
-    checkpoints: int
+    checkpoints: int | None  # None: each spec's own Budget.checkpoints
     workers: int | str
     cache_dir: str | None
     undecided: str
@@ -48,9 +48,9 @@ _SETTINGS: list[tuple[str, str, str, Any, str]] = [
         "--goal-specs-checkpoints",
         "goal_specs_checkpoints",
         "string",
-        "10",
-        "judge runs at this many checkpoints and stop training once every threshold is met "
-        "(anytime verdicts); 1: train every run's whole budget",
+        "",
+        "judge runs at this many checkpoints instead of each spec's own (Budget.checkpoints, 10 unless set) and "
+        "stop training once every threshold is met (anytime verdicts); 1: train every run's whole budget",
     ),
     (
         "--goal-specs-workers",
@@ -149,7 +149,8 @@ def parse_options(config: pytest.Config) -> Options:
     from specguard.stats.anytime import parse_checkpoints
 
     try:
-        checkpoints = parse_checkpoints(get("--goal-specs-checkpoints"))
+        text = get("--goal-specs-checkpoints")
+        checkpoints = parse_checkpoints(text) if text else None  # None: each spec's own
     except ValueError as e:
         raise pytest.UsageError(f"--goal-specs-checkpoints: {e}") from None
 

@@ -28,7 +28,7 @@ class Session:
 
 
 def scaled(state: Session, spec: Any) -> Any:
-    """The spec as this session trains it: its budget scaled, judged at the session's checkpoints."""
+    """The spec as this session trains it: its budget scaled, judged at its own checkpoints or the session's."""
     return spec.scaled(state.options.budget_scale, checkpoints=state.options.checkpoints)
 
 

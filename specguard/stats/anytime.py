@@ -50,6 +50,7 @@ from collections.abc import Callable, Mapping
 from specguard.stats.intervals import RunVerdict, run_verdict, success_interval
 
 __all__ = [
+    "DEFAULT_CHECKPOINTS",
     "EpisodeCounts",
     "checkpoint_steps",
     "evaluation_stages",
@@ -61,6 +62,12 @@ __all__ = [
     "min_successes_to_meet",
     "parse_checkpoints",
 ]
+
+DEFAULT_CHECKPOINTS = 10
+"""The one default of every door (``run_spec``, ``specguard run``, ``pytest --goal-specs``): a run is judged at
+every tenth of its budget and stops training once every threshold is met. A spec that wants another
+judgment says so in its ``Budget(checkpoints=...)``; a door's option (``--checkpoints``,
+``--goal-specs-checkpoints``) overrides it for one session, visibly."""
 
 EpisodeCounts = Callable[[int, int], dict[str, int]]
 """``evaluate(start, count)``: the counts per key of episodes ``start .. start + count - 1``."""
