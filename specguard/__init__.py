@@ -36,6 +36,7 @@ _EXPORTS = {
     "Annotation": "specguard.extend",
     "Budget": "specguard.engine.budget",
     "Cache": "specguard.engine.cache",
+    "CacheWarning": "specguard.error",
     "CompiledTree": "specguard.build.compiled",
     "Constraint": "specguard.tree.builtin_annotations",
     "Distance": "specguard.tree.builtin_annotations",
@@ -105,6 +106,7 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.engine.spec import Spec as Spec
     from specguard.engine.spec_result import GoalVerdict as GoalVerdict
     from specguard.engine.spec_result import SpecResult as SpecResult
+    from specguard.error import CacheWarning as CacheWarning
     from specguard.error import EvaluationError as EvaluationError
     from specguard.error import FingerprintError as FingerprintError
     from specguard.error import InitialEnvError as InitialEnvError

@@ -8,6 +8,7 @@ catch :class:`SpecError` to handle all of them.
 from __future__ import annotations
 
 __all__ = [
+    "CacheWarning",
     "EvaluationError",
     "FingerprintError",
     "InitialEnvError",
@@ -115,3 +116,11 @@ class VersionMismatch(SpecError):
     default_hint = (
         "finish editing first, then run again (a new key trains afresh); give cluster workers the same versions"
     )
+
+
+class CacheWarning(UserWarning):
+    """The run cache could not be used (written, locked or created): the trained results are kept, not cached.
+
+    Issued once per spec, naming the path and the cause; the verdict never
+    depends on the cache.
+    """

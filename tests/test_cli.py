@@ -199,3 +199,12 @@ def test_a_spec_file_in_a_package_imports_its_package_by_name(tmp_path, monkeypa
         "spec = sg.Spec(sg.InitialEnv('Pendulum-v1', features=('x', 'y', 'omega')), base.TREE, sg.Budget(64))\n"
     )
     assert list(load_objects(str(package / "more.py"))) == ["spec"]
+
+
+def test_a_spec_file_that_exits_at_import_is_one_line_naming_it(tmp_path, capsys):
+    path = tmp_path / "exits.py"
+    path.write_text("import sys\nsys.exit(3)\n")
+    for command in ("run", "show"):
+        assert main([command, str(path), "--no-cache"] if command == "run" else [command, str(path)]) == 2
+        err = capsys.readouterr().err
+        assert f"specguard: error: {path}: importing it called sys.exit(3)" in err and "Traceback" not in err

@@ -454,3 +454,60 @@ def test_a_malformed_result_from_a_worker_fails_its_seed_and_is_never_stored(tmp
     assert set(result.errors) == {0, 1}
     assert all("malformed result" in message for message in result.errors.values()), result.errors
     assert not list(tmp_path.rglob("result.json"))
+
+
+def _a_file_in_the_cache_dirs_place(tmp_path):
+    path = tmp_path / "cache"
+    path.write_text("not a folder")
+    return path
+
+
+def _a_read_only_cache(tmp_path):
+    path = tmp_path / "cache"
+    path.mkdir()
+    path.chmod(0o555)
+    return path
+
+
+@pytest.mark.parametrize("make_cache", [_a_file_in_the_cache_dirs_place, _a_read_only_cache], ids=["file", "read-only"])
+def test_a_cache_that_cannot_be_written_warns_once_and_keeps_the_trained_result(tmp_path, make_cache):
+    import os
+
+    cache = make_cache(tmp_path)
+    if os.geteuid() == 0 and make_cache is _a_read_only_cache:
+        pytest.skip("root writes into read-only folders")
+    expected = sg.run_spec(spec(expect={"pendulum": 0.95}), workers=2, cache_dir=None, progress=None)
+    with pytest.warns(sg.CacheWarning) as caught:
+        result = sg.run_spec(spec(expect={"pendulum": 0.95}), workers=2, cache_dir=cache, progress=None)
+    assert len(caught) == 1 and str(cache) in str(caught[0].message)
+    assert [r.successes for r in result.runs] == [r.successes for r in expected.runs] and len(result.runs) == 2
+    assert result.passed == expected.passed and not result.errors
+
+
+def test_a_full_disk_warns_with_its_cause_and_keeps_every_run(tmp_path, monkeypatch):
+    import errno
+
+    from specguard.engine.cache import Cache
+
+    def full(self, key, result, files):
+        raise OSError(errno.ENOSPC, "No space left on device", str(self.folder(key)))
+
+    monkeypatch.setattr(Cache, "store_files", full)
+    with pytest.warns(sg.CacheWarning, match="No space left on device") as caught:
+        result = sg.run_spec(spec(expect={"pendulum": 0.95}), workers=2, cache_dir=tmp_path, progress=None)
+    assert len(caught) == 1
+    assert len(result.runs) == 2 and not result.errors  # both seeds kept, judged
+
+
+def test_a_lock_that_cannot_be_created_warns_and_keeps_every_run(tmp_path, monkeypatch):
+    import errno
+
+    from specguard.engine.cache import Cache
+
+    def denied(self, key, timeout):
+        raise PermissionError(errno.EACCES, "Permission denied", str(self.folder(key).parent / f"{key}.lock"))
+
+    monkeypatch.setattr(Cache, "lock", denied)
+    with pytest.warns(sg.CacheWarning, match="Permission denied") as caught:
+        result = sg.run_spec(spec(expect={"pendulum": 0.95}), workers=2, cache_dir=tmp_path, progress=None)
+    assert len(caught) == 1 and len(result.runs) == 2 and not result.errors

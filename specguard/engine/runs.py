@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from typing import Any, Literal
 
@@ -12,6 +13,7 @@ from specguard.engine.results import RunResult
 from specguard.engine.spec import Spec
 from specguard.engine.spec_result import SpecResult
 from specguard.engine.train_task import describe_failure, is_spec_error, train_task
+from specguard.error import CacheWarning
 from specguard.parallel.executors import Executor
 from specguard.parallel.protocol import Failure, Task, TaskOutcome
 from specguard.tree.keys import label, result_keys
@@ -71,8 +73,14 @@ class Runs:
                     continue
                 key = self._key(seed)
                 if key is not None and self.cache is not None:
-                    lock = self.cache.lock(key, self.lock_timeout)
-                    if not try_acquire(lock):
+                    try:
+                        lock = self.cache.lock(key, self.lock_timeout)
+                        acquired = try_acquire(lock)
+                    except OSError as e:  # the cache folder cannot be made or written: train without it
+                        self._without_cache(e)
+                        todo.append(seed)
+                        continue
+                    if not acquired:
                         busy.append(seed)  # another process trains it: take it from the cache when it is done
                         continue
                     locks[seed] = lock
@@ -82,7 +90,9 @@ class Runs:
             self._train(todo)
             for seed in busy:
                 key = self._key(seed)
-                assert key is not None and self.cache is not None
+                if key is None or self.cache is None:  # the cache failed meanwhile
+                    self._train([seed])
+                    continue
                 lock = self.cache.lock(key, self.lock_timeout)
                 if not try_acquire(lock):
                     self.say(ProgressEvent(self.spec.label, seed, "waiting"))
@@ -122,7 +132,10 @@ class Runs:
                 return
             key = self._key(seed)
             if key is not None and self.cache is not None:
-                self.cache.store_files(key, run, outcome.value["files"])
+                try:
+                    self.cache.store_files(key, run, outcome.value["files"])
+                except OSError as e:  # read-only, full, not a folder: the run is kept and judged all the same
+                    self._without_cache(e)
             trained[seed] = run
             self._event(seed, "done", run, message=self._rates(run))
 
@@ -142,6 +155,20 @@ class Runs:
             if seed in trained:
                 self.result.runs.append(trained[seed])
                 self.result.cached[seed] = False
+
+    def _without_cache(self, error: OSError) -> None:
+        """Warn once that the cache cannot be used (its path, the cause) and go on without it: nothing is lost."""
+        if self.cache is None:
+            return
+        where = error.filename or self.cache.root
+        cause = error.strerror or str(error)
+        warnings.warn(
+            f"specguard cache: cannot write {where} ({cause}); the runs of spec {self.spec.label!r} are kept and "
+            "judged, not cached",
+            CacheWarning,
+            stacklevel=2,
+        )
+        self.cache = None
 
     @staticmethod
     def _rates(run: RunResult) -> str:

@@ -49,6 +49,11 @@ def _import_file(path: Path) -> ModuleType:
         module_spec.loader.exec_module(module)
     except SpecError:
         raise
+    except SystemExit as e:  # sys.exit() at import: a spec file may not end the command
+        raise SpecError(
+            f"{path}: importing it called sys.exit({e.code!r})",
+            hint='keep scripts\' own runs under `if __name__ == "__main__":`',
+        ) from None
     except Exception as e:
         raise SpecError(f"{path}: importing it raised {type(e).__name__}: {e}") from e
     # Workers are separate processes: ship this file's functions by value.
