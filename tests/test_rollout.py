@@ -143,3 +143,33 @@ def test_report_gifs_load_the_first_seeds_cached_model(trained, tmp_path):
     assert "another process" in gifs["t.py::test_elsewhere"].text and not gifs["t.py::test_elsewhere"].written
     assert "not in the cache" in gifs["t.py::test_uncached"].text
     assert "cache is off" in report_gifs(tmp_path / "r", rows[:1], specs, None)["t.py::test_cart"].text
+
+
+def test_writing_a_gif_prints_nothing_to_stderr(tmp_path):
+    # SDL complains on stderr about a missing display ("XDG_RUNTIME_DIR is invalid") unless told it has none.
+    import os
+    import subprocess
+    import sys
+    import textwrap
+
+    script = textwrap.dedent(
+        """
+        import sys
+        import specguard as sg
+        from specguard.engine.train import train_run
+        from specguard.report.gifs import write_gif
+
+        pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
+        spec = sg.Spec(pendulum, sg.Goal("up", x=(0.9, 1.0)), budget=sg.Budget(timesteps=64, eval_episodes=1),
+                       hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1})
+        _, model = train_run(spec, seed=0)
+        gif = write_gif(model, spec, sys.argv[1], max_frames=5)
+        assert gif.written, gif.text
+        """
+    )
+    env = {k: v for k, v in os.environ.items() if k not in ("XDG_RUNTIME_DIR", "SDL_VIDEODRIVER")}
+    done = subprocess.run(
+        [sys.executable, "-c", script, str(tmp_path / "a.gif")], capture_output=True, text=True, env=env, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.strip() == ""

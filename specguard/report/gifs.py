@@ -9,6 +9,8 @@ its first seed's cached model.
 
 from __future__ import annotations
 
+import os
+
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -110,6 +112,8 @@ def write_gif(
     except ImportError:
         return Gif(None, f"no GIF of spec {spec.label!r}: Pillow is not installed (pip install pillow)")
     try:
+        # Frames are drawn off-screen: SDL needs no display (and prints no complaint about a missing one).
+        os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
         env = spec_env(spec, render_mode="rgb_array")
     except Exception as e:
         return Gif(None, f"no GIF of spec {spec.label!r}: its env cannot be made to render rgb_array frames ({e})")
