@@ -6,6 +6,8 @@ The terminal table, the ``--goal-specs-report`` files and the ``--goal-specs-sav
 from __future__ import annotations
 
 import json
+import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -13,7 +15,7 @@ import pytest
 
 from specguard.pytest_plugin.session import Session
 
-__all__ = ["PROPERTY", "Recorder", "write_outputs"]
+__all__ = ["PROPERTY", "Recorder", "unsigned_cache_note", "write_outputs"]
 
 PROPERTY = "specguard"  # the user property that carries a goal item's row
 
@@ -52,6 +54,33 @@ class Recorder:
             terminalreporter.write_line(line)
         for path in write_outputs(self.config, self.state):
             terminalreporter.write_line(f"specguard: wrote {path}")
+        note = unsigned_cache_note(self.state.rows, os.environ)
+        if note:
+            terminalreporter.write_line(note)
+
+
+def unsigned_cache_note(rows: list[dict[str, Any]], environ: Mapping[str, str]) -> str | None:
+    """One line when CI trusted cached runs whose entries nobody signed, with the setting that signs them.
+
+    A cache restored in CI (``CI`` set) may come from a run anyone could write to
+    (a pull request's job); without ``SPECGUARD_CACHE_KEY`` its entries are checked
+    but not authenticated, so a forged one would be trusted.
+
+    Example:
+        >>> unsigned_cache_note([{"cached": True}], {"CI": "true"}) is not None
+        True
+        >>> unsigned_cache_note([{"cached": True}], {"CI": "true", "SPECGUARD_CACHE_KEY": "k"}) is None
+        True
+    """
+    from specguard.engine.cache import SECRET_ENV
+
+    if not environ.get("CI") or environ.get(SECRET_ENV) or not any(row.get("cached") for row in rows):
+        return None
+    return (
+        f"specguard: cached runs were trusted without {SECRET_ENV}: entries are checked but not authenticated, "
+        f"so a restored cache could carry forged ones; set {SECRET_ENV} from a CI secret (e.g. "
+        f"`{SECRET_ENV}: ${{{{ secrets.SPECGUARD_CACHE_KEY }}}}` in the job's env) to sign and verify them"
+    )
 
 
 def write_outputs(config: pytest.Config, state: Session) -> list[Path]:

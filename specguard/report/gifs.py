@@ -10,7 +10,6 @@ its first seed's cached model.
 from __future__ import annotations
 
 import os
-
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
