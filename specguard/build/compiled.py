@@ -30,11 +30,15 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
+from types import CodeType
 from typing import Any, NoReturn
 
 import numpy as np
 
 from specguard.build.codegen import build_namespace, source_of
+from specguard.build.initial_env import state_type
+from specguard.build.reference import FLOAT_MAX, check_distance, distance_value
 from specguard.error import EvaluationError, InvalidSpec, UnknownFeature
 from specguard.extend import (
     Annotation,
@@ -48,8 +52,6 @@ from specguard.extend import (
     annotation_key,
     component_weights,
 )
-from specguard.build.initial_env import state_type
-from specguard.build.reference import FLOAT_MAX, check_distance, distance_value
 from specguard.validation import PATH_SEPARATOR
 
 __all__ = ["CompiledTree", "Evaluator", "compile_tree"]
@@ -86,6 +88,8 @@ class CompiledTree:
         children: per node, the indices of its children in ``paths``.
         slots: the own-state slots (node or annotation key, slot), in observation order.
         slot_start: per node, the index of its first own-state slot (``-1``: none).
+        weights: the adapted weights it was compiled with (``compile_tree(weights=...)``),
+            by path; empty for the tree's own.
     """
 
     features: tuple[str, ...]
@@ -99,6 +103,11 @@ class CompiledTree:
     children: tuple[tuple[int, ...], ...]
     slots: tuple[tuple[str, Slot], ...]
     slot_start: tuple[int, ...]
+    weights: tuple[tuple[str, tuple[float, ...]], ...] = ()
+
+    def __getstate__(self) -> dict[str, Any]:
+        # The generated code is made again after unpickling: the standard pickle cannot pickle code objects.
+        return {k: v for k, v in self.__dict__.items() if k != "code"}
 
     @property
     def term_keys(self) -> tuple[str, ...]:
@@ -254,13 +263,18 @@ class CompiledTree:
 
     # -- the per-step kernel -------------------------------------------------
 
-    @property
+    @cached_property
     def source(self) -> str:
-        """The generated per-step code (``start`` and ``step``), for reading and debugging."""
+        """The generated per-step code (``start``, ``step`` and ``safe``), for reading and debugging."""
         return source_of(self)
 
+    @cached_property
+    def code(self) -> CodeType:
+        """:attr:`source` compiled, once per compiled tree: every evaluator runs it in a namespace of its own."""
+        return compile(self.source, f"<specguard evaluator of {self.paths[0]!r}>", "exec")
+
     def evaluator(self) -> Evaluator:
-        """A fresh per-episode evaluator (one per env)."""
+        """A fresh per-episode evaluator (one per env); evaluators of one compiled tree share its generated code."""
         return Evaluator(self)
 
 
@@ -381,6 +395,7 @@ def compile_tree(
         tuple(tuple(c) for c in children),
         tuple(slots),
         tuple(slot_start),
+        tuple(sorted((path, tuple(float(w) for w in ws)) for path, ws in (weights or {}).items())),
     )
 
 
@@ -454,7 +469,7 @@ class Evaluator:
         self.safety_keys = tree.safety_keys
         self._state_cls = state_type(tree.features)
         namespace = build_namespace(tree, self._state_cls)
-        exec(compile(tree.source, f"<specguard evaluator of {tree.paths[0]!r}>", "exec"), namespace)
+        exec(tree.code, namespace)
         self._start: Callable[..., Any] = namespace["start"]
         self._step: Callable[..., Any] = namespace["step"]
         self._safe: Callable[[list[float]], tuple[bool, ...]] = namespace["safe"]

@@ -48,7 +48,7 @@ import sys
 import sysconfig
 import types
 import warnings
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -411,19 +411,21 @@ def digest(value: Any, where: str = "value") -> str:
 # -- the behavioural probe ---------------------------------------------------------
 
 
-def probe(spec: Any, steps: int = PROBE_STEPS) -> str:
+def probe(spec: Any, steps: int = PROBE_STEPS, build: Callable[[], Any] | None = None) -> str:
     """A digest of a fixed-seed rollout of the spec's training env (seeded random actions).
 
     An env that raises is not an error here: the exception's type and message
     are hashed and the rollout ends (the training run reports the failure
-    with its seed, where it belongs).
+    with its seed, where it belongs). ``build`` makes the env (``None``:
+    :func:`~specguard.engine.train.make_single_env`); probes of one spec share
+    one :func:`~specguard.engine.train.env_factory`, so its tree is compiled once.
     """
     from specguard.engine.train import make_single_env
 
     h = hashlib.sha256()
     env = None
     try:
-        env = make_single_env(spec)
+        env = make_single_env(spec) if build is None else build()
         h.update(_dumps(canonical((env.observation_space, env.action_space), "spaces")).encode())
         actions = copy.deepcopy(env.action_space)  # seeding the user's own space would change it
         actions.seed(0)
@@ -491,7 +493,10 @@ def _compute(spec: Any) -> SpecFingerprint:
     full = _fields(spec, frozenset())
     run = _fields(spec, _SPEC_ONLY_FIELDS)
     run["budget"] = _fields(spec.budget, _BUDGET_SPEC_ONLY_FIELDS)
-    first, second = probe(spec), probe(spec)
+    from specguard.engine.train import env_factory
+
+    build = env_factory(spec)  # a fresh env per probe, on one compiled tree
+    first, second = probe(spec, build=build), probe(spec, build=build)
     if first != second:
         warnings.warn(
             f"specguard: {where}: the env does not repeat a fixed-seed rollout (it draws randomness its seed does "
