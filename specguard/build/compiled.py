@@ -56,6 +56,8 @@ from specguard.validation import PATH_SEPARATOR
 
 __all__ = ["CompiledTree", "Evaluator", "compile_tree"]
 
+_isfinite = math.isfinite
+
 
 @dataclass(frozen=True)
 class _Term:
@@ -460,6 +462,10 @@ class Evaluator:
 
     Holds the episode's state: the previous memberships, distances and
     feature namedtuple, and the own-state slots (counters, stages).
+
+    Attributes:
+        goals: every node's membership of the last state reset or stepped to, by path: a new
+            dict each time (the env hands it out as ``info["goals"]``).
     """
 
     def __init__(self, tree: CompiledTree) -> None:
@@ -473,10 +479,12 @@ class Evaluator:
         self._start: Callable[..., Any] = namespace["start"]
         self._step: Callable[..., Any] = namespace["step"]
         self._safe: Callable[[list[float]], tuple[bool, ...]] = namespace["safe"]
+        self._safe_info: Callable[[list[float]], dict[str, bool]] = namespace["safe_info"]
         self._m: tuple[bool, ...] = ()
         self._q: tuple[float, ...] = ()
         self._s: Any = None
         self.own_state: list[float] = [0.0] * len(tree.slots)
+        self.goals: dict[str, bool] = {}
 
     def members(self, f: Sequence[float]) -> tuple[bool, ...]:
         """Every node's membership of one feature vector, at the start of an episode (no episode state)."""
@@ -487,7 +495,7 @@ class Evaluator:
         """Start an episode in features ``f``; returns every node's membership."""
         own = [0.0] * len(self.slots)
         try:
-            self._m, self._s, self._q = self._start(f, own, True)
+            self._m, self.goals, self._s, self._q = self._start(f, own, True)
         except EvaluationError:
             raise
         except Exception as e:
@@ -500,7 +508,7 @@ class Evaluator:
         if len(own) != len(self.slots):
             raise ValueError(f"expected {len(self.slots)} own-state values, got {len(own)}")
         state = [float(v) for v in own]
-        self._m, self._s, self._q = self._start(f, state, False)
+        self._m, self.goals, self._s, self._q = self._start(f, state, False)
         self.own_state = state
         return self._m
 
@@ -508,6 +516,10 @@ class Evaluator:
     def safe(self) -> tuple[bool, ...]:
         """Per safety annotation (``safety_keys``), whether the episode has had no violation so far."""
         return self._safe(self.own_state)
+
+    def safe_info(self) -> dict[str, bool]:
+        """:attr:`safe` by safety key, a new dict (the env's ``info["safe"]``)."""
+        return self._safe_info(self.own_state)
 
     def step(self, action: Any, f: Sequence[float]) -> tuple[float, bool, tuple[bool, ...], dict[str, float]]:
         """Advance by one transition to features ``f``.
@@ -517,17 +529,17 @@ class Evaluator:
             counter at 0, or a node's own termination), every node's membership
             of ``f`` and the weighted reward terms by key (Algorithm 1's processing order).
         """
-        own = list(self.own_state)  # the episode state changes only once the step succeeded
+        own = self.own_state[:]  # the episode state changes only once the step succeeded
         try:
-            r, ended, m2, s2, q2, terms = self._step(f, self._m, self._s, self._q, own, action)
+            r, ended, m2, goals, s2, q2, terms = self._step(f, self._m, self._s, self._q, own, action)
         except EvaluationError:
             raise
         except Exception as e:
             self._diagnose(action, f, e)
-        if not math.isfinite(r):
+        if not _isfinite(r):
             bad = {k: v for k, v in terms.items() if not math.isfinite(v)}
             raise EvaluationError(f"non-finite reward {r}: the terms {bad} are not finite")
-        self._m, self._s, self._q, self.own_state = m2, s2, q2, own
+        self._m, self.goals, self._s, self._q, self.own_state = m2, goals, s2, q2, own
         return float(r), ended, m2, terms
 
     def _diagnose(self, action: Any, f: Sequence[float], error: Exception) -> NoReturn:

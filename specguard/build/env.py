@@ -37,6 +37,9 @@ from specguard.build.reference import ReferenceEvaluator
 from specguard.error import EvaluationError, InitialEnvError, InvalidSpec, SpecError, StateMappingError
 from specguard.tree.nodes import Node
 
+_FLOAT32 = np.dtype(np.float32)
+_isfinite = math.isfinite
+
 __all__ = ["EnvFactory", "GoalInfo", "SpecEnv", "make_baseline_env", "make_env", "preflight"]
 
 EvaluatorName = Literal["flat", "reference"]
@@ -183,13 +186,6 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         adapted = {path: tuple(float(w) for w in ws) for path, ws in weights.items()}
         self._pending = adapted, compile_tree(self.tree, self.features, weights=adapted)
 
-    # -- mapping ---------------------------------------------------------------
-
-    def _observation(self, obs: Any, f: list[float]) -> np.ndarray:
-        if self._passthrough:
-            return obs  # type: ignore[no-any-return]
-        return np.array(f + self.evaluator.own_state, dtype=np.float32)
-
     # -- gymnasium API -------------------------------------------------------
 
     def reset(
@@ -200,24 +196,33 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
             self.evaluator = self.compiled.evaluator()
         obs, info = self.env.reset(seed=seed, options=options)
         f = _features(obs, self._state, self.features, self.tree.name)
-        members = self.evaluator.reset(f)
-        info["goals"] = dict(zip(self._paths, members))
-        info["safe"] = self._safe()
-        return self._observation(obs, f), info
-
-    def _safe(self) -> dict[str, bool]:
-        return dict(zip(self._safety_keys, self.evaluator.safe)) if self._safety_keys else {}
+        ev = self.evaluator
+        ev.reset(f)
+        info["goals"] = ev.goals
+        info["safe"] = ev.safe_info() if self._safety_keys else {}
+        return (obs if self._passthrough else np.array(f + ev.own_state, _FLOAT32)), info
 
     def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
-        base_action = action if self._execute is None else self._execute(action)
-        obs, base_reward, terminated, truncated, info = self.env.step(base_action)
-        f = _features(obs, self._state, self.features, self.tree.name)
-        reward, ended, members, terms = self.evaluator.step(action, f)
-        info["goals"] = dict(zip(self._paths, members))
-        info["safe"] = self._safe()
+        # The hot path: every call of a user's training runs it, so it is written out in one function.
+        obs, base_reward, terminated, truncated, info = self.env.step(
+            action if self._execute is None else self._execute(action)
+        )
+        if self._state is None:  # the identity: _features inlined
+            f = obs.tolist()
+            if len(f) != self._n or not _isfinite(sum(f)):
+                _features(obs, None, self.features, self.tree.name)  # raises, naming the observation
+        else:
+            f = _features(obs, self._state, self.features, self.tree.name)
+        ev = self.evaluator
+        reward, ended, _, terms = ev.step(action, f)
+        info["goals"] = ev.goals  # a new dict each step, as are the others
+        info["safe"] = ev.safe_info() if self._safety_keys else {}
         info["reward_terms"] = terms
         info["base_reward"] = float(base_reward)
-        return self._observation(obs, f), reward, bool(terminated or ended), bool(truncated), info
+        # A new array each step (a consumer may keep it, e.g. SB3's terminal_observation); or, when
+        # nothing is added or converted, the base env's own observation untouched.
+        observation = obs if self._passthrough else np.array(f + ev.own_state, _FLOAT32)
+        return observation, reward, bool(terminated or ended), bool(truncated), info
 
 
 class GoalInfo(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
