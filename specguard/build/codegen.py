@@ -193,8 +193,11 @@ def _step_source(tree: FlatTree) -> str:
             lines.append(f"    g{k}a, e{k}a = _ann{k}.step(s, a, s2, z){comment}")
             term = f"{number(t.coef)} * g{k}a"
             ends.append(f"e{k}a")
-        names.append(f"t{k}")
-        lines.append(f"    t{k} = {term}")
+        if term == "0.0":  # a constant: reported as such, and left out of the sum below
+            names.append("0.0")
+        else:
+            names.append(f"t{k}")
+            lines.append(f"    t{k} = {term}")
     if all(tree.fast):
         end = " or ".join(ends)
     else:
@@ -204,8 +207,11 @@ def _step_source(tree: FlatTree) -> str:
     if distance_names:
         checks = " and ".join(f"0.0 <= {d} <= {number(FLOAT_MAX)}" for d in distance_names)
         lines += [f"    if not ({checks}):", "        raise ValueError('invalid distance')"]
-    lines.append(f"    r = {' + '.join(names) or '0.0'}")
-    pairs = ", ".join(f"{text(t.key)}: t{k}" for k, t in enumerate(tree.terms))
+    # The terms weighted 0 add nothing: the sum is the others', in order, after one 0.0 when some were left
+    # out (exactly the same float: adding 0.0 changes no number but a -0.0, to 0.0).
+    added = [name for name in names if name != "0.0"]
+    lines.append(f"    r = {' + '.join((['0.0'] if len(added) < len(names) else []) + added) or '0.0'}")
+    pairs = ", ".join(f"{text(t.key)}: {name}" for t, name in zip(tree.terms, names))
     lines.append(f"    return r, {end}, {_members(tree)}, s2, {_tuple(distance_names)}, {{{pairs}}}")
     return "\n".join(lines) + "\n"
 
