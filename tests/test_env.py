@@ -290,6 +290,29 @@ def test_envs_of_one_factory_share_the_compiled_tree_but_not_the_episode(build_c
     assert second.step(torque)[1] == again.step(torque)[1] != step[1]
 
 
+@pytest.mark.parametrize("tree", [lunar_lander.trees["c"], sg.Goal("legs", leg1=1.0)], ids=["own-state", "passthrough"])
+def test_what_a_step_returns_is_never_changed_by_a_later_step(tree):
+    # Consumers keep references (SB3's DummyVecEnv keeps the last observation as info["terminal_observation"]
+    # across the reset): every observation and info dict is a new object, never a reused buffer.
+    env = sg.make_env(lunar_lander.initial_env, tree)
+    obs, info = env.reset(seed=0)
+    kept = [(obs, obs.copy(), info, {k: dict(v) if isinstance(v, dict) else v for k, v in info.items()})]
+    env.action_space.seed(0)
+    for _ in range(30):
+        obs, _, terminated, truncated, info = env.step(env.action_space.sample())
+        kept.append((obs, obs.copy(), info, {k: dict(v) if isinstance(v, dict) else v for k, v in info.items()}))
+        info["goals"]["mutated"] = True  # a consumer writing into its info changes nothing that follows
+        if terminated or truncated:
+            obs, info = env.reset(seed=1)
+    for obs, copy, info, snapshot in kept:
+        assert np.array_equal(obs, copy)
+        assert {k: v for k, v in info["goals"].items() if k != "mutated"} == snapshot["goals"]
+        assert info["safe"] == snapshot["safe"]
+    assert len({id(o) for o, *_ in kept}) == len(kept)
+    assert len({id(info["goals"]) for _, _, info, _ in kept}) == len(kept)
+    env.close()
+
+
 def test_a_factory_refuses_again_what_its_preflight_refused():
     from specguard.build.env import EnvFactory
 
