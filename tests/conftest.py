@@ -1,5 +1,7 @@
 import os
+import sys
 
+import pytest
 from hypothesis import HealthCheck, settings
 
 pytest_plugins = ["pytester"]
@@ -13,3 +15,26 @@ settings.register_profile(
 )
 settings.register_profile("dev", max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci" if os.environ.get("CI") else "dev"))
+
+
+@pytest.fixture
+def build_counts(monkeypatch):
+    """Counts, from here on, the goal trees compiled (``compile_tree``, wherever imported) and code-generated."""
+    from specguard.build import compiled as compiled_module
+
+    counts = {"compile": 0, "codegen": 0}
+    compile_tree, source_of = compiled_module.compile_tree, compiled_module.source_of
+
+    def counting_compile(*args, **kwargs):
+        counts["compile"] += 1
+        return compile_tree(*args, **kwargs)
+
+    def counting_source(*args, **kwargs):
+        counts["codegen"] += 1
+        return source_of(*args, **kwargs)
+
+    for name, module in list(sys.modules.items()):
+        if name.startswith("specguard") and getattr(module, "compile_tree", None) is compile_tree:
+            monkeypatch.setattr(module, "compile_tree", counting_compile)
+    monkeypatch.setattr(compiled_module, "source_of", counting_source)
+    return counts

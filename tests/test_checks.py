@@ -44,7 +44,9 @@ def test_a_goal_at_the_edge_of_the_bounds_warns_once_naming_it(cartpole):
     tree = sg.All(sg.Goal("edge", x=(4.8, None)), sg.Goal("slow", v=(-1, 1)), name="cartpole")
     with pytest.warns(UserWarning, match=r"edge of the feature bounds: cartpole/edge \(x in \[4.8, inf\]") as seen:
         sg.make_env(cartpole, tree).close()
-    assert len([w for w in seen if "edge of the feature bounds" in str(w.message)]) == 1
+    edge = [w for w in seen if "edge of the feature bounds" in str(w.message)]
+    assert len(edge) == 1
+    assert edge[0].filename == __file__  # the line that built the env, not one inside specguard
 
 
 def test_a_goal_inside_the_bounds_passes_silently(cartpole):

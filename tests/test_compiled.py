@@ -290,3 +290,23 @@ def test_adapted_weights_of_an_auto_node_include_its_default_weight_constraints(
         sg.InvalidSpec, match=r"expected 3 finite weights >= 0 \(one per child, then one per constraint"
     ):
         compile_tree(tree, ("x", "v"), weights={"p": (0.9, 0.1)})
+
+
+def _distance_to_a(s):
+    return abs(s.a)
+
+
+def test_a_compiled_tree_shares_its_generated_code_and_pickles_without_it():
+    import copy
+    import pickle
+
+    tree = sg.All(sg.Goal("g", a=(0.0, 1.0)).annotate(sg.Distance(_distance_to_a, scale=2.0)), name="root")
+    compiled = compile_tree(tree, FEATURES)
+    first, second = compiled.evaluator(), compiled.evaluator()
+    assert first._step.__code__ is second._step.__code__ and first._step is not second._step
+    for again in (pickle.loads(pickle.dumps(compiled)), copy.deepcopy(compiled)):
+        assert "code" not in again.__dict__ and again.source == compiled.source
+        ev = again.evaluator()
+        first.reset([2.0, 0.0, 0.0])
+        ev.reset([2.0, 0.0, 0.0])
+        assert ev.step(0, [0.5, 0.0, 0.0]) == first.step(0, [0.5, 0.0, 0.0])

@@ -247,6 +247,96 @@ def test_make_env_rejects_wrong_argument_types():
         sg.make_env(pendulum.initial_env, pendulum.trees["a"], evaluator="fast")
 
 
+@pytest.mark.parametrize("make", [sg.make_env, sg.make_baseline_env])
+@pytest.mark.parametrize(
+    ("initial", "tree", "error", "message"),
+    [
+        ("Pendulum-v1", pendulum.trees["a"], sg.InitialEnvError, "expected an InitialEnv as first argument"),
+        (pendulum.initial_env, {"x": (0, 1)}, sg.InvalidSpec, r"expected a goal-tree node \(Goal, All, ...\) as tree"),
+        (pendulum.initial_env, sg.Goal("g", v=(0, 1)), sg.UnknownFeature, "goal names unknown feature 'v'"),
+    ],
+    ids=["not-an-initial-env", "not-a-node", "unknown-feature"],
+)
+def test_the_baseline_env_refuses_what_make_env_refuses(make, initial, tree, error, message):
+    # One preflight for both (issue 19): the baseline used to skip the node check.
+    with pytest.raises(error, match=message) as info:
+        make(initial, tree)
+    if error is not sg.UnknownFeature:  # the argument checks name the function called
+        assert str(info.value).startswith(make.__name__)
+
+
+@pytest.mark.parametrize("make", [sg.make_env, sg.make_baseline_env])
+def test_make_env_compiles_and_generates_the_tree_once(build_counts, make):
+    env = make(lunar_lander.initial_env, lunar_lander.trees["c"])
+    assert build_counts == {"compile": 1, "codegen": 1}
+    env.close()
+
+
+def test_envs_of_one_factory_share_the_compiled_tree_but_not_the_episode(build_counts):
+    from specguard.build.env import EnvFactory
+
+    build = EnvFactory(pendulum.initial_env, pendulum.trees["w"])
+    first, second = build(), build()
+    assert build_counts == {"compile": 1, "codegen": 1}
+    assert first.compiled is second.compiled and first.evaluator is not second.evaluator
+    first.reset(seed=0)
+    second.reset(seed=0)
+    torque = np.array([2.0], dtype=np.float32)
+    for _ in range(5):
+        step = first.step(torque)
+    # The second env's episode is its own: stepping it now gives what the first gave at its first step.
+    again = sg.make_env(pendulum.initial_env, pendulum.trees["w"])
+    again.reset(seed=0)
+    assert second.step(torque)[1] == again.step(torque)[1] != step[1]
+
+
+@pytest.mark.parametrize("tree", [lunar_lander.trees["c"], sg.Goal("legs", leg1=1.0)], ids=["own-state", "passthrough"])
+def test_what_a_step_returns_is_never_changed_by_a_later_step(tree):
+    # Consumers keep references (SB3's DummyVecEnv keeps the last observation as info["terminal_observation"]
+    # across the reset): every observation and info dict is a new object, never a reused buffer.
+    env = sg.make_env(lunar_lander.initial_env, tree)
+    obs, info = env.reset(seed=0)
+    kept = [(obs, obs.copy(), info, {k: dict(v) if isinstance(v, dict) else v for k, v in info.items()})]
+    env.action_space.seed(0)
+    for _ in range(30):
+        obs, _, terminated, truncated, info = env.step(env.action_space.sample())
+        kept.append((obs, obs.copy(), info, {k: dict(v) if isinstance(v, dict) else v for k, v in info.items()}))
+        info["goals"]["mutated"] = True  # a consumer writing into its info changes nothing that follows
+        if terminated or truncated:
+            obs, info = env.reset(seed=1)
+    for obs, copy, info, snapshot in kept:
+        assert np.array_equal(obs, copy)
+        assert {k: v for k, v in info["goals"].items() if k != "mutated"} == snapshot["goals"]
+        assert info["safe"] == snapshot["safe"]
+    assert len({id(o) for o, *_ in kept}) == len(kept)
+    assert len({id(info["goals"]) for _, _, info, _ in kept}) == len(kept)
+    env.close()
+
+
+def test_a_factory_refuses_again_what_its_preflight_refused():
+    from specguard.build.env import EnvFactory
+
+    build = EnvFactory(pendulum.initial_env, sg.Goal("g", v=(0, 1)), baseline=True)
+    for _ in range(2):
+        with pytest.raises(sg.UnknownFeature, match="g: goal names unknown feature 'v'"):
+            build()
+
+
+def test_an_env_refuses_the_compiled_tree_of_another_tree():
+    from specguard.build.compiled import compile_tree
+
+    base = gym.make("Pendulum-v1")
+    other = compile_tree(pendulum.trees["b"], pendulum.initial_env.features)
+    with pytest.raises(sg.InvalidSpec, match="compiled: expected compile_tree"):
+        sg.SpecEnv(base, pendulum.trees["w"], pendulum.initial_env.features, compiled=other)
+    with pytest.raises(sg.InvalidSpec, match="compiled: expected compile_tree"):
+        sg.GoalInfo(base, pendulum.trees["w"], pendulum.initial_env.features, compiled=other)
+    tree = sg.All(sg.Goal("a", x=(0.9, 1.0)), sg.Goal("b", omega=(-1, 1)), name="auto", weights="auto")
+    adapted = compile_tree(tree, pendulum.initial_env.features, weights={"auto": (0.7, 0.3)})
+    with pytest.raises(sg.InvalidSpec, match="compiled: expected the tree compiled with its own weights"):
+        sg.SpecEnv(base, tree, pendulum.initial_env.features, compiled=adapted)
+
+
 def test_acrobot_height_feature_comes_from_state():
     env = sg.make_env(acrobot.initial_env, acrobot.trees["c"])
     obs, _ = env.reset(seed=0)

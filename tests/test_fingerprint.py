@@ -276,6 +276,11 @@ class Dynamics(gym.Wrapper):
         return obs, reward * self.gain, terminated, truncated, info
 
 
+def test_the_two_probes_of_a_spec_compile_its_tree_once(build_counts):
+    fingerprint_spec(spec(tree=sg.All(sg.Goal("up", x=(0.9, 1.0)), name="once")))
+    assert build_counts == {"compile": 1, "codegen": 1}
+
+
 def test_the_probe_sees_a_changed_env_that_the_static_part_cannot():
     gym.register("SpecguardProbe-v0", entry_point=lambda: Dynamics(gym.make("Pendulum-v1")))
     try:

@@ -35,6 +35,11 @@ def test_run_result_is_plain_data_and_deterministic_per_seed():
     assert hasattr(model, "predict")
 
 
+def test_a_run_compiles_its_tree_once_for_all_its_envs(build_counts):
+    train_run(tiny_spec(n_envs=2), seed=0)  # two training envs and the evaluation env
+    assert build_counts == {"compile": 1, "codegen": 1}
+
+
 def test_evaluate_counts_the_last_state_of_each_episode():
     initial = sg.InitialEnv(lambda: ReplayEnv([[0.0], [1.0], [0.0], [1.0]]), features=("x",))
     tree = sg.All(sg.Goal("up", x=(0.5, None)), sg.Goal("any", x=(-1.0, None)), name="root")

@@ -2,9 +2,10 @@
 
 Like Gymnasium's ``env_checker``: each ``check_*`` function states one
 invariant, raises (or warns) with the node path when it does not hold, and
-returns nothing otherwise. :func:`check_goals` runs them all; ``make_env`` and
-``make_baseline_env`` call it, so ``run_spec`` refuses an impossible spec
-before training.
+returns nothing otherwise. :func:`check_goals` runs them all on a compiled
+tree; ``make_env`` and ``make_baseline_env`` call it (their preflight,
+:class:`specguard.build.env.EnvFactory`), so ``run_spec`` refuses an
+impossible spec before training.
 
 Nodes whose goal is a box (a ``Goal``; an ``All``'s is the intersection of
 its children's) are checked; a node whose goal is not a box (an ``AnyOf``, a
@@ -27,8 +28,8 @@ from __future__ import annotations
 
 from specguard.utils.text import bounds_text
 
+import sys
 import warnings
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -44,6 +45,18 @@ __all__ = [
     "check_goals_reachable",
     "unreachable_reason",
 ]
+
+
+def _caller() -> int:
+    """The ``stacklevel`` for a warning of the calling function: the innermost frame outside ``specguard.build``.
+
+    That is the line that built the env (the caller of ``make_env``, or of an env factory), however many of
+    this package's frames lie between.
+    """
+    frame, level = sys._getframe(1), 1  # level 1: the function that warns
+    while frame.f_back is not None and str(frame.f_globals.get("__name__", "")).startswith("specguard.build."):
+        frame, level = frame.f_back, level + 1
+    return level
 
 
 def _f32(values: np.ndarray) -> np.ndarray:
@@ -112,7 +125,7 @@ def check_goals_reachable(compiled: CompiledTree, low: ArrayLike, high: ArrayLik
         warnings.warn(
             f"{compiled.paths[node]}: {found[0]}; {compiled.paths[escape]} is not a box and may still hold "
             "without it (e.g. through another alternative of an OR)",
-            stacklevel=4,  # the caller of make_env
+            stacklevel=_caller(),  # the caller of make_env
         )
 
 
@@ -152,17 +165,16 @@ def check_goals_off_the_edge(compiled: CompiledTree, low: ArrayLike, high: Array
             "goals reachable only at the edge of the feature bounds: "
             + "; ".join(names)
             + ". Widen the box into the bounds unless the edge is the point",
-            stacklevel=4,  # the caller of make_env
+            stacklevel=_caller(),  # the caller of make_env
         )
 
 
-def check_goals(tree: Node, features: Sequence[str], low: ArrayLike, high: ArrayLike) -> None:
-    """Every static check of ``tree`` over features with bounds ``low``/``high``.
+def check_goals(compiled: CompiledTree, low: ArrayLike, high: ArrayLike) -> None:
+    """Every static check of a compiled tree over features with bounds ``low``/``high``.
 
     Raises:
         UnreachableGoal: a goal no state can be in.
     """
-    compiled = compile_tree(tree, features)
     check_goals_reachable(compiled, low, high)
     check_goals_off_the_edge(compiled, low, high)
 

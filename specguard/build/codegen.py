@@ -3,13 +3,18 @@
 Three functions are generated, straight-line, one line per goal and per
 reward term, with the weights folded into constants:
 
-* ``start(f, z, init)``: memberships, the feature namedtuple and the
-  distances of a first state; with ``init`` it also writes the initial own
-  state into the list ``z`` (otherwise it reads it, to restore an observation);
+* ``start(f, z, init)``: memberships (a tuple, and a dict by path), the
+  feature namedtuple and the distances of a first state; with ``init`` it also
+  writes the initial own state into the list ``z`` (otherwise it reads it, to
+  restore an observation);
 * ``step(f, m, s, q, z, a)``: one transition to features ``f`` from the
   previous memberships ``m``, namedtuple ``s``, distances ``q``, own state
   ``z`` (updated in place) and action ``a``;
-* ``safe(z)``: per safety annotation, whether the episode is free of violations.
+* ``safe(z)``: per safety annotation, whether the episode is free of
+  violations; ``safe_info(z)``: the same as a dict by key.
+
+The dicts are what the env reports in ``info`` (a new one per call): written
+out as dict displays, they cost less than ``dict(zip(keys, values))``.
 
 Only three kinds of values reach the source: finite floats as their exact
 ``repr`` (:func:`number`), integers, and names as ``str`` literals inside
@@ -108,7 +113,8 @@ def _inside(tree: FlatTree, i: int, previous: bool) -> str:
 
 
 def _member_lines(tree: FlatTree, *, stepping: bool) -> list[str]:
-    lines = [f"    ({', '.join(f'f{i}' for i in range(len(tree.features)))},) = f", "    s2 = _make(f)"]
+    # The unpacking checks the length, so the namedtuple is made without ``_make``'s own check.
+    lines = [f"    ({', '.join(f'f{i}' for i in range(len(tree.features)))},) = f", "    s2 = _new(_State, f)"]
     # Children come after parents in ``paths``: emit in reverse so a parent sees its children's results.
     for i in reversed(range(len(tree.paths))):
         comment = f"  # {text(tree.paths[i])}"
@@ -125,7 +131,9 @@ def _member_lines(tree: FlatTree, *, stepping: bool) -> list[str]:
 
 
 def _members(tree: FlatTree) -> str:
-    return _tuple([f"m{i}" for i in range(len(tree.paths))])
+    """The memberships as a tuple, then as a dict by path."""
+    goals = ", ".join(f"{text(path)}: m{i}" for i, path in enumerate(tree.paths))
+    return f"{_tuple([f'm{i}' for i in range(len(tree.paths))])}, {{{goals}}}"
 
 
 def _distance_lines(tree: FlatTree, target: str) -> tuple[list[str], list[str]]:
@@ -185,8 +193,11 @@ def _step_source(tree: FlatTree) -> str:
             lines.append(f"    g{k}a, e{k}a = _ann{k}.step(s, a, s2, z){comment}")
             term = f"{number(t.coef)} * g{k}a"
             ends.append(f"e{k}a")
-        names.append(f"t{k}")
-        lines.append(f"    t{k} = {term}")
+        if term == "0.0":  # a constant: reported as such, and left out of the sum below
+            names.append("0.0")
+        else:
+            names.append(f"t{k}")
+            lines.append(f"    t{k} = {term}")
     if all(tree.fast):
         end = " or ".join(ends)
     else:
@@ -196,8 +207,11 @@ def _step_source(tree: FlatTree) -> str:
     if distance_names:
         checks = " and ".join(f"0.0 <= {d} <= {number(FLOAT_MAX)}" for d in distance_names)
         lines += [f"    if not ({checks}):", "        raise ValueError('invalid distance')"]
-    lines.append(f"    r = {' + '.join(names) or '0.0'}")
-    pairs = ", ".join(f"{text(t.key)}: t{k}" for k, t in enumerate(tree.terms))
+    # The terms weighted 0 add nothing: the sum is the others', in order, after one 0.0 when some were left
+    # out (exactly the same float: adding 0.0 changes no number but a -0.0, to 0.0).
+    added = [name for name in names if name != "0.0"]
+    lines.append(f"    r = {' + '.join((['0.0'] if len(added) < len(names) else []) + added) or '0.0'}")
+    pairs = ", ".join(f"{text(t.key)}: {name}" for t, name in zip(tree.terms, names))
     lines.append(f"    return r, {end}, {_members(tree)}, s2, {_tuple(distance_names)}, {{{pairs}}}")
     return "\n".join(lines) + "\n"
 
@@ -221,11 +235,14 @@ def _termination_lines(tree: FlatTree) -> list[str]:
 
 def _safe_source(tree: FlatTree) -> str:
     tests = []
+    keys = []
     for k, t in enumerate(tree.terms):
         if t.annotation is None or t.annotation.role != "safety":
             continue
         tests.append(f"z[{t.slot}] >= {number(t.budget)}" if t.kind == "counter" else f"_ann{k}.safe(z)")
-    return f"def safe(z):\n    return {_tuple(tests)}\n"
+        keys.append(text(t.key))
+    pairs = ", ".join(f"{key}: {test}" for key, test in zip(keys, tests))
+    return f"def safe(z):\n    return {_tuple(tests)}\n\n\ndef safe_info(z):\n    return {{{pairs}}}\n"
 
 
 def source_of(tree: FlatTree) -> str:
@@ -257,44 +274,60 @@ class _GeneralNode:
             q = ()
         return bool(call_definition(path, "contains()", node.contains, Context(s, q, inside)))
 
-    def step(
-        self, s: Any, a: Any, s2: Any, z: list[float], inside: tuple[bool, ...], inside2: tuple[bool, ...]
-    ) -> tuple[bool, float]:
-        # The hot path calls the methods directly (the body of ``_step``, inlined: this runs every env
-        # step); if one raises, ``_step`` re-runs checked and names it. Own state is written only once
-        # every method succeeded, so the checked re-run sees the same state.
-        try:
-            node, start, stop = self.node, self.start, self.stop
-            q = tuple(z[start:stop])
-            before = _context(Context, (s, q, inside))
-            if stop > start:
-                q2 = node.next_state(before, a, s2, inside2)
-                if type(q2) is not tuple:
-                    q2 = tuple(q2)
-            else:
-                q2 = q
-            after = self.after = _context(Context, (s2, q2, inside2))
-            member = bool(node.contains(after))
-            if not self.own_reward:
-                reward = 0.0
-            elif self.default_reward:
+    def hot_step(self) -> Callable[..., tuple[bool, float]]:
+        """``step(s, a, s2, z, inside, inside2) -> (member, reward)``, written for this node.
+
+        The hot path: it runs every env step, so it is a closure over this node's methods and flags rather
+        than a method reading them from ``self`` (the body of :meth:`_step`, inlined). If a method raises,
+        :meth:`_step` runs again checked and names it. Own state is written only once every method
+        succeeded, so the checked re-run sees the same state.
+        """
+        node, start, stop = self.node, self.start, self.stop
+        stateful, single = stop > start, stop - start == 1
+        next_state, contains, potential, reward_of = node.next_state, node.contains, node.potential, node.reward
+        own_reward, default_reward = self.own_reward, self.default_reward
+        keep_after = type(node).terminates is not Node.terminates  # only a node's own termination reads it
+        general, context, new = self, Context, _context
+
+        def step(
+            s: Any, a: Any, s2: Any, z: list[float], inside: tuple[bool, ...], inside2: tuple[bool, ...]
+        ) -> tuple[bool, float]:
+            try:
+                q = (z[start],) if single else tuple(z[start:stop])
                 # The last step's ``after`` is this step's ``before`` when nothing reset or restored in between:
                 # the same feature tuple object, and equal own state and children's memberships.
-                last = self.last
+                last = general.last
                 if last is not None and last[0][0] is s and last[0][1] == q and last[0][2] == inside:
-                    phi = last[1]
+                    before, phi = last
                 else:
-                    phi = float(node.potential(before))
-                phi2 = float(node.potential(after))
-                self.last = (after, phi2)
-                reward = phi2 - phi
-            else:
-                reward = float(node.reward(before, a, after))
-        except Exception:
-            member, reward, q2 = self._step(s, a, s2, z, inside, inside2, self._checked)
-        if stop > start:
-            z[start:stop] = q2
-        return member, reward
+                    before, phi = new(context, (s, q, inside)), None
+                if stateful:
+                    q2 = next_state(before, a, s2, inside2)
+                    if type(q2) is not tuple:
+                        q2 = tuple(q2)
+                else:
+                    q2 = q
+                after = new(context, (s2, q2, inside2))
+                if keep_after:
+                    general.after = after
+                member = bool(contains(after))
+                if not own_reward:
+                    reward = 0.0
+                elif default_reward:  # reward = potential(after) - potential(before)
+                    if phi is None:
+                        phi = float(potential(before))
+                    phi2 = float(potential(after))
+                    general.last = (after, phi2)
+                    reward = phi2 - phi
+                else:
+                    reward = float(reward_of(before, a, after))
+            except Exception:
+                member, reward, q2 = general._step(s, a, s2, z, inside, inside2, general._checked)
+            if stateful:
+                z[start:stop] = q2
+            return member, reward
+
+        return step
 
     def _checked(self, what: str, fn: Callable[..., Any], *args: Any) -> Any:
         return call_definition(self.path, what, fn, *args)
@@ -366,7 +399,7 @@ class _GeneralAnnotation:
 
 def build_namespace(tree: FlatTree, make: Callable[..., Any]) -> dict[str, Any]:
     """The globals the generated code runs with: user functions and general nodes by index."""
-    namespace: dict[str, Any] = {"_make": make._make, "_float": float}  # type: ignore[attr-defined]
+    namespace: dict[str, Any] = {"_new": tuple.__new__, "_State": make, "_float": float}
     slot_counts: dict[str, int] = {}
     for key, _ in tree.slots:
         slot_counts[key] = slot_counts.get(key, 0) + 1
@@ -374,7 +407,7 @@ def build_namespace(tree: FlatTree, make: Callable[..., Any]) -> dict[str, Any]:
         if not tree.fast[i]:
             size = slot_counts.get(tree.paths[i], 0) if tree.slot_start[i] >= 0 else 0
             general = _GeneralNode(tree.paths[i], node, max(tree.slot_start[i], 0), size)
-            namespace[f"_node{i}"] = general.step
+            namespace[f"_node{i}"] = general.hot_step()
             namespace[f"_end{i}"] = general.end
             namespace[f"_start{i}"] = general.begin
     for k, t in enumerate(tree.terms):

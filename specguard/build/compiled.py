@@ -30,11 +30,15 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
+from types import CodeType
 from typing import Any, NoReturn
 
 import numpy as np
 
 from specguard.build.codegen import build_namespace, source_of
+from specguard.build.initial_env import state_type
+from specguard.build.reference import FLOAT_MAX, check_distance, distance_value
 from specguard.error import EvaluationError, InvalidSpec, UnknownFeature
 from specguard.extend import (
     Annotation,
@@ -53,6 +57,8 @@ from specguard.build.reference import FLOAT_MAX, check_distance, distance_value
 from specguard.validation import child_path
 
 __all__ = ["CompiledTree", "Evaluator", "compile_tree"]
+
+_isfinite = math.isfinite
 
 
 @dataclass(frozen=True)
@@ -86,6 +92,8 @@ class CompiledTree:
         children: per node, the indices of its children in ``paths``.
         slots: the own-state slots (node or annotation key, slot), in observation order.
         slot_start: per node, the index of its first own-state slot (``-1``: none).
+        weights: the adapted weights it was compiled with (``compile_tree(weights=...)``),
+            by path; empty for the tree's own.
     """
 
     features: tuple[str, ...]
@@ -99,6 +107,11 @@ class CompiledTree:
     children: tuple[tuple[int, ...], ...]
     slots: tuple[tuple[str, Slot], ...]
     slot_start: tuple[int, ...]
+    weights: tuple[tuple[str, tuple[float, ...]], ...] = ()
+
+    def __getstate__(self) -> dict[str, Any]:
+        # The generated code is made again after unpickling: the standard pickle cannot pickle code objects.
+        return {k: v for k, v in self.__dict__.items() if k != "code"}
 
     @property
     def term_keys(self) -> tuple[str, ...]:
@@ -254,13 +267,18 @@ class CompiledTree:
 
     # -- the per-step kernel -------------------------------------------------
 
-    @property
+    @cached_property
     def source(self) -> str:
-        """The generated per-step code (``start`` and ``step``), for reading and debugging."""
+        """The generated per-step code (``start``, ``step`` and ``safe``), for reading and debugging."""
         return source_of(self)
 
+    @cached_property
+    def code(self) -> CodeType:
+        """:attr:`source` compiled, once per compiled tree: every evaluator runs it in a namespace of its own."""
+        return compile(self.source, f"<specguard evaluator of {self.paths[0]!r}>", "exec")
+
     def evaluator(self) -> Evaluator:
-        """A fresh per-episode evaluator (one per env)."""
+        """A fresh per-episode evaluator (one per env); evaluators of one compiled tree share its generated code."""
         return Evaluator(self)
 
 
@@ -381,6 +399,7 @@ def compile_tree(
         tuple(tuple(c) for c in children),
         tuple(slots),
         tuple(slot_start),
+        tuple(sorted((path, tuple(float(w) for w in ws)) for path, ws in (weights or {}).items())),
     )
 
 
@@ -445,6 +464,10 @@ class Evaluator:
 
     Holds the episode's state: the previous memberships, distances and
     feature namedtuple, and the own-state slots (counters, stages).
+
+    Attributes:
+        goals: every node's membership of the last state reset or stepped to, by path: a new
+            dict each time (the env hands it out as ``info["goals"]``).
     """
 
     def __init__(self, tree: CompiledTree) -> None:
@@ -454,14 +477,16 @@ class Evaluator:
         self.safety_keys = tree.safety_keys
         self._state_cls = state_type(tree.features)
         namespace = build_namespace(tree, self._state_cls)
-        exec(compile(tree.source, f"<specguard evaluator of {tree.paths[0]!r}>", "exec"), namespace)
+        exec(tree.code, namespace)
         self._start: Callable[..., Any] = namespace["start"]
         self._step: Callable[..., Any] = namespace["step"]
         self._safe: Callable[[list[float]], tuple[bool, ...]] = namespace["safe"]
+        self._safe_info: Callable[[list[float]], dict[str, bool]] = namespace["safe_info"]
         self._m: tuple[bool, ...] = ()
         self._q: tuple[float, ...] = ()
         self._s: Any = None
         self.own_state: list[float] = [0.0] * len(tree.slots)
+        self.goals: dict[str, bool] = {}
 
     def members(self, f: Sequence[float]) -> tuple[bool, ...]:
         """Every node's membership of one feature vector, at the start of an episode (no episode state)."""
@@ -472,7 +497,7 @@ class Evaluator:
         """Start an episode in features ``f``; returns every node's membership."""
         own = [0.0] * len(self.slots)
         try:
-            self._m, self._s, self._q = self._start(f, own, True)
+            self._m, self.goals, self._s, self._q = self._start(f, own, True)
         except EvaluationError:
             raise
         except Exception as e:
@@ -485,7 +510,7 @@ class Evaluator:
         if len(own) != len(self.slots):
             raise ValueError(f"expected {len(self.slots)} own-state values, got {len(own)}")
         state = [float(v) for v in own]
-        self._m, self._s, self._q = self._start(f, state, False)
+        self._m, self.goals, self._s, self._q = self._start(f, state, False)
         self.own_state = state
         return self._m
 
@@ -493,6 +518,10 @@ class Evaluator:
     def safe(self) -> tuple[bool, ...]:
         """Per safety annotation (``safety_keys``), whether the episode has had no violation so far."""
         return self._safe(self.own_state)
+
+    def safe_info(self) -> dict[str, bool]:
+        """:attr:`safe` by safety key, a new dict (the env's ``info["safe"]``)."""
+        return self._safe_info(self.own_state)
 
     def step(self, action: Any, f: Sequence[float]) -> tuple[float, bool, tuple[bool, ...], dict[str, float]]:
         """Advance by one transition to features ``f``.
@@ -502,17 +531,17 @@ class Evaluator:
             counter at 0, or a node's own termination), every node's membership
             of ``f`` and the weighted reward terms by key (Algorithm 1's processing order).
         """
-        own = list(self.own_state)  # the episode state changes only once the step succeeded
+        own = self.own_state[:]  # the episode state changes only once the step succeeded
         try:
-            r, ended, m2, s2, q2, terms = self._step(f, self._m, self._s, self._q, own, action)
+            r, ended, m2, goals, s2, q2, terms = self._step(f, self._m, self._s, self._q, own, action)
         except EvaluationError:
             raise
         except Exception as e:
             self._diagnose(action, f, e)
-        if not math.isfinite(r):
+        if not _isfinite(r):
             bad = {k: v for k, v in terms.items() if not math.isfinite(v)}
             raise EvaluationError(f"non-finite reward {r}: the terms {bad} are not finite")
-        self._m, self._s, self._q, self.own_state = m2, s2, q2, own
+        self._m, self.goals, self._s, self._q, self.own_state = m2, goals, s2, q2, own
         return float(r), ended, m2, terms
 
     def _diagnose(self, action: Any, f: Sequence[float], error: Exception) -> NoReturn:

@@ -24,22 +24,36 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any, Literal, SupportsFloat
+from typing import Any, Literal, SupportsFloat, cast
 
 import gymnasium as gym
 import numpy as np
 from gymnasium.utils import RecordConstructorArgs
 
 from specguard.build.checks import check_goals
-from specguard.build.compiled import compile_tree
-from specguard.error import EvaluationError, InitialEnvError, InvalidSpec, SpecError, StateMappingError
+from specguard.build.compiled import CompiledTree, compile_tree
 from specguard.build.initial_env import InitialEnv, check_identity_observation
-from specguard.tree.nodes import Node
 from specguard.build.reference import ReferenceEvaluator
+from specguard.error import EvaluationError, InitialEnvError, InvalidSpec, SpecError, StateMappingError
+from specguard.tree.nodes import Node
 
-__all__ = ["GoalInfo", "SpecEnv", "make_baseline_env", "make_env"]
+_FLOAT32 = np.dtype(np.float32)
+_isfinite = math.isfinite
+
+__all__ = ["EnvFactory", "GoalInfo", "SpecEnv", "make_baseline_env", "make_env", "preflight"]
 
 EvaluatorName = Literal["flat", "reference"]
+
+
+def _compiled_for(tree: Node, features: tuple[str, ...], compiled: CompiledTree | None) -> CompiledTree:
+    """``compiled`` when it is this very tree compiled over ``features`` with its own weights; compiled here if None."""
+    if compiled is None:
+        return compile_tree(tree, features)  # validates feature names, even for "reference"
+    if not isinstance(compiled, CompiledTree) or compiled.nodes[0] is not tree or compiled.features != features:
+        raise InvalidSpec("compiled", "expected compile_tree(tree, features) of this very tree and these features")
+    if compiled.weights:
+        raise InvalidSpec("compiled", "expected the tree compiled with its own weights, not adapted ones")
+    return compiled
 
 
 def _features(obs: Any, state: Callable[[Any], Any] | None, features: tuple[str, ...], where: str) -> list[float]:
@@ -87,6 +101,8 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
             unbounded (see :meth:`InitialEnv.feature_bounds`).
         action_space: ``A_G``; ``None`` for the base env's.
         evaluator: ``"flat"`` (compiled, fast) or ``"reference"`` (Algorithm 1 as written).
+        compiled: ``compile_tree(tree, features)`` when the caller has it (envs of one
+            tree share it, :class:`EnvFactory`); ``None`` compiles the tree here.
     """
 
     def __init__(
@@ -100,8 +116,10 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         feature_high: Sequence[float] | None = None,
         action_space: gym.Space[Any] | None = None,
         evaluator: EvaluatorName = "flat",
+        *,
+        compiled: CompiledTree | None = None,
     ) -> None:
-        RecordConstructorArgs.__init__(
+        RecordConstructorArgs.__init__(  # not ``compiled``: the spec re-creates the env from the tree
             self,
             tree=tree,
             features=tuple(features),
@@ -117,7 +135,7 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
             raise InvalidSpec("tree", f"expected a goal-tree node (Goal, All, ...), got {tree!r}")
         self.tree = tree
         self.features = tuple(features)
-        self.compiled = compile_tree(tree, self.features)  # validates feature names, even for "reference"
+        self.compiled = _compiled_for(tree, self.features, compiled)
         if evaluator == "flat":
             self.evaluator: Any = self.compiled.evaluator()
         elif evaluator == "reference":
@@ -168,13 +186,6 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         adapted = {path: tuple(float(w) for w in ws) for path, ws in weights.items()}
         self._pending = adapted, compile_tree(self.tree, self.features, weights=adapted)
 
-    # -- mapping ---------------------------------------------------------------
-
-    def _observation(self, obs: Any, f: list[float]) -> np.ndarray:
-        if self._passthrough:
-            return obs  # type: ignore[no-any-return]
-        return np.array(f + self.evaluator.own_state, dtype=np.float32)
-
     # -- gymnasium API -------------------------------------------------------
 
     def reset(
@@ -185,24 +196,33 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
             self.evaluator = self.compiled.evaluator()
         obs, info = self.env.reset(seed=seed, options=options)
         f = _features(obs, self._state, self.features, self.tree.name)
-        members = self.evaluator.reset(f)
-        info["goals"] = dict(zip(self._paths, members))
-        info["safe"] = self._safe()
-        return self._observation(obs, f), info
-
-    def _safe(self) -> dict[str, bool]:
-        return dict(zip(self._safety_keys, self.evaluator.safe)) if self._safety_keys else {}
+        ev = self.evaluator
+        ev.reset(f)
+        info["goals"] = ev.goals
+        info["safe"] = ev.safe_info() if self._safety_keys else {}
+        return (obs if self._passthrough else np.array(f + ev.own_state, _FLOAT32)), info
 
     def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
-        base_action = action if self._execute is None else self._execute(action)
-        obs, base_reward, terminated, truncated, info = self.env.step(base_action)
-        f = _features(obs, self._state, self.features, self.tree.name)
-        reward, ended, members, terms = self.evaluator.step(action, f)
-        info["goals"] = dict(zip(self._paths, members))
-        info["safe"] = self._safe()
+        # The hot path: every call of a user's training runs it, so it is written out in one function.
+        obs, base_reward, terminated, truncated, info = self.env.step(
+            action if self._execute is None else self._execute(action)
+        )
+        if self._state is None:  # the identity: _features inlined
+            f = obs.tolist()
+            if len(f) != self._n or not _isfinite(sum(f)):
+                _features(obs, None, self.features, self.tree.name)  # raises, naming the observation
+        else:
+            f = _features(obs, self._state, self.features, self.tree.name)
+        ev = self.evaluator
+        reward, ended, _, terms = ev.step(action, f)
+        info["goals"] = ev.goals  # a new dict each step, as are the others
+        info["safe"] = ev.safe_info() if self._safety_keys else {}
         info["reward_terms"] = terms
         info["base_reward"] = float(base_reward)
-        return self._observation(obs, f), reward, bool(terminated or ended), bool(truncated), info
+        # A new array each step (a consumer may keep it, e.g. SB3's terminal_observation); or, when
+        # nothing is added or converted, the base env's own observation untouched.
+        observation = obs if self._passthrough else np.array(f + ev.own_state, _FLOAT32)
+        return observation, reward, bool(terminated or ended), bool(truncated), info
 
 
 class GoalInfo(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
@@ -216,16 +236,25 @@ class GoalInfo(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         tree: the goal tree.
         features: the feature names.
         state: ``state(obs*)``; ``None`` for the identity.
+        compiled: ``compile_tree(tree, features)`` when the caller has it; ``None`` compiles the tree here.
     """
 
     def __init__(
-        self, env: gym.Env, tree: Node, features: Sequence[str], state: Callable[[Any], Any] | None = None
+        self,
+        env: gym.Env,
+        tree: Node,
+        features: Sequence[str],
+        state: Callable[[Any], Any] | None = None,
+        *,
+        compiled: CompiledTree | None = None,
     ) -> None:
         RecordConstructorArgs.__init__(self, tree=tree, features=tuple(features), state=state)
         gym.Wrapper.__init__(self, env)
+        if not isinstance(tree, Node):
+            raise InvalidSpec("tree", f"expected a goal-tree node (Goal, All, ...), got {tree!r}")
         self.tree = tree
         self.features = tuple(features)
-        self.evaluator = compile_tree(tree, self.features).evaluator()
+        self.evaluator = _compiled_for(tree, self.features, compiled).evaluator()
         self._state = state
         if state is None:
             check_identity_observation(tree.name, self.features, env.observation_space)
@@ -251,19 +280,99 @@ class GoalInfo(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         return obs, reward, terminated, truncated, self._info(info, members)
 
 
-def make_baseline_env(initial_env: InitialEnv, tree: Node, **make_kwargs: Any) -> GoalInfo:
-    """The initial env with its own reward, reporting the goals of ``tree`` (the paper's baseline)."""
+def preflight(where: str, initial_env: object, tree: object) -> CompiledTree:
+    """The checks of the arguments of ``make_env`` and ``make_baseline_env``, before any env is built.
+
+    One function for both (and every :class:`EnvFactory`): the baseline refuses what the constructed env refuses.
+
+    Args:
+        where: the function the user called, for the messages.
+        initial_env: should be an :class:`InitialEnv`.
+        tree: should be a goal-tree node whose goals name only the initial env's features.
+
+    Returns:
+        ``tree`` compiled over the initial env's features.
+
+    Raises:
+        InitialEnvError: ``initial_env`` is not an :class:`InitialEnv`.
+        InvalidSpec: ``tree`` is not a node, or a weight makes a coefficient overflow.
+        UnknownFeature: a goal names a feature the initial env lacks.
+    """
     if not isinstance(initial_env, InitialEnv):
-        raise InitialEnvError(f"make_baseline_env: expected an InitialEnv as first argument, got {initial_env!r}")
-    compile_tree(tree, initial_env.features)
-    base = initial_env.make(**make_kwargs)
-    try:
-        low, high = initial_env.feature_bounds(base.observation_space)  # checks the features fit the observation
-        check_goals(tree, initial_env.features, low, high)  # refuse a goal no state can be in, before training
-        return GoalInfo(base, tree=tree, features=initial_env.features, state=initial_env.state)
-    except SpecError:
-        base.close()
-        raise
+        raise InitialEnvError(f"{where}: expected an InitialEnv as first argument, got {initial_env!r}")
+    if not isinstance(tree, Node):
+        raise InvalidSpec(where, f"expected a goal-tree node (Goal, All, ...) as tree, got {tree!r}")
+    return compile_tree(tree, initial_env.features)
+
+
+class EnvFactory:
+    """Builds the envs of one goal tree over one initial env, compiling the tree once for all of them.
+
+    ``make_env(initial_env, tree, ...)`` is ``EnvFactory(initial_env, tree, ...)()``. A training run that
+    builds several envs of one spec (its vectorised envs and its evaluation env) calls one factory several
+    times: the envs share the compiled tree and its generated code, each with an evaluator (episode state)
+    of its own. The factory holds the tree object itself, so what it compiled is exactly that tree.
+
+    The first call runs :func:`preflight` (a failure is raised again by every later call); every call builds
+    a base env and checks the goals against the bounds of its observation space, before wrapping it.
+
+    Args:
+        initial_env: the initial environment and its mappings.
+        tree: the goal tree.
+        baseline: build :class:`GoalInfo` envs (the initial env's own reward) rather than :class:`SpecEnv`.
+        evaluator: the :class:`SpecEnv` evaluator, ``"flat"`` or ``"reference"``.
+    """
+
+    def __init__(
+        self, initial_env: InitialEnv, tree: Node, *, baseline: bool = False, evaluator: EvaluatorName = "flat"
+    ) -> None:
+        self.initial_env = initial_env
+        self.tree = tree
+        self.baseline = baseline
+        self.evaluator: EvaluatorName = evaluator
+        self.compiled: CompiledTree | None = None
+        """The compiled tree, once the first call's preflight passed."""
+
+    def __call__(self, **make_kwargs: Any) -> SpecEnv | GoalInfo:
+        """A new env; ``make_kwargs`` override the base env's ``gymnasium.make`` kwargs.
+
+        Raises:
+            SpecError: the tree or the initial env is invalid; the message names the node path.
+        """
+        if self.compiled is None:
+            self.compiled = preflight("make_baseline_env" if self.baseline else "make_env", self.initial_env, self.tree)
+        compiled, initial_env = self.compiled, self.initial_env
+        base = initial_env.make(**make_kwargs)
+        try:
+            low, high = initial_env.feature_bounds(base.observation_space)  # checks the features fit the observation
+            check_goals(compiled, low, high)  # refuse a goal no state can be in, before training
+            if self.baseline:
+                return GoalInfo(
+                    base, tree=self.tree, features=initial_env.features, state=initial_env.state, compiled=compiled
+                )
+            return SpecEnv(
+                base,
+                tree=self.tree,
+                features=initial_env.features,
+                state=initial_env.state,
+                execute=initial_env.execute,
+                feature_low=None if np.all(np.isinf(low)) else tuple(low.tolist()),
+                feature_high=None if np.all(np.isinf(high)) else tuple(high.tolist()),
+                action_space=initial_env.action_space,
+                evaluator=self.evaluator,
+                compiled=compiled,
+            )
+        except SpecError:
+            base.close()
+            raise
+
+
+def make_baseline_env(initial_env: InitialEnv, tree: Node, **make_kwargs: Any) -> GoalInfo:
+    """The initial env with its own reward, reporting the goals of ``tree`` (the paper's baseline).
+
+    It runs the preflight of :func:`make_env` (:func:`preflight`, then the goals against the feature bounds).
+    """
+    return cast(GoalInfo, EnvFactory(initial_env, tree, baseline=True)(**make_kwargs))
 
 
 def make_env(initial_env: InitialEnv, tree: Node, *, evaluator: EvaluatorName = "flat", **make_kwargs: Any) -> SpecEnv:
@@ -277,34 +386,13 @@ def make_env(initial_env: InitialEnv, tree: Node, *, evaluator: EvaluatorName = 
             (e.g. ``render_mode="human"``).
 
     Returns:
-        A :class:`SpecEnv`, a ``gymnasium.Env``.
+        A :class:`SpecEnv`, a ``gymnasium.Env``. The tree is compiled once
+        (:class:`EnvFactory` builds several envs of one tree on one compilation).
 
     Raises:
         SpecError: the tree or the initial env is invalid; the message names the node path.
     """
-    if not isinstance(initial_env, InitialEnv):
-        raise InitialEnvError(f"make_env: expected an InitialEnv as first argument, got {initial_env!r}")
-    if not isinstance(tree, Node):
-        raise InvalidSpec("make_env", f"expected a goal-tree node (Goal, All, ...) as tree, got {tree!r}")
-    compile_tree(tree, initial_env.features)  # fail before building the base env
-    base = initial_env.make(**make_kwargs)
-    try:
-        low, high = initial_env.feature_bounds(base.observation_space)  # checks the features fit the observation
-        check_goals(tree, initial_env.features, low, high)  # refuse a goal no state can be in, before training
-        return SpecEnv(
-            base,
-            tree=tree,
-            features=initial_env.features,
-            state=initial_env.state,
-            execute=initial_env.execute,
-            feature_low=None if np.all(np.isinf(low)) else tuple(low.tolist()),
-            feature_high=None if np.all(np.isinf(high)) else tuple(high.tolist()),
-            action_space=initial_env.action_space,
-            evaluator=evaluator,
-        )
-    except SpecError:
-        base.close()
-        raise
+    return cast(SpecEnv, EnvFactory(initial_env, tree, evaluator=evaluator)(**make_kwargs))
 
 
 def __getattr__(name: str) -> Any:

@@ -19,6 +19,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
+from specguard.build.initial_env import state_type
 from specguard.error import EvaluationError
 from specguard.extend import Annotation, Context, Node, Slot, annotation_key, component_weights
 from specguard.build.initial_env import state_type
@@ -255,9 +256,14 @@ class ReferenceEvaluator:
         self.slots = self.req.slots
         self.safety_keys = tuple(self.req.violations)
         self._x: ExtendedState | None = None
+        self.goals: dict[str, bool] = {}
+        """Every node's membership of the last state, by path."""
 
     def _members(self, x: ExtendedState) -> tuple[bool, ...]:
-        return tuple(g(x) for g in self.req.goals.values())
+        """Every node's membership of ``x`` (the state just reached), also kept by path in :attr:`goals`."""
+        members = tuple(g(x) for g in self.req.goals.values())
+        self.goals = dict(zip(self.paths, members))
+        return members
 
     def reset(self, f: Sequence[float]) -> tuple[bool, ...]:
         s = self.state_cls._make(f)
@@ -290,6 +296,10 @@ class ReferenceEvaluator:
         assert self._x is not None
         x = self._x
         return tuple(v(x) == 0 for v in self.req.violations.values())
+
+    def safe_info(self) -> dict[str, bool]:
+        """:attr:`safe` by safety key."""
+        return dict(zip(self.safety_keys, self.safe))
 
     def step(self, action: Any, f: Sequence[float]) -> tuple[float, bool, tuple[bool, ...], Terms]:
         """Advance by one transition to features ``f``: reward, spec termination, goals, weighted terms."""

@@ -97,7 +97,10 @@ def _compute(spec: Any) -> SpecFingerprint:
     full = _fields(spec, frozenset())
     run = _fields(spec, _SPEC_ONLY_FIELDS)
     run["budget"] = _fields(spec.budget, _BUDGET_SPEC_ONLY_FIELDS)
-    first, second = probe(spec), probe(spec)
+    from specguard.engine.train import env_factory
+
+    build = env_factory(spec)  # a fresh env per probe, on one compiled tree
+    first, second = probe(spec, build=build), probe(spec, build=build)
     if first != second:
         warnings.warn(
             f"specguard: {where}: the env does not repeat a fixed-seed rollout (it draws randomness its seed does "

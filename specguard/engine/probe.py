@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import copy
 import hashlib
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -24,17 +25,19 @@ PROBE_STEPS = 256
 # -- the behavioural probe ---------------------------------------------------------
 
 
-def probe(spec: Any, steps: int = PROBE_STEPS) -> str:
+def probe(spec: Any, steps: int = PROBE_STEPS, build: Callable[[], Any] | None = None) -> str:
     """A digest of a fixed-seed rollout of the spec's training env (seeded random actions).
 
     An env that raises is not an error here: the exception's type and message
     are hashed and the rollout ends (the training run reports the failure
-    with its seed, where it belongs).
+    with its seed, where it belongs). ``build`` makes the env (``None``:
+    :func:`~specguard.engine.train.make_single_env`); probes of one spec share
+    one :func:`~specguard.engine.train.env_factory`, so its tree is compiled once.
     """
     h = hashlib.sha256()
     env = None
     try:
-        env = make_single_env(spec)
+        env = make_single_env(spec) if build is None else build()
         h.update(dumps(canonical((env.observation_space, env.action_space), "spaces")).encode())
         actions = copy.deepcopy(env.action_space)  # seeding the user's own space would change it
         actions.seed(0)

@@ -23,7 +23,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from specguard.build.env import make_baseline_env, make_env
+from specguard.build.env import EnvFactory
 from specguard.engine.auto_weights import WeightAdapter
 from specguard.engine.progress import ProgressEvent, decode_update, encode_update
 from specguard.engine.results import RunResult
@@ -38,6 +38,7 @@ __all__ = [
     "EVAL_SEED_STRIDE",
     "RunResult",
     "TrainingError",
+    "env_factory",
     "evaluate",
     "make_single_env",
     "train_run",
@@ -85,11 +86,14 @@ def evaluate(policy: Callable[[Any], Any], env: gym.Env, episodes: int, seeds: l
     return counts
 
 
+def env_factory(spec: Spec) -> EnvFactory:
+    """Builds the envs of one run (:func:`make_single_env`'s), compiling the spec's tree once for all of them."""
+    return EnvFactory(spec.initial_env, spec.tree, baseline=spec.baseline)
+
+
 def make_single_env(spec: Spec) -> gym.Env:
     """The env one run trains on: the constructed env, or for a baseline spec the initial env with goal info."""
-    if spec.baseline:
-        return make_baseline_env(spec.initial_env, spec.tree)
-    return make_env(spec.initial_env, spec.tree)
+    return env_factory(spec)()
 
 
 TICKS = 100  # step reports per run (cheap; they tell where a run was when it died)
@@ -226,8 +230,9 @@ def train_run(
             progress(decode_update(spec.label, seed, line))
 
     emit("build", None, None)
+    build = env_factory(spec)  # the training envs and the evaluation env share one compiled tree
     try:
-        venv = make_vec_env(lambda: make_single_env(spec), n_envs=spec.n_envs, seed=seed)
+        venv = make_vec_env(build, n_envs=spec.n_envs, seed=seed)
     except SpecError:
         raise
     except Exception as e:
@@ -251,7 +256,7 @@ def train_run(
 
     budget = spec.budget
     confidence = spec.verdict_confidence  # corrected for every look (specguard.stats.anytime)
-    eval_env = make_single_env(spec)
+    eval_env = build()
     seeds = range(EVAL_SEED_BASE + seed * EVAL_SEED_STRIDE, EVAL_SEED_BASE + (seed + 1) * EVAL_SEED_STRIDE)
     normalizer = venv if isinstance(venv, VecNormalize) else None
 

@@ -32,6 +32,8 @@ if TYPE_CHECKING:
 
 __all__ = ["Constraint", "Distance"]
 
+_FLOAT_MAX = sys.float_info.max  # read every step by operators that shape with a Distance (a Sequence)
+
 
 def _text(a: Distance | Constraint, default_name: str, arguments: str) -> str:
     """The exact description: ``Kind(fn, arguments[, weight=...][, name=...])``, defaults left out."""
@@ -80,12 +82,20 @@ class Distance(Annotation):
             d = float(self.fn(s))
         except Exception as e:
             raise EvaluationError(f"the distance function raised {type(e).__name__}: {e} (state {s})") from e
-        if not 0.0 <= d <= sys.float_info.max:  # NaN fails it too
+        if not 0.0 <= d <= _FLOAT_MAX:  # NaN fails it too
             raise EvaluationError(f"expected a finite distance >= 0, got {d!r} (state {s})")
         return d
 
     def potential(self, s: Any, q: tuple[float, ...]) -> float:
-        return -self.value(s) / self.scale  # Phi = -fn(s) / d, so R = (fn(s) - fn(s')) / d
+        # Phi = -fn(s) / d, so R = (fn(s) - fn(s')) / d. A Sequence asks it every step: the checks of
+        # value() written out here; it calls value() for the message when fn raised or returned a bad distance.
+        try:
+            d = float(self.fn(s))
+        except Exception:
+            d = self.value(s)
+        if not 0.0 <= d <= _FLOAT_MAX:  # NaN fails it too
+            d = self.value(s)
+        return -d / self.scale
 
     def reward(self, s: Any, q: tuple[float, ...], action: Any, s2: Any, q2: tuple[float, ...]) -> float:
         return (self.value(s) - self.value(s2)) / self.scale  # as SPEC.md writes it (same rounding as the fast path)
