@@ -19,7 +19,7 @@ DRIVER = "SPECGUARD_TEST_DRIVER_PID"
 
 
 def spec(initial=None, **kwargs):
-    kwargs.setdefault("budget", sg.Budget(timesteps=256, min_seeds=2, eval_episodes=3))
+    kwargs.setdefault("budget", sg.Budget(timesteps=256, min_seeds=2, eval_episodes=3, checkpoints=1))
     return sg.Spec(
         initial or pendulum.initial_env,
         pendulum.trees["b"],
