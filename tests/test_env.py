@@ -72,6 +72,25 @@ def test_env_works_with_sb3_vector_envs():
         venv.close()
 
 
+def test_a_factory_that_has_compiled_its_tree_builds_subprocess_envs():
+    # The factory travels pickled (cloudpickle) with its compiled tree, less the generated code object.
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    from specguard.build.env import EnvFactory
+
+    build = EnvFactory(pendulum.initial_env, pendulum.trees["c"])
+    build().close()
+    assert build.compiled is not None and "code" in build.compiled.__dict__
+    rewards = []
+    for cls in (None, SubprocVecEnv):
+        venv = make_vec_env(build, n_envs=2, seed=0, **({} if cls is None else {"vec_env_cls": cls}))
+        venv.reset()
+        rewards.append(venv.step(np.full((2, 1), 0.5, dtype=np.float32))[1].tolist())
+        venv.close()
+    assert rewards[0] == pytest.approx(rewards[1], rel=1e-6)  # DummyVecEnv keeps rewards in float32
+
+
 def test_reference_and_flat_envs_give_the_same_rollout():
     rollouts = []
     for evaluator in ("flat", "reference"):

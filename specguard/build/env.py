@@ -145,7 +145,7 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         self._state = state
         self._execute = execute
         self._n = len(self.features)
-        self._paths, self._safety_keys = self.evaluator.paths, self.evaluator.safety_keys
+        self._safety_keys = self.evaluator.safety_keys
         base_space = env.observation_space
         if state is None:
             check_identity_observation(tree.name, self.features, base_space)
