@@ -26,8 +26,6 @@ Example:
 
 from __future__ import annotations
 
-from specguard.utils.text import bounds_text
-
 import sys
 import warnings
 from typing import Any
@@ -38,6 +36,7 @@ from numpy.typing import ArrayLike
 from specguard.build.compiled import CompiledTree, compile_tree
 from specguard.error import UnreachableGoal
 from specguard.tree.nodes import Node
+from specguard.utils.text import bounds_text
 
 __all__ = [
     "check_goals",

@@ -52,8 +52,6 @@ from specguard.extend import (
     annotation_key,
     component_weights,
 )
-from specguard.build.initial_env import state_type
-from specguard.build.reference import FLOAT_MAX, check_distance, distance_value
 from specguard.validation import child_path
 
 __all__ = ["CompiledTree", "Evaluator", "compile_tree"]

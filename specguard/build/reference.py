@@ -22,7 +22,6 @@ from typing import Any, NamedTuple
 from specguard.build.initial_env import state_type
 from specguard.error import EvaluationError
 from specguard.extend import Annotation, Context, Node, Slot, annotation_key, component_weights
-from specguard.build.initial_env import state_type
 from specguard.validation import child_path
 
 __all__ = [
