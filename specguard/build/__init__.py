@@ -1,1 +1,1 @@
-"""The constructed environment: the initial env, Algorithm 1 (reference), its compiled form and code, checks, ``SpecEnv``."""
+"""The constructed environment: the initial env, Algorithm 1 (reference), the compiled form, ``SpecEnv``."""
