@@ -45,7 +45,8 @@ _EXPORTS = {
     "Goal": "specguard.tree.nodes",
     "GoalEnv": "specguard.build.env",  # deprecated name of SpecEnv (warns)
     "SpecEnv": "specguard.build.env",
-    "GoalInfo": "specguard.build.env",
+    "GoalInfo": "specguard.build.env",  # deprecated name of BaselineEnv (warns)
+    "BaselineEnv": "specguard.build.env",
     "GoalVerdict": "specguard.engine.spec_result",
     "InitialEnv": "specguard.build.initial_env",
     "InitialEnvError": "specguard.error",
@@ -83,7 +84,7 @@ def __getattr__(name: str) -> Any:
                 return found
         raise AttributeError(f"module 'specguard' has no attribute {name!r}")
     value = getattr(importlib.import_module(module), name)
-    if name != "GoalEnv":  # the deprecated name warns on every use
+    if name not in ("GoalEnv", "GoalInfo"):  # the deprecated names warn on every use
         globals()[name] = value
     return value
 
@@ -95,7 +96,7 @@ def __dir__() -> list[str]:
 if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.build.compiled import CompiledTree as CompiledTree
     from specguard.build.compiled import compile_tree as compile_tree
-    from specguard.build.env import GoalInfo as GoalInfo
+    from specguard.build.env import BaselineEnv as BaselineEnv
     from specguard.build.env import SpecEnv as SpecEnv
     from specguard.build.env import make_baseline_env as make_baseline_env
     from specguard.build.env import make_env as make_env

@@ -349,7 +349,7 @@ def test_an_env_refuses_the_compiled_tree_of_another_tree():
     with pytest.raises(sg.InvalidSpec, match="compiled: expected compile_tree"):
         sg.SpecEnv(base, pendulum.trees["w"], pendulum.initial_env.features, compiled=other)
     with pytest.raises(sg.InvalidSpec, match="compiled: expected compile_tree"):
-        sg.GoalInfo(base, pendulum.trees["w"], pendulum.initial_env.features, compiled=other)
+        sg.BaselineEnv(base, pendulum.trees["w"], pendulum.initial_env.features, compiled=other)
     tree = sg.All(sg.Goal("a", x=(0.9, 1.0)), sg.Goal("b", omega=(-1, 1)), name="auto", weights="auto")
     adapted = compile_tree(tree, pendulum.initial_env.features, weights={"auto": (0.7, 0.3)})
     with pytest.raises(sg.InvalidSpec, match="compiled: expected the tree compiled with its own weights"):
@@ -421,3 +421,9 @@ def test_adapted_weights_apply_from_the_next_episode_on():
 def test_the_reference_evaluator_keeps_the_trees_weights():
     with pytest.raises(sg.InvalidSpec, match=r"evaluator: adapted weights need the 'flat' evaluator"):
         _replay_auto_env(evaluator="reference").set_weights({"p": (0.9, 0.1)})
+
+
+def test_goal_info_is_the_deprecated_name_of_the_baseline_env():
+    with pytest.warns(DeprecationWarning, match="GoalInfo is renamed BaselineEnv"):
+        assert sg.GoalInfo is sg.BaselineEnv
+    assert isinstance(sg.make_baseline_env(pendulum.initial_env, pendulum.trees["w"]), sg.BaselineEnv)

@@ -40,7 +40,7 @@ from specguard.tree.nodes import Node
 _FLOAT32 = np.dtype(np.float32)
 _isfinite = math.isfinite
 
-__all__ = ["EnvFactory", "GoalInfo", "SpecEnv", "make_baseline_env", "make_env", "preflight"]
+__all__ = ["BaselineEnv", "EnvFactory", "SpecEnv", "make_baseline_env", "make_env", "preflight"]
 
 EvaluatorName = Literal["flat", "reference"]
 
@@ -225,7 +225,7 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         return observation, reward, bool(terminated or ended), bool(truncated), info
 
 
-class GoalInfo(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
+class BaselineEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
     """Reports ``info["goals"]`` and ``info["safe"]`` of a goal tree and changes nothing else.
 
     The paper's *baseline*: the initial env keeps its own observation, reward
@@ -319,7 +319,7 @@ class EnvFactory:
     Args:
         initial_env: the initial environment and its mappings.
         tree: the goal tree.
-        baseline: build :class:`GoalInfo` envs (the initial env's own reward) rather than :class:`SpecEnv`.
+        baseline: build :class:`BaselineEnv` envs (the initial env's own reward) rather than :class:`SpecEnv`.
         evaluator: the :class:`SpecEnv` evaluator, ``"flat"`` or ``"reference"``.
     """
 
@@ -333,7 +333,7 @@ class EnvFactory:
         self.compiled: CompiledTree | None = None
         """The compiled tree, once the first call's preflight passed."""
 
-    def __call__(self, **make_kwargs: Any) -> SpecEnv | GoalInfo:
+    def __call__(self, **make_kwargs: Any) -> SpecEnv | BaselineEnv:
         """A new env; ``make_kwargs`` override the base env's ``gymnasium.make`` kwargs.
 
         Raises:
@@ -347,7 +347,7 @@ class EnvFactory:
             low, high = initial_env.feature_bounds(base.observation_space)  # checks the features fit the observation
             check_goals(compiled, low, high)  # refuse a goal no state can be in, before training
             if self.baseline:
-                return GoalInfo(
+                return BaselineEnv(
                     base, tree=self.tree, features=initial_env.features, state=initial_env.state, compiled=compiled
                 )
             return SpecEnv(
@@ -367,12 +367,12 @@ class EnvFactory:
             raise
 
 
-def make_baseline_env(initial_env: InitialEnv, tree: Node, **make_kwargs: Any) -> GoalInfo:
+def make_baseline_env(initial_env: InitialEnv, tree: Node, **make_kwargs: Any) -> BaselineEnv:
     """The initial env with its own reward, reporting the goals of ``tree`` (the paper's baseline).
 
     It runs the preflight of :func:`make_env` (:func:`preflight`, then the goals against the feature bounds).
     """
-    return cast(GoalInfo, EnvFactory(initial_env, tree, baseline=True)(**make_kwargs))
+    return cast(BaselineEnv, EnvFactory(initial_env, tree, baseline=True)(**make_kwargs))
 
 
 def make_env(initial_env: InitialEnv, tree: Node, *, evaluator: EvaluatorName = "flat", **make_kwargs: Any) -> SpecEnv:
@@ -395,16 +395,24 @@ def make_env(initial_env: InitialEnv, tree: Node, *, evaluator: EvaluatorName = 
     return cast(SpecEnv, EnvFactory(initial_env, tree, evaluator=evaluator)(**make_kwargs))
 
 
+_RENAMED = {
+    # GoalEnv was SpecEnv's name until 0.1; it clashed with gymnasium-robotics' goal-conditioned GoalEnv.
+    "GoalEnv": ("SpecEnv", "GoalEnv is gymnasium-robotics' goal-conditioned env"),
+    # GoalInfo named what the wrapper adds, not what it is: the initial env, judged by the goals.
+    "GoalInfo": ("BaselineEnv", "it is the baseline env: the initial env's own reward, judged by the goals"),
+}
+
+
 def __getattr__(name: str) -> Any:
-    # GoalEnv was this class's name until 0.1; it clashed with gymnasium-robotics' goal-conditioned GoalEnv.
-    if name == "GoalEnv":
+    """The deprecated names, each with a ``DeprecationWarning`` on every use; they go in the next release."""
+    if name in _RENAMED:
         import warnings
 
+        new, why = _RENAMED[name]
         warnings.warn(
-            "specguard.GoalEnv is renamed SpecEnv (GoalEnv is gymnasium-robotics' goal-conditioned env); "
-            "the old name goes in the next release",
+            f"specguard.{name} is renamed {new} ({why}); the old name goes in the next release",
             DeprecationWarning,
             stacklevel=2,
         )
-        return SpecEnv
+        return globals()[new]
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
