@@ -20,7 +20,9 @@ from collections.abc import Callable
 from numbers import Integral, Real
 from typing import Any, TypeGuard
 
-from specguard.error import InvalidSpec
+import numpy as np
+
+from specguard.error import EvaluationError, InvalidSpec
 
 __all__ = [
     "ANNOTATION_SEPARATOR",
@@ -30,6 +32,7 @@ __all__ = [
     "check_count",
     "check_name",
     "check_positive",
+    "check_truth",
     "check_weight",
     "child_path",
     "function_text",
@@ -204,3 +207,29 @@ def function_text(fn: Callable[..., Any]) -> str:
     if not isinstance(name, str):
         name = type(fn).__qualname__  # a callable object: its class
     return name.rsplit("<locals>.", 1)[-1]
+
+
+def check_truth(where: str, value: object) -> bool:
+    """A constraint function's result: ``True`` or ``False`` (a ``bool`` or ``numpy.bool_``), nothing else.
+
+    ``None`` (a ``def`` that forgot to ``return``) would never count a
+    violation, and a string would always count one: both are errors.
+
+    Raises:
+        EvaluationError: naming ``where`` (the constraint's key) and the value returned.
+
+    Example:
+        >>> check_truth("pendulum:fast", False)
+        False
+        >>> check_truth("pendulum:fast", None)
+        Traceback (most recent call last):
+        ...
+        specguard.error.EvaluationError: pendulum:fast: the constraint function returned None (NoneType)...
+    """
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    raise EvaluationError(
+        f"{where}: the constraint function returned {value!r} ({type(value).__name__}); expected True or False "
+        "(a bool or numpy.bool_)",
+        hint="return the comparison itself, e.g. `return abs(s.x) > 1`; a def without return gives None",
+    )

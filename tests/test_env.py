@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -427,3 +429,31 @@ def test_goal_info_is_the_deprecated_name_of_the_baseline_env():
     with pytest.warns(DeprecationWarning, match="GoalInfo is renamed BaselineEnv"):
         assert sg.GoalInfo is sg.BaselineEnv
     assert isinstance(sg.make_baseline_env(pendulum.initial_env, pendulum.trees["w"]), sg.BaselineEnv)
+
+
+@pytest.mark.parametrize(
+    "returns, shown",
+    [
+        (lambda s, a: None, "None (NoneType)"),
+        (lambda s, a: "yes", "'yes' (str)"),
+        (lambda s, a: np.array([1, 2]), "(ndarray)"),
+    ],
+    ids=["forgot return", "a string", "an array"],
+)
+@pytest.mark.parametrize("evaluator", ["flat", "reference"])
+def test_a_constraint_that_returns_no_truth_value_is_an_error_naming_it(returns, shown, evaluator):
+    tree = sg.Goal("up", x=(0.9, 1.0)).annotate(sg.Constraint(returns, name="fast"))
+    env = sg.make_env(pendulum.initial_env, tree, evaluator=evaluator)
+    env.reset(seed=0)
+    with pytest.raises(sg.EvaluationError, match=r"fast.*the constraint function returned .*" + re.escape(shown)):
+        env.step(np.zeros(1, dtype=np.float32))
+
+
+def test_a_constraint_returning_numpy_bools_is_fine_in_every_evaluator():
+    tree = sg.Goal("up", x=(0.9, 1.0)).annotate(sg.Constraint(lambda s, a: np.bool_(s.x > 2.0), name="never"))
+    for evaluator in ("flat", "reference"):
+        env = sg.make_env(pendulum.initial_env, tree, evaluator=evaluator)
+        env.reset(seed=0)
+        for _ in range(3):
+            _, _, _, _, info = env.step(np.zeros(1, dtype=np.float32))
+        assert info["safe"] == {"up:never": True}

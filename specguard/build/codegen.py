@@ -32,6 +32,7 @@ import numpy as np
 
 from specguard.build.reference import FLOAT_MAX, call_definition
 from specguard.extend import Context, Node, Slot
+from specguard.validation import check_truth
 
 __all__ = ["FlatTree", "build_namespace", "number", "source_of", "text"]
 
@@ -397,6 +398,23 @@ class _GeneralAnnotation:
         return int(call_definition(self.key, "violations()", self.a.violations, tuple(z[self.start : self.stop]))) == 0
 
 
+def _checked_first(namespace: dict[str, Any], name: str, key: str, fn: Callable[..., Any]) -> Callable[..., Any]:
+    """``fn`` whose first result is checked to be a truth value; it then puts ``fn`` itself in its place.
+
+    So every evaluator checks a constraint's return type on its first step
+    (:func:`~specguard.validation.check_truth`), and later steps call the
+    user's function directly, at full speed.
+    """
+
+    def first(*args: Any) -> Any:
+        value = fn(*args)
+        check_truth(key, value)
+        namespace[name] = fn
+        return value
+
+    return first
+
+
 def build_namespace(tree: FlatTree, make: Callable[..., Any]) -> dict[str, Any]:
     """The globals the generated code runs with: user functions and general nodes by index."""
     namespace: dict[str, Any] = {"_new": tuple.__new__, "_State": make, "_float": float}
@@ -412,7 +430,7 @@ def build_namespace(tree: FlatTree, make: Callable[..., Any]) -> dict[str, Any]:
             namespace[f"_start{i}"] = general.begin
     for k, t in enumerate(tree.terms):
         if t.fn is not None:
-            namespace[f"_fn{k}"] = t.fn
+            namespace[f"_fn{k}"] = _checked_first(namespace, f"_fn{k}", t.key, t.fn) if t.kind == "counter" else t.fn
         if t.kind == "annotation":
             assert t.annotation is not None
             size = slot_counts.get(t.key, 0) if t.slot >= 0 else 0

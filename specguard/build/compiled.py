@@ -52,7 +52,7 @@ from specguard.extend import (
     annotation_key,
     component_weights,
 )
-from specguard.validation import child_path
+from specguard.validation import check_truth, child_path
 
 __all__ = ["CompiledTree", "Evaluator", "compile_tree"]
 
@@ -245,7 +245,10 @@ class CompiledTree:
         cls = state_type(self.features)
         args: tuple[Any, ...] = (cls(*s.T),) if actions is None else (cls(*s.T), actions)
         try:
-            out = np.asarray(t.fn(*args), dtype=np.float64)
+            raw = np.asarray(t.fn(*args))
+            if t.kind == "counter" and raw.dtype != np.bool_:
+                raise TypeError("not a column of truth values")  # checked row by row below, each named
+            out = raw.astype(np.float64)
         except Exception:
             pass
         else:
@@ -260,8 +263,9 @@ class CompiledTree:
         if t.kind == "distance":
             return np.array([distance_value(t.key, t.fn, r) for r in rows], dtype=np.float64)
         if actions is None:
-            return np.array([1.0 if t.fn(r) else 0.0 for r in rows], dtype=np.float64)
-        return np.array([1.0 if t.fn(r, a) else 0.0 for r, a in zip(rows, actions)], dtype=np.float64)
+            return np.array([1.0 if check_truth(t.key, t.fn(r)) else 0.0 for r in rows], dtype=np.float64)
+        truths = [check_truth(t.key, t.fn(r, a)) for r, a in zip(rows, actions)]
+        return np.array([1.0 if v else 0.0 for v in truths], dtype=np.float64)
 
     # -- the per-step kernel -------------------------------------------------
 

@@ -22,6 +22,7 @@ from specguard.validation import (
     check_callable,
     check_name,
     check_positive,
+    check_truth,
     check_weight,
     function_text,
     number_text,
@@ -150,7 +151,8 @@ class Constraint(Annotation):
         return (float(self.budget),)
 
     def next_state(self, s: Any, q: tuple[float, ...], action: Any, s2: Any) -> tuple[float, ...]:
-        return (q[0] - 1.0,) if self.fn(s, action) else q  # judged on (s, a), as R_pen is
+        violated = check_truth(f"constraint {self.name!r}", self.fn(s, action))
+        return (q[0] - 1.0,) if violated else q  # judged on (s, a), as R_pen is
 
     def potential(self, s: Any, q: tuple[float, ...]) -> float:
         return q[0]  # R_pen = -1 per violation = s_C' - s_C
