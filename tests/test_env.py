@@ -457,3 +457,29 @@ def test_a_constraint_returning_numpy_bools_is_fine_in_every_evaluator():
         for _ in range(3):
             _, _, _, _, info = env.step(np.zeros(1, dtype=np.float32))
         assert info["safe"] == {"up:never": True}
+
+
+def _raises_at_build():
+    raise ZeroDivisionError("boom")
+
+
+@pytest.mark.parametrize(
+    "initial, names",
+    [
+        (lambda: sg.InitialEnv(_raises_at_build, features=("x",)), r"_raises_at_build: building it with its factory"),
+        (
+            lambda: sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"), nonsense=3),
+            r"'Pendulum-v1': building it with gymnasium.make and \{'nonsense': 3\} raised TypeError",
+        ),
+        (
+            lambda: sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"), execute=lambda a: 1 / 0),
+            r"g: execute\(\) raised ZeroDivisionError: division by zero on action",
+        ),
+    ],
+    ids=["factory", "make keyword", "execute"],
+)
+def test_factory_make_and_execute_errors_are_spec_errors_naming_the_culprit(initial, names):
+    with pytest.raises(sg.InitialEnvError, match=names):
+        env = sg.make_env(initial(), sg.Goal("g", x=(0.9, 1.0)))
+        env.reset(seed=0)
+        env.step(np.zeros(1, dtype=np.float32))

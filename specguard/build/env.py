@@ -204,9 +204,16 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
 
     def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
         # The hot path: every call of a user's training runs it, so it is written out in one function.
-        obs, base_reward, terminated, truncated, info = self.env.step(
-            action if self._execute is None else self._execute(action)
-        )
+        base_action = action
+        if self._execute is not None:
+            try:
+                base_action = self._execute(action)
+            except Exception as e:
+                raise InitialEnvError(
+                    f"{self.tree.name}: execute() raised {type(e).__name__}: {e} on action {action!r}",
+                    hint="execute(a) maps the agent's action to one the initial env accepts",
+                ) from e
+        obs, base_reward, terminated, truncated, info = self.env.step(base_action)
         if self._state is None:  # the identity: _features inlined
             f = obs.tolist()
             if len(f) != self._n or not _isfinite(sum(f)):

@@ -190,6 +190,13 @@ class InitialEnv:
                 f"InitialEnv {self.label}: a dependency is missing ({e}); "
                 'for Box2D envs such as LunarLander install "gymnasium[box2d]"'
             ) from e
+        except Exception as e:  # the factory, or gymnasium.make with a keyword the env does not take
+            how = "gymnasium.make" if isinstance(self.env, str) else "its factory"
+            raise InitialEnvError(
+                f"InitialEnv {self.label}: building it with {how}"
+                + (f" and {kwargs}" if kwargs else "")
+                + f" raised {type(e).__name__}: {e}"
+            ) from e
         if not isinstance(built, gym.Env):
             raise InitialEnvError(
                 f"InitialEnv {self.label}: the factory returned {type(built).__name__}, expected a gymnasium.Env"
