@@ -2,7 +2,7 @@
 
 Public so that authors of custom operators and annotations can property-test
 them the way specguard tests its own definitions (``tests/test_reference.py``).
-Importing this module needs ``hypothesis`` (``pip install "specguard[hypothesis]"``).
+Hypothesis is installed with specguard (the kit and these strategies are one of its uses).
 
 Example:
     >>> from hypothesis import given
