@@ -54,11 +54,20 @@ specs["b"] = sg.Spec(
 )
 
 # (c) (b) with a distance to the top speed: shaping towards building momentum.
-# Paper: reached in about 6 of 10 runs. Measured: at the end of 50k steps one seed 100%, one 0% (its
-# policy reaches the flag early, then unlearns it); judged at checkpoints (anytime verdicts) both seeds
-# meet the goal in 30/30 episodes, at 30k and 5k steps, where their training stops.
+# Paper: reached in about 6 of 10 runs. Measured: 2 of 10 seeds (0-9) at the end of 50k steps
+# (docs/reproduction.md). Judged at checkpoints (anytime verdicts), whether both of 2 seeds meet it depends
+# on the machine's floating-point kernels: on an AMD EPYC both did (30/30 at 30k and 5k steps), on an Intel
+# Xeon seed 0 never did (0/30 at every checkpoint up to 51k) with the same code, seeds and packages. A
+# goal that passes or fails by the CPU it trains on is the paper's negative result, not a test: xfail.
 trees["c"] = sg.All(position, velocity.annotate(sg.Distance(velocity_distance, scale=0.14)), name="mountain_car")
-specs["c"] = sg.Spec(initial_env, trees["c"], expect={"mountain_car": 0.8}, name="mountain_car-c", **COMMON)
+specs["c"] = sg.Spec(
+    initial_env,
+    trees["c"],
+    expect={"mountain_car": 0.8},
+    xfail={"mountain_car": "paper: reached in about 6 of 10 runs; measured 2 of 10 at 50k steps"},
+    name="mountain_car-c",
+    **COMMON,
+)
 
 # (c+) (c) with exploration settings (beyond the paper): gSDE noise resampled every 64 steps instead of once
 # per rollout, so one episode tries several pushing patterns; a discount close to 1, so reaching the flag
