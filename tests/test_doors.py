@@ -14,9 +14,17 @@ from pathlib import Path
 
 import pytest
 
+# Imported before any test: pytester's fixture drops the modules a test imported when it ends, and these
+# (numpy's C extensions under scipy.stats, the engine's pickled functions) cannot be imported twice.
+import scipy.stats  # noqa: F401
+
 import specguard as sg
+import specguard.engine.run
+import specguard.engine.train_task
+import specguard.engine.versions
 from specguard.cli.main import main
 from specguard.engine.specfiles import load_objects
+from specguard.stats.intervals import GoalOutcome
 
 SPEC_FILE = """
 import specguard as sg
@@ -101,3 +109,93 @@ def test_every_door_gives_the_same_figures_and_verdicts(spec_file: Path, tmp_pat
     assert code == (0 if result.passed else 1)
     passed = sum(1 for _, ok in api.values() if ok)
     outcome.assert_outcomes(passed=passed, failed=len(api) - passed)
+
+
+UNDECIDED_FILE = """
+import specguard as sg
+
+pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
+tree = sg.All(sg.Goal("anywhere", x=(-1.0, 1.0)), sg.Goal("position", x=(0.966, 1.0)), name="pendulum")
+# Two evaluation episodes never place a run's interval on one side of 0.5: the goal stays undecided.
+budget = sg.Budget(timesteps=128, min_seeds=1, eval_episodes=2, max_eval_episodes=2)
+spec = sg.Spec(
+    pendulum,
+    tree,
+    budget=budget,
+    hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1},
+    expect={"anywhere": 0.5},
+    undecided=UNDECIDED,
+)
+measured = sg.Spec(pendulum, tree, budget=budget, hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1})
+"""
+
+# What an undecided goal counts as: exit status of `specguard run`, pytest outcome.
+COUNTS_AS = {"fail": (1, "failed"), "xfail": (0, "xfailed"), "pass": (0, "passed")}
+
+
+@pytest.mark.parametrize("undecided", list(COUNTS_AS))
+def test_every_door_counts_an_undecided_goal_as_the_spec_says(
+    undecided: str, tmp_path: Path, pytester: pytest.Pytester
+):
+    source = textwrap.dedent(UNDECIDED_FILE).replace("UNDECIDED", repr(undecided))
+    spec_file = tmp_path / "undecided_spec.py"
+    spec_file.write_text(source)
+    spec = load_objects(f"{spec_file}::spec")["spec"]
+
+    result = sg.run_spec(spec, workers=1, cache_dir=tmp_path / "api", progress=None)
+    assert result.outcome("pendulum/anywhere") is GoalOutcome.UNDECIDED
+    assert result.counted("pendulum/anywhere") == COUNTS_AS[undecided][1]
+    assert (result.passed, result.as_expected) == (undecided == "pass", undecided != "fail")
+
+    argv = ["run", f"{spec_file}::spec", "--workers", "1", "--cache-dir", str(tmp_path / "cli"), "--quiet"]
+    assert main(argv) == COUNTS_AS[undecided][0]
+
+    pytester.makepyfile(undecided_spec=source)
+    pytester.makepyfile(
+        test_u="import specguard as sg\nfrom undecided_spec import spec\n\ntest_u = sg.goal_specs({'s': spec})\n"
+    )
+    run = pytester.runpytest_subprocess(
+        "-p", "no:cacheprovider", "--goal-specs", "--goal-specs-workers=1", f"--goal-specs-cache-dir={tmp_path / 'p'}"
+    )
+    run.assert_outcomes(**{COUNTS_AS[undecided][1]: 1}, **({"warnings": 1} if undecided == "pass" else {}))
+
+
+def test_the_doors_options_override_the_specs_undecided_the_same_way(tmp_path: Path, pytester: pytest.Pytester):
+    source = textwrap.dedent(UNDECIDED_FILE).replace("UNDECIDED", repr("fail"))
+    spec_file = tmp_path / "undecided_spec.py"
+    spec_file.write_text(source)
+    argv = ["run", f"{spec_file}::spec", "--workers", "1", "--cache-dir", str(tmp_path / "cli"), "--quiet"]
+    assert main([*argv, "--undecided", "xfail"]) == 0
+
+    pytester.makepyfile(undecided_spec=source)
+    pytester.makepyfile(
+        test_u="import specguard as sg\nfrom undecided_spec import spec\n\ntest_u = sg.goal_specs({'s': spec})\n"
+    )
+    run = pytester.runpytest_subprocess(
+        "-p",
+        "no:cacheprovider",
+        "--goal-specs",
+        "--goal-specs-workers=1",
+        f"--goal-specs-cache-dir={tmp_path / 'p'}",
+        "--goal-specs-undecided=xfail",
+    )
+    run.assert_outcomes(xfailed=1)
+
+
+def test_a_spec_with_nothing_to_assert_is_refused_at_every_door_before_training(
+    tmp_path: Path, pytester: pytest.Pytester, capsys: pytest.CaptureFixture[str]
+):
+    source = textwrap.dedent(UNDECIDED_FILE).replace("UNDECIDED", repr("fail"))
+    spec_file = tmp_path / "undecided_spec.py"
+    spec_file.write_text(source)
+    cache = tmp_path / "cli"
+    assert main(["run", f"{spec_file}::measured", "--workers", "1", "--cache-dir", str(cache), "--quiet"]) == 2
+    assert "nothing to assert" in capsys.readouterr().err
+    assert not cache.exists()  # refused before anything trained
+
+    pytester.makepyfile(undecided_spec=source)
+    test = "import specguard as sg\nfrom undecided_spec import measured\n\ntest_m = sg.goal_specs({'m': measured})\n"
+    pytester.makepyfile(test_m=test)
+    run = pytester.runpytest_subprocess("-p", "no:cacheprovider", "--goal-specs", "--goal-specs-workers=1")
+    assert run.ret != 0
+    run.stdout.fnmatch_lines(["*nothing to assert*"])

@@ -187,6 +187,7 @@ tree = sg.All(sg.Goal("position", x=(0.966, 1.0)), sg.Goal("stabilization", omeg
 spec = sg.Spec(
     pendulum, tree, budget=sg.Budget(timesteps={steps}, min_seeds=1, eval_episodes=2),
     hyperparameters={{"n_steps": 64, "batch_size": 64, "n_epochs": 1}},
+    expect={{"position": {threshold}}},
 )
 """
 
@@ -237,7 +238,8 @@ def _wait_for_line(process: subprocess.Popen[str], needle: str, timeout: float =
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads child processes from /proc")
 def test_sigterm_to_specguard_run_ends_every_worker_promptly_and_stores_nothing(tmp_path):
     spec_file = tmp_path / "long.py"
-    spec_file.write_text(CLI_SPEC.format(steps=50_000))  # the first progress line comes at 5 000 steps
+    # The first progress line comes at 5 000 steps; 0.99 is never met on 2 episodes: no checkpoint stops training.
+    spec_file.write_text(CLI_SPEC.format(steps=50_000, threshold=0.99))
     process = _cli(spec_file, tmp_path / "cache")
     try:
         _wait_for_line(process, "root goal")  # a worker is training
@@ -258,7 +260,7 @@ def test_sigterm_to_specguard_run_ends_every_worker_promptly_and_stores_nothing(
 
 def test_two_processes_asking_for_the_same_run_train_it_once(tmp_path):
     spec_file = tmp_path / "same.py"
-    spec_file.write_text(CLI_SPEC.format(steps=6_000))
+    spec_file.write_text(CLI_SPEC.format(steps=6_000, threshold=0.0))  # met: both processes exit 0
     first, second = _cli(spec_file, tmp_path / "cache"), _cli(spec_file, tmp_path / "cache")
     outputs = [p.communicate(timeout=300) for p in (first, second)]
     assert [p.returncode for p in (first, second)] == [0, 0]

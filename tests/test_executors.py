@@ -194,7 +194,7 @@ def test_specguard_run_takes_an_executor(cluster, tmp_path, capsys):
     path = tmp_path / "specs.py"
     path.write_text(
         GOAL_SPEC.replace('@sg.goal_spec(expect={"stabilization": 0.0})\ndef test_on_the_cluster():', "def make():")
-        + "\nspec = make()\n"
+        + '\nimport dataclasses\n\nspec = dataclasses.replace(make(), expect={"stabilization": 0.0})\n'
     )
     assert main(["run", str(path), "--executor", cluster.scheduler_address, "--cache-dir", str(tmp_path / "c")]) == 0
     assert "== spec: passed" in capsys.readouterr().out

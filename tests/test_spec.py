@@ -42,7 +42,7 @@ def test_quorum_defaults_to_every_run():
         ({"quorum": 3}, r"Spec 'pendulum': expected quorum <= budget.max_seeds=2 \(the runs trained\), got 3"),
         ({"quorum": 0}, r"Spec 'pendulum': expected quorum to be an integer >= 1 \(runs that must meet"),
         ({"confidence": 1.0}, r"Spec 'pendulum'.confidence: expected a number in \(0, 1\)"),
-        ({"undecided": "xfail"}, r"Spec 'pendulum'.undecided: expected one of \('fail', 'pass'\)"),
+        ({"undecided": "maybe"}, r"Spec 'pendulum'.undecided: expected one of \('fail', 'xfail', 'pass'\)"),
         ({"hyperparameters": [1]}, r"Spec 'pendulum'.hyperparameters: expected a mapping"),
         ({"name": "mine", "n_envs": -1}, r"Spec 'mine': expected n_envs"),
     ],

@@ -10,7 +10,10 @@ module-level ``Spec`` objects (named by variable) and the values of its
 module-level dicts of specs (named by key); ``show`` also lists goal trees.
 
 Exit status of ``run``: 0 when every spec passed (a goal the spec declares in
-``xfail`` may miss), 1 when one failed, 2 for a usage or spec error.
+``xfail`` may miss; an undecided goal counts as ``Spec.undecided`` or
+``--undecided`` says), 1 when one failed, 2 for a usage or spec error (a spec
+with no threshold has nothing to assert: refused before anything trains, as
+``pytest --goal-specs`` refuses it).
 """
 
 from __future__ import annotations
@@ -26,6 +29,8 @@ from typing import Any
 from specguard.engine.spec import Spec
 from specguard.engine.specfiles import load_objects
 from specguard.error import InvalidSpec, SpecError
+from specguard.stats.intervals import UNDECIDED_OUTCOMES
+from specguard.tree.keys import require_thresholds
 from specguard.tree.nodes import Node
 from specguard.utils.files import write_atomic
 
@@ -65,6 +70,8 @@ def _run(args: argparse.Namespace) -> int:
     from specguard.parallel.workers import resolve_workers
 
     specs = load_objects(args.target)
+    for name, spec in specs.items():  # before anything trains: a spec with nothing to assert has no verdict
+        require_thresholds(f"{args.target.partition('::')[0]}::{name}", spec.thresholds)
     json_path = _prepare_json(args.json) if args.json else None  # before training, which may take hours
     executor = make_executor(args.executor, workers=resolve_workers(args.workers))  # a cluster answers, or exit 2
     try:
@@ -84,7 +91,7 @@ def _run_all(args: argparse.Namespace, specs: dict[str, Any], executor: Any) -> 
     results = {}
     failed = False
     for name, spec in specs.items():
-        spec = spec.scaled(args.budget_scale, checkpoints=args.checkpoints)
+        spec = spec.as_run(args.budget_scale, checkpoints=args.checkpoints, undecided=args.undecided)
         result = run_spec(
             spec,
             executor=executor,
@@ -128,6 +135,12 @@ def _checkpoints(text: str) -> int:
         raise argparse.ArgumentTypeError(str(e)) from None
 
 
+def _undecided(text: str) -> str:
+    if text not in UNDECIDED_OUTCOMES:
+        raise argparse.ArgumentTypeError(f"expected one of {', '.join(UNDECIDED_OUTCOMES)}, got {text!r}")
+    return text
+
+
 def _scale(text: str) -> float:
     from specguard.validation import parse_positive
 
@@ -164,6 +177,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="N",
         help="judge each run at N checkpoints and stop its training once every threshold is met "
         "(anytime verdicts; default: the spec's own Budget.checkpoints, 10 unless set; 1: the whole budget)",
+    )
+    run.add_argument(
+        "--undecided",
+        type=_undecided,
+        default=None,
+        help="what a goal whose runs stayed undecided counts as: fail, xfail or pass "
+        "(default: the spec's own Spec.undecided, fail unless set)",
     )
     run.add_argument("--json", metavar="FILE", help="also write the results as JSON (missing directories are created)")
     run.add_argument("--quiet", action="store_true", help="no progress lines on stderr")

@@ -16,8 +16,7 @@ def judge(spec: Spec, runs: list[RunResult], failed_seeds: int) -> dict[str, Goa
     goals = {}
     for path, threshold in spec.thresholds.items():
         verdicts = [run_verdict(r.successes[path], r.episodes, threshold, spec.verdict_confidence) for r in runs]
-        counted = [RunVerdict.MET if (v is RunVerdict.UNDECIDED and spec.undecided == "pass") else v for v in verdicts]
-        counted += [RunVerdict.MISSED] * failed_seeds  # a run that crashed met nothing
+        counted = verdicts + [RunVerdict.MISSED] * failed_seeds  # a run that crashed met nothing
         verdict = quorum_verdict(counted, spec.required_runs, spec.budget.max_seeds)
         k = sum(r.successes[path] for r in runs)
         n = sum(r.episodes for r in runs)

@@ -25,13 +25,12 @@ from specguard.build.initial_env import InitialEnv
 from specguard.engine.budget import Budget
 from specguard.engine.sb3 import ALGORITHMS
 from specguard.error import InvalidSpec
+from specguard.stats.intervals import UNDECIDED_OUTCOMES
 from specguard.tree.keys import check_expect, check_xfail, check_xfail_thresholded, resolve_goal
 from specguard.tree.nodes import Node
 from specguard.validation import check_count
 
 __all__ = ["Spec"]
-
-UNDECIDED_OUTCOMES = ("fail", "pass")
 
 
 @dataclass(frozen=True)
@@ -53,7 +52,12 @@ class Spec:
             (``budget.max_seeds``).
         deterministic: evaluate the policy's deterministic action.
         confidence: the confidence of the success intervals.
-        undecided: what a verdict still undecided at the end counts as: "fail" or "pass".
+        undecided: what a goal counts as when it failed only through runs that
+            stayed undecided (none missed, no seed failed): "fail" (default),
+            "xfail" (expected to miss: pytest XFAIL, ``specguard run`` exit 0)
+            or "pass" (with a warning under pytest). Every door reads it
+            here; their ``--undecided`` options override it
+            (:meth:`as_run`).
         baseline: train on the initial env's own reward, termination and
             observation, and evaluate the same goals (the paper's baseline).
         name: a label for reports; defaults to the root's name.
@@ -120,6 +124,20 @@ class Spec:
         if factor == 1 and checkpoints in (None, self.budget.checkpoints):
             return self
         return dataclasses.replace(self, budget=self.budget.scaled(factor, checkpoints=checkpoints))
+
+    def as_run(
+        self, budget_scale: float = 1.0, *, checkpoints: int | None = None, undecided: str | None = None
+    ) -> Spec:
+        """This spec as a door (``specguard run``, ``pytest --goal-specs``) runs it, with the door's options.
+
+        ``budget_scale`` and ``checkpoints`` as for :meth:`scaled`; ``undecided``,
+        if given, replaces the spec's own. ``None`` keeps the spec's own, so
+        that every door judges a spec the same way unless told otherwise.
+        """
+        spec = self.scaled(budget_scale, checkpoints=checkpoints)
+        if undecided is None or undecided == spec.undecided:
+            return spec
+        return dataclasses.replace(spec, undecided=undecided)
 
     @property
     def verdict_confidence(self) -> float:

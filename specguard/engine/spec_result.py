@@ -9,7 +9,7 @@ from typing import Any
 from specguard.engine.results import RunResult
 from specguard.engine.spec import Spec
 from specguard.error import SpecError
-from specguard.stats.intervals import QuorumVerdict, RunVerdict, success_interval
+from specguard.stats.intervals import GoalOutcome, QuorumVerdict, RunVerdict, success_interval
 from specguard.tree.keys import GOAL, kind, label
 from specguard.utils.text import interval_text, render_table, weights_text
 
@@ -60,16 +60,44 @@ class SpecResult:
     trained: Spec | None = field(default=None, repr=False, compare=False)  # the spec as run, for model()/rollout()
     cache_dir: Path | None = field(default=None, repr=False, compare=False)
 
+    def outcome(self, path: str) -> GoalOutcome:
+        """Thresholded goal ``path`` at the end: passed, failed, or undecided.
+
+        Undecided when it failed only through runs that stayed undecided: none
+        missed, no seed failed (more evaluation episodes could have decided it).
+        """
+        goal = self.goals[path]
+        if goal.verdict is QuorumVerdict.PASSED:
+            return GoalOutcome.PASSED
+        if not self.errors and goal.runs and RunVerdict.MISSED not in goal.runs:
+            return GoalOutcome.UNDECIDED
+        return GoalOutcome.FAILED
+
+    def counted(self, path: str) -> str:
+        """What goal ``path`` counts as at every door: ``"passed"``, ``"xfailed"`` or ``"failed"``.
+
+        The one place the spec's ``undecided`` and ``xfail`` apply: an undecided
+        goal counts as the spec's ``undecided`` says; a goal the spec expects
+        to miss (``xfail``) that did not pass counts as xfailed.
+        """
+        outcome = self.outcome(path)
+        undecided_as = self.trained.undecided if self.trained is not None else "fail"
+        if outcome is GoalOutcome.PASSED or (outcome is GoalOutcome.UNDECIDED and undecided_as == "pass"):
+            return "passed"
+        xfail = self.trained.xfail if self.trained is not None else {}
+        if path in xfail or (outcome is GoalOutcome.UNDECIDED and undecided_as == "xfail"):
+            return "xfailed"
+        return "failed"
+
     @property
     def passed(self) -> bool:
-        """No seed failed and every thresholded goal passed."""
-        return not self.errors and all(g.verdict is QuorumVerdict.PASSED for g in self.goals.values())
+        """No seed failed and every thresholded goal counts as passed (:meth:`counted`)."""
+        return not self.errors and all(self.counted(p) == "passed" for p in self.goals)
 
     @property
     def as_expected(self) -> bool:
-        """No seed failed and every thresholded goal passed, except goals the spec expects to miss (``xfail``)."""
-        xfail = self.trained.xfail if self.trained is not None else {}
-        return not self.errors and all(g.verdict is QuorumVerdict.PASSED or p in xfail for p, g in self.goals.items())
+        """No seed failed and no thresholded goal counts as failed: each passed, or was expected to miss."""
+        return not self.errors and all(self.counted(p) != "failed" for p in self.goals)
 
     def model(self, seed: int) -> Any:
         """The trained SB3 model of run ``seed`` (loaded from the cache, after its checksums are verified).

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 from specguard.engine.spec import Spec
 from specguard.engine.spec_result import SpecResult
 from specguard.extend import SHAPING, Node
-from specguard.stats.intervals import GoalOutcome, QuorumVerdict, RunVerdict
+from specguard.stats.intervals import GoalOutcome, RunVerdict
 from specguard.tree.keys import GOAL, SAFETY, kind, require_thresholds, resolve_goal
 from specguard.utils.text import interval_text
 from specguard.validation import child_path
@@ -193,12 +193,7 @@ def gate_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalChec
         }
         for r, v in zip(result.runs, verdict.runs)
     ]
-    if verdict.verdict is QuorumVerdict.PASSED:
-        outcome = GoalOutcome.PASSED
-    elif not result.errors and RunVerdict.MISSED not in verdict.runs and verdict.runs:
-        outcome = GoalOutcome.UNDECIDED
-    else:
-        outcome = GoalOutcome.FAILED
+    outcome = result.outcome(path)
     return GoalCheck(
         group=group,
         spec=spec.label,

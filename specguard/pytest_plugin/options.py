@@ -13,9 +13,7 @@ from typing import Any
 
 import pytest
 
-__all__ = ["UNDECIDED", "Options", "add_options", "baseline_path", "parse_options"]
-
-UNDECIDED = ("fail", "xfail", "pass")
+__all__ = ["Options", "add_options", "baseline_path", "parse_options"]
 
 
 @dataclasses.dataclass
@@ -27,7 +25,7 @@ class Options:
     checkpoints: int | None  # None: each spec's own Budget.checkpoints
     workers: int | str
     cache_dir: str | None
-    undecided: str
+    undecided: str | None  # None: each spec's own Spec.undecided
     report_dir: Path | None
     save: str | None
     compare: str | None
@@ -64,8 +62,9 @@ _SETTINGS: list[tuple[str, str, str, Any, str]] = [
         "--goal-specs-undecided",
         "goal_specs_undecided",
         "string",
-        "fail",
-        "what a goal whose runs stayed undecided does: fail, xfail or pass (with a warning)",
+        "",
+        "what a goal whose runs stayed undecided counts as: fail, xfail or pass (with a warning); "
+        "default: the spec's own Spec.undecided, fail unless set",
     ),
     (
         "--goal-specs-report",
@@ -147,6 +146,7 @@ def parse_options(config: pytest.Config) -> Options:
     from specguard.error import InvalidSpec
     from specguard.parallel.workers import resolve_workers
     from specguard.stats.anytime import parse_checkpoints
+    from specguard.stats.intervals import UNDECIDED_OUTCOMES
 
     try:
         text = get("--goal-specs-checkpoints")
@@ -159,9 +159,11 @@ def parse_options(config: pytest.Config) -> Options:
         workers = resolve_workers(get("--goal-specs-workers"), share=int((workerinput or {}).get("workercount", 1)))
     except InvalidSpec as e:
         raise pytest.UsageError(f"--goal-specs-workers: {e.message}") from None
-    undecided = get("--goal-specs-undecided")
-    if undecided not in UNDECIDED:
-        raise pytest.UsageError(f"--goal-specs-undecided: expected one of {', '.join(UNDECIDED)}, got {undecided!r}")
+    undecided = get("--goal-specs-undecided") or None  # None: each spec's own Spec.undecided
+    if undecided is not None and undecided not in UNDECIDED_OUTCOMES:
+        raise pytest.UsageError(
+            f"--goal-specs-undecided: expected one of {', '.join(UNDECIDED_OUTCOMES)}, got {undecided!r}"
+        )
     report = get("--goal-specs-report")
     return Options(
         enabled=bool(config.getoption("goal_specs") or config.getini("goal_specs")),

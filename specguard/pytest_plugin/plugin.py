@@ -139,17 +139,18 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
         pytest.fail(f"{pyfuncitem.path.name}::{pyfuncitem.name}: {marker.kwargs['error']}", pytrace=False)
     with one_line_errors(pyfuncitem):
         spec, paths = spec_of(pyfuncitem, marker.kwargs.get("expect"))
-        result = run(state, scaled(state, spec))
+        trained = scaled(state, spec)
+        result = run(state, trained)
     baseline = (state.baseline, state.options.compare or "latest") if state.baseline is not None else None
     checks = check_item(result, spec, paths, group_of(pyfuncitem), baseline=baseline)
     for check in checks:
         row = check.to_row()
         if state.options.report_dir is not None:
             row["curves"] = [r.curve for r in result.runs]
-            state.specs.setdefault(row["group"], scaled(state, spec))  # the spec as trained: its cache entries
+            state.specs.setdefault(row["group"], trained)  # the spec as trained: its cache entries
         pyfuncitem.user_properties.append((PROPERTY, json.dumps(row)))
         pyfuncitem.user_properties += [(f"{PROPERTY}.{check.goal}.{k}", v) for k, v in check.junit_properties()]
-    raise_outcome(pyfuncitem, checks, state.options.undecided, result)
+    raise_outcome(pyfuncitem, checks, trained.undecided, result)
     return True
 
 

@@ -28,8 +28,9 @@ class Session:
 
 
 def scaled(state: Session, spec: Any) -> Any:
-    """The spec as this session trains it: its budget scaled, judged at its own checkpoints or the session's."""
-    return spec.scaled(state.options.budget_scale, checkpoints=state.options.checkpoints)
+    """The spec as this session trains and judges it: the session's options applied, the spec's own where unset."""
+    options = state.options
+    return spec.as_run(options.budget_scale, checkpoints=options.checkpoints, undecided=options.undecided)
 
 
 def terminal_progress(config: pytest.Config) -> Callable[[Any], None]:

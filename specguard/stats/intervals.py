@@ -33,7 +33,15 @@ import enum
 import functools
 from collections.abc import Sequence
 
-__all__ = ["GoalOutcome", "QuorumVerdict", "RunVerdict", "quorum_verdict", "run_verdict", "success_interval"]
+__all__ = [
+    "UNDECIDED_OUTCOMES",
+    "GoalOutcome",
+    "QuorumVerdict",
+    "RunVerdict",
+    "quorum_verdict",
+    "run_verdict",
+    "success_interval",
+]
 
 
 class RunVerdict(str, enum.Enum):
@@ -50,6 +58,10 @@ class QuorumVerdict(str, enum.Enum):
     PASSED = "passed"
     FAILED = "failed"
     OPEN = "open"  # neither is settled yet: more runs could decide it
+
+
+# What a goal whose runs stayed undecided counts as (``Spec.undecided`` and every door's option).
+UNDECIDED_OUTCOMES = ("fail", "xfail", "pass")
 
 
 class GoalOutcome(str, enum.Enum):
