@@ -108,7 +108,7 @@ def check_operator(cls: type, max_examples: int | None = None) -> None:
 
     Args:
         cls: the operator or annotation class.
-        max_examples: examples per check; ``None`` for the default (50).
+        max_examples: examples per check; ``None`` for the default (40, ``specguard.contract.trees.MAX_EXAMPLES``).
 
     Raises:
         AssertionError: one or more checks failed; the message holds each
