@@ -1,4 +1,4 @@
-"""The documentation under ``docs/``: its links lead somewhere, and its examples are the code's.
+"""The documentation under ``docs/``: self-contained, its links lead somewhere, and its examples are the code's.
 
 The pages' ``{doctest}`` and ``{testcode}`` blocks run in ``sphinx-build -b doctest`` (``.ci/run``); the
 ``python`` blocks that show a test module or a worked operator are checked here against the code.
@@ -6,6 +6,8 @@ The pages' ``{doctest}`` and ``{testcode}`` blocks run in ``sphinx-build -b doct
 
 from __future__ import annotations
 
+import re
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -13,6 +15,31 @@ from markdown_pages import DOCS, ROOT, broken_links, page, python_blocks
 
 from example_specs.at_least import AtLeast
 from specguard.testing import parametrize_with_checks
+
+# Written in two parts, so that this file does not match itself.
+OUTSIDE = re.compile(("SPEC" + r"\.md|\.\./" + "shared|/work/" + "shared").encode())
+"""References to files outside the repository: the team's notes, which users do not have."""
+
+
+def tracked_files() -> list[str]:
+    try:
+        out = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True).stdout
+    except (OSError, subprocess.CalledProcessError) as e:
+        pytest.skip(f"not a git checkout ({e})")
+    return [name for name in out.decode().split("\0") if name]
+
+
+def test_no_tracked_file_points_outside_the_repository():
+    found = []
+    for name in tracked_files():
+        path = ROOT / name
+        if not path.is_file():
+            continue
+        for number, line in enumerate(path.read_bytes().splitlines(), 1):
+            if OUTSIDE.search(line):
+                found.append(f"{name}:{number}: {line.decode(errors='replace').strip()[:100]}")
+    assert found == [], "these lines point outside the repository; point to docs/ instead:\n" + "\n".join(found)
+
 
 PAGES = sorted(
     p.relative_to(ROOT).as_posix()
