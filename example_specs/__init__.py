@@ -1,4 +1,6 @@
-"""The four case studies of the source paper (SPEC.md section 5), and CartPole beyond it, as goal specs.
+"""The four case studies of the source paper, and CartPole beyond it, as goal specs.
+
+Their definitions are in docs/guide/case-studies.md, "Definitions".
 
 Each case-study module reads as the paper's iterative environment design:
 ``initial_env``, the goals, then ``specs`` (``{"a": ..., "b": ..., "c": ...,

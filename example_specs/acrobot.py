@@ -1,4 +1,4 @@
-"""Acrobot-v1 (SPEC.md section 5): swing the tip above the bar.
+"""Acrobot-v1 (docs/guide/case-studies.md, "Definitions"): swing the tip above the bar.
 
 The height of the tip is not an observation, so ``state()`` appends it:
 ``height = -cos(t1) - cos(t1 + t2)``, from the observed cosines and sines.
@@ -44,7 +44,7 @@ def height_distance(s):  # type: ignore[no-untyped-def]
     return abs(s.height - 1.5)
 
 
-# -- the specs, one refinement at a time (the paper's Figure 4 row; SPEC.md section 5) -----------------------
+# -- the specs, one refinement at a time (the paper's Figure 4 row; docs/guide/case-studies.md) -------------
 #
 # Budget: rl-zoo's PPO for Acrobot (16 envs, observations and rewards normalised by VecNormalize), at
 # most 150k steps per run; under anytime verdicts a run stops at the first tenth of its budget where every

@@ -1,6 +1,6 @@
 """A custom operator from zero: ``AtLeast(k, *children)``, met when at least ``k`` children are.
 
-README's "Writing an operator" walks through this file; ``tests/test_readme.py``
+docs/guide/writing-an-operator.md walks through this file; ``tests/test_docs.py``
 runs specguard's contract kit on it, as an operator author would in their own
 tests::
 

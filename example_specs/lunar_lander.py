@@ -1,4 +1,4 @@
-"""LunarLander-v3 (SPEC.md section 5): land softly, upright, on both legs, on the pad.
+"""LunarLander-v3 (docs/guide/case-studies.md, "Definitions"): land softly, upright, on both legs, on the pad.
 
 Every tree carries the crash constraint on its root (budget 1), which stands
 for the crash penalty of the original reward.
@@ -24,7 +24,7 @@ BOUNDS = {
 
 
 def crash(s, a):  # type: ignore[no-untyped-def]
-    """Low and off the pad (SPEC.md's reading of the paper's misprinted C_Crash)."""
+    """Low and off the pad: the paper's misprinted C_Crash, read as docs/guide/case-studies.md says."""
     return abs(s.x) >= 0.2 and s.y <= 0.2
 
 
@@ -52,13 +52,13 @@ distances = {
 near = [g.annotate(distances[n]) if n in distances else g for n, g in goals.items()]
 
 
-# -- the specs, one refinement at a time (the paper's Figure 4 row; SPEC.md section 5) -----------------------
+# -- the specs, one refinement at a time (the paper's Figure 4 row; docs/guide/case-studies.md) -------------
 #
 # Budget: rl-zoo's tuned PPO for LunarLander (16 envs), as the paper uses it (Table 1), at most 1M steps
 # per run (the paper trained LunarLander for 1M steps and more). Under anytime verdicts (pytest
 # --goal-specs) a run stops at the first tenth of its budget where every threshold is met. Thresholds are
-# SPEC.md's floors. Measured figures are 2 seeds x 30 deterministic evaluation episodes on the 2-core
-# development machine, about 3 000 steps/s per seed.
+# floors (docs/guide/case-studies.md, "Thresholds"). Measured figures are 2 seeds x 30 deterministic
+# evaluation episodes on the 2-core development machine, about 3 000 steps/s per seed.
 ppo_kwargs: dict[str, object] = {
     "n_steps": 1024,
     "batch_size": 64,
@@ -113,9 +113,10 @@ specs["c"] = sg.Spec(
 # Paper: more precise than the baseline.
 # Measured (why it missed at 400k, and what changed): at 400k both seeds reach the pad (position 15/30 and
 # 30/30) but touch down too fast or tilted (velocity 14/30 and 7/30, stabilisation 8/30 and 9/30), so the
-# root goal holds at the end of 0/30 and 5/30 episodes. The crash constraint (SPEC.md's reading of the
-# paper's) punishes only low states off the pad, so a hard touchdown on the pad costs nothing but the
-# velocity and stabilisation goals, and soft, level landings come late: between 500k and 700k steps.
+# root goal holds at the end of 0/30 and 5/30 episodes. The crash constraint (specguard's reading of the
+# paper's, docs/guide/case-studies.md) punishes only low states off the pad, so a hard touchdown on the pad
+# costs nothing but the velocity and stabilisation goals, and soft, level landings come late: between 500k
+# and 700k steps.
 # Root goal per 100k checkpoint, seeds 0 / 1: 400k 0 / 5, 500k 17 / 8, 600k 14 / 2, 700k 18 / 19,
 # 800k 6 / 5, 900k 12 / 3, 1M 7 / 3 (of 30). Landing quality swings from checkpoint to checkpoint, so one
 # judgment at a fixed budget is a coin toss; judged at checkpoints, both seeds meet the floor at 500k

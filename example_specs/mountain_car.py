@@ -1,4 +1,4 @@
-"""MountainCarContinuous-v0 (SPEC.md section 5): reach the flag, arriving slowly."""
+"""MountainCarContinuous-v0 (docs/guide/case-studies.md, "Definitions"): reach the flag, arriving slowly."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ def velocity_distance(s):  # type: ignore[no-untyped-def]
     return abs(s.vel - 0.07)
 
 
-# -- the specs, one refinement at a time (the paper's Figure 4 row; SPEC.md section 5) -----------------------
+# -- the specs, one refinement at a time (the paper's Figure 4 row; docs/guide/case-studies.md) -------------
 #
 # Budget: PPO with use_sde (paper, Table 1), at most 50k steps per run; under anytime verdicts a run stops
 # at the first tenth of its budget where every threshold is met. Measured figures are 2 seeds x 30

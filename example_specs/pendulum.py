@@ -1,4 +1,4 @@
-"""Pendulum-v1 (SPEC.md sections 4 and 5): swing up and hold the pendulum upright.
+"""Pendulum-v1, the paper's running example (docs/guide/case-studies.md, "Definitions"): swing up and hold it upright.
 
 Run ``python example_specs/pendulum.py`` to print the trees, their reward
 formulas and a short rollout of the constructed env.
@@ -27,7 +27,7 @@ def position_distance(s):  # type: ignore[no-untyped-def]
 near_position = position.annotate(sg.Distance(position_distance, scale=2.0))
 
 
-# -- the specs, one refinement at a time (the paper's Figure 4 row; SPEC.md section 5) -----------------------
+# -- the specs, one refinement at a time (the paper's Figure 4 row; docs/guide/case-studies.md) -------------
 #
 # Budget: rl-zoo's tuned PPO for Pendulum (4 envs), at most 100k steps per run. Under anytime verdicts
 # (pytest --goal-specs) a run stops at the first tenth of its budget where every threshold is met.

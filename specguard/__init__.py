@@ -1,7 +1,7 @@
 """specguard: pytest for reinforcement-learning specifications.
 
 State what an agent must achieve as a goal tree, get a trainable Gymnasium
-environment built from it (SPEC.md, Algorithm 1), train it within a budget and
+environment built from it (the paper's Algorithm 1; docs/semantics.md), train it within a budget and
 judge every goal.
 
 The public names below are imported on first use (PEP 562), so ``import

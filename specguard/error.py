@@ -54,7 +54,10 @@ class InvalidSpec(SpecError, ValueError):
             (``"pendulum/position:distance"``) at fault.
     """
 
-    default_hint = "the message names the node or option at fault; README's tables list what each one accepts"
+    default_hint = (
+        "the message names the node or option at fault; the tables of docs/guide/language.md and "
+        "docs/guide/training.md list what each one accepts"
+    )
 
     def __init__(self, where: str, message: str, hint: str | None = None) -> None:
         self.where = where

@@ -1,4 +1,4 @@
-"""The operator extension API (SPEC.md section 6): what every node and annotation states.
+"""The operator extension API (docs/semantics.md, "The operator contract"): what every node and annotation states.
 
 Every operator, built-in or not, is a :class:`Node` subclass and every
 annotation an :class:`Annotation` subclass. The constructed env, both
@@ -305,7 +305,7 @@ class Node:
     def terminates(self, ctx: Context, ended: tuple[bool, ...]) -> bool:
         """Whether the node ends the episode in ``ctx``, given whether each child's subtree does (``ended``).
 
-        SPEC.md section 6: the union of the children's terminations, plus the
+        docs/semantics.md, "Termination": the union of the children's terminations, plus the
         operator's own; so an override must return ``True`` whenever
         ``any(ended)`` (the kit checks it).
         """
@@ -416,7 +416,7 @@ def check_children(kind: str, name: str, children: Sequence[object]) -> tuple[No
 def component_weights(node: Node) -> tuple[float, tuple[float, ...]]:
     """The weights of a node's reward components: its core and each annotation.
 
-    SPEC.md section 2, "Reward components and weights": ``1/N`` over the core
+    docs/semantics.md, "Weights inside a node": ``1/N`` over the core
     and the normalised annotations (distances); a constraint defaults to 1 and
     is outside the normalisation; a weight the user set replaces its default.
     The core's weight is always its default (the parent's weight scales it).

@@ -1,7 +1,8 @@
 """Testing tools: the operator contract kit and a simulator-free test double.
 
 For authors of operators and annotations (:mod:`specguard.extend`): each
-check of :mod:`specguard.contract.checks` states one invariant of SPEC.md section 6
+check of :mod:`specguard.contract.checks` states one invariant of the operator contract
+(docs/semantics.md, "What the contract kit checks")
 and tests it with Hypothesis on random trees that contain the class, the way
 scikit-learn's ``parametrize_with_checks`` tests an estimator.
 
@@ -108,7 +109,7 @@ def check_operator(cls: type, max_examples: int | None = None) -> None:
 
     Args:
         cls: the operator or annotation class.
-        max_examples: examples per check; ``None`` for the default (50).
+        max_examples: examples per check; ``None`` for the default (40, ``specguard.contract.trees.MAX_EXAMPLES``).
 
     Raises:
         AssertionError: one or more checks failed; the message holds each

@@ -1,6 +1,6 @@
 """Deliberately broken operators, written on the public extension API, for ``tests/test_contract.py``.
 
-Each breaks one invariant of SPEC.md section 6 the way a plausible bug would,
+Each breaks one invariant of the operator contract (docs/semantics.md) the way a plausible bug would,
 and one check of :mod:`specguard.contract.checks` must catch it (``CAUGHT_BY``).
 """
 

@@ -1,4 +1,4 @@
-"""The constructed environment: Gymnasium API, SPEC.md section 2 on real and replayed envs."""
+"""The constructed environment: Gymnasium API, docs/semantics.md on real and replayed envs."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Properties of the definitions (SPEC.md section 2), checked on the reference Algorithm 1."""
+"""Properties of the definitions (docs/semantics.md, "Reward"), checked on the reference Algorithm 1."""
 
 from __future__ import annotations
 

@@ -1,4 +1,6 @@
-"""``AnyOf``: the OR-operator, whose goal is the union of its children's goals (SPEC.md section 6).
+"""``AnyOf``: the OR-operator, whose goal is the union of its children's goals.
+
+Its semantics: docs/semantics.md, "Operators beyond the paper".
 
 Example:
     >>> import specguard as sg
@@ -41,7 +43,7 @@ __all__ = ["AnyOf"]
 class AnyOf(Node):
     """The OR-operator: the goal is the union of the children's goals.
 
-    Semantics (SPEC.md section 6, "AnyOf"):
+    Semantics (docs/semantics.md, "Operators beyond the paper"):
 
     * goal: ``G = G_1 u ... u G_N``, so ``contains`` is ``any(ctx.inside)``;
     * core reward: the node's own membership difference ``1[s' in G] - 1[s in G]``

@@ -1,4 +1,6 @@
-"""``Avoid``: a safety annotation counting the steps that end inside a region (SPEC.md section 6).
+"""``Avoid``: a safety annotation counting the steps that end inside a region.
+
+Its semantics: docs/semantics.md, "Operators beyond the paper".
 
 Example:
     >>> import specguard as sg
@@ -42,7 +44,7 @@ def region_text(node: Node) -> str:
 class Avoid(Annotation):
     """A safety annotation: every step whose next state ``s'`` lies in ``region`` is a violation.
 
-    Semantics (SPEC.md section 6, "Avoid"), a counter as for ``Constraint``:
+    Semantics (docs/semantics.md, "Operators beyond the paper"), a counter as for ``Constraint``:
 
     * own state: one slot ``counter`` in ``[0, budget]``, appended to the
       observation, ``budget`` at the start of an episode;

@@ -1,4 +1,6 @@
-"""``Sequence``: the THEN-operator, its children's goals reached one after the other (SPEC.md section 6).
+"""``Sequence``: the THEN-operator, its children's goals reached one after the other.
+
+Its semantics: docs/semantics.md, "Operators beyond the paper".
 
 Example:
     >>> import specguard as sg
@@ -41,7 +43,7 @@ __all__ = ["Sequence"]
 class Sequence(Node):
     """The THEN-operator: reach ``c_1``, then ``c_2``, ..., then ``c_N``.
 
-    Semantics (SPEC.md section 6, "Sequence"):
+    Semantics (docs/semantics.md, "Operators beyond the paper"):
 
     * own state: one slot ``stage`` in ``[0, N]``, appended to the observation.
       ``q_0`` is the number of leading children whose goals already hold in
@@ -63,7 +65,7 @@ class Sequence(Node):
         user set one, else 1; ``shaping(s, N) = 0``. Shaping annotations deeper
         in a child's subtree do not shape.
 
-        Decision (SPEC.md writes ``Phi(s, q) = -fn_{q+1}(s) / d_{q+1}``, without
+        Decision (the unscaled form is ``Phi(s, q) = -fn_{q+1}(s) / d_{q+1}``, without
         the stage weight): unscaled, entering a stage whose next goal is far
         costs up to ``1 - 1/N`` net (``1/N`` for the stage, ``-fn/d`` down to
         ``-1`` for the new distance), and trained agents learn to stop short of

@@ -1,4 +1,4 @@
-"""specguard's operator contract kit (the SPEC.md section 6 invariants) run on the plugin's classes."""
+"""specguard's operator contract kit (docs/semantics.md, "The operator contract") run on the plugin's classes."""
 
 from __future__ import annotations
 

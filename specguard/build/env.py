@@ -1,4 +1,4 @@
-"""The constructed environment: a Gymnasium wrapper built from a goal tree (SPEC.md section 2).
+"""The constructed environment: a Gymnasium wrapper built from a goal tree (docs/semantics.md, "The construction").
 
 :class:`SpecEnv` takes the base env as its first argument and records its
 other constructor arguments, so ``env.spec`` re-creates it the Gymnasium way
@@ -181,8 +181,9 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
             raise InvalidSpec(
                 "evaluator", "adapted weights need the 'flat' evaluator; 'reference' is the tree as written"
             )
-        # Compiled now, so a bad path fails at the call; swapped in at reset, as shaping telescopes
-        # and enter/exit rewards cancel only under weights constant over an episode (SPEC.md section 6).
+        # Compiled now, so a bad path fails at the call; swapped in at reset, as shaping telescopes and
+        # enter/exit rewards cancel only under weights constant over an episode (docs/semantics.md, "Potential-based
+        # shaping").
         adapted = {path: tuple(float(w) for w in ws) for path, ws in weights.items()}
         self._pending = adapted, compile_tree(self.tree, self.features, weights=adapted)
 

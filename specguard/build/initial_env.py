@@ -1,4 +1,6 @@
-"""The initial environment ``(S*, A*, P*)`` and its mappings (SPEC.md section 1).
+"""The initial environment ``(S*, A*, P*)`` and its mappings.
+
+Their semantics: docs/semantics.md, "Features and the initial environment".
 
 An :class:`InitialEnv` names a Gymnasium env (by id or factory), the features
 of the goal state space ``S_G`` and the two mappings ``state: S* -> S_G`` and

@@ -1,7 +1,7 @@
 """Algorithm 1 of the source paper, written plainly: the reference implementation.
 
 ``process(node)`` builds the goal ``G`` and requirements ``(S_G, A_G, T_G, R_G)``
-of a node depth first, exactly as SPEC.md sections 2 and 6 state them, asking
+of a node depth first, exactly as docs/semantics.md states them ("Reward", "The operator contract"), asking
 every node and annotation only through the extension protocol
 (:mod:`specguard.extend`). It is slow (closures calling closures) and meant to
 be read: the fast evaluator in :mod:`specguard.build.compiled` is tested against it
@@ -208,7 +208,7 @@ def process(node: Node, path: str | None = None, *, root: bool = True) -> Requir
     kids = [process(c, child_path(path, c.name), root=False) for c in node.children]
     req = _operator(path, node, kids)
     # Step 2: annotations, in order. The core keeps its default weight; each
-    # annotation brings its own (SPEC.md "Reward components and weights").
+    # annotation brings its own (docs/semantics.md, "Weights inside a node").
     core_w, ann_w = component_weights(node)
     core = req
     req = Requirements(

@@ -1,4 +1,4 @@
-"""The extension contract (SPEC.md section 6) as named, property-based checks.
+"""The extension contract (docs/semantics.md, "The operator contract") as named, property-based checks.
 
 Each ``check_*`` function states one invariant in the first line of its
 docstring, in the manner of Gymnasium's ``utils/env_checker.py``, and tests it

@@ -35,11 +35,13 @@ class ReplayEnv(gym.Env[np.ndarray, int]):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start the replay: the first observation, and an empty info."""
         super().reset(seed=seed)
         self._t = 0
         return self.trajectory[0].copy(), {}
 
     def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """The next observation of the trajectory, reward 0, never terminated, truncated at the last one."""
         self._t += 1
         truncated = self._t >= len(self.trajectory) - 1
         return self.trajectory[self._t].copy(), 0.0, False, truncated, {}

@@ -3,7 +3,7 @@
 The paper leaves an AND-node's weights to the user, who tunes them by hand
 when one subgoal crowds out another (Pendulum (w): position 0.8,
 stabilization 0.2). ``weights="auto"`` does that tuning from what the run
-observes, by this rule (our choice, beyond SPEC.md):
+observes, by this rule (our choice, beyond the paper; docs/semantics.md, "Automatic weights"):
 
     w_i = (1 - p_i + FLOOR) / sum_j (1 - p_j + FLOOR)
 
@@ -37,7 +37,7 @@ node's own weights hold: ``1/N`` per child, 1 per constraint.
 Weights change only between episodes (the env applies new ones at its next
 ``reset``, :meth:`specguard.build.env.SpecEnv.set_weights`): within an episode
 shaping telescopes and enter/exit rewards cancel only under constant
-weights (SPEC.md section 6). The env built from the tree alone keeps ``1/N``
+weights (docs/semantics.md, "Potential-based shaping"). The env built from the tree alone keeps ``1/N``
 and is what evaluation uses; success does not depend on weights, so
 evaluation stays a pure function of the spec. The weights in force are
 recorded in each learning-curve point and in the run's result.

@@ -107,8 +107,8 @@ class _Encoder:
         if isinstance(obj, property):
             return ["property", self.encode((obj.fget, obj.fset, obj.fdel), where)]
         if isinstance(obj, (Node, Annotation)):
-            # A goal-tree node through the protocol: its exact description (SPEC.md section 6), then
-            # what pickle stores of it (the functions its description only names, by their code).
+            # A goal-tree node through the protocol: its exact description (docs/semantics.md, "The operator
+            # contract"), then what pickle stores of it (the functions its description only names, by their code).
             text = obj.describe()
             return ["spec-node", text, self._object(obj, f"{where} ({text})")]
         if isinstance(obj, types.CellType):

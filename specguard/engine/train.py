@@ -1,4 +1,4 @@
-"""Training one run (one seed) of a spec and measuring every goal's success (SPEC.md section 3).
+"""Training one run (one seed) of a spec and measuring every goal's success (docs/semantics.md, "Success").
 
 A run trains ``spec.algorithm`` for ``spec.budget.timesteps`` steps on the
 constructed env (or, for a baseline spec, on the initial env's own reward),

@@ -13,7 +13,7 @@ up before submitting, submits only missing seeds, and stores what comes back
   ``dask scheduler`` with ``dask worker``s, a ``dask-jobqueue`` SLURM cluster,
   a ``LocalCluster``). Needs the ``cluster`` extra (``distributed``).
 
-Why Dask and not Ray: see README, "Scaling out" (measured on this machine).
+Why Dask and not Ray: see docs/guide/pytest-plugin.md, "Scaling out" (measured on this machine).
 
 Example:
     >>> check_address("local"), check_address("tcp://127.0.0.1:8786")

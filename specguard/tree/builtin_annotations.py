@@ -1,4 +1,4 @@
-"""The built-in annotations: ``Distance`` and ``Constraint`` (SPEC.md section 2), on the extension API.
+"""The built-in annotations: ``Distance`` and ``Constraint`` (docs/semantics.md, "Reward"), on the extension API.
 
 Example:
     >>> import specguard as sg
@@ -74,7 +74,7 @@ class Distance(Annotation):
         object.__setattr__(self, "weight", check_weight(where, self.weight))
 
     def value(self, s: Any) -> float:
-        """``fn(s)``, checked to be a finite number ``>= 0`` (SPEC.md "Distance annotation").
+        """``fn(s)``, checked to be a finite number ``>= 0`` (docs/semantics.md, "Distance shaping").
 
         Raises:
             EvaluationError: ``fn`` raised, or returned a negative, infinite or NaN distance.
@@ -99,7 +99,7 @@ class Distance(Annotation):
         return -d / self.scale
 
     def reward(self, s: Any, q: tuple[float, ...], action: Any, s2: Any, q2: tuple[float, ...]) -> float:
-        return (self.value(s) - self.value(s2)) / self.scale  # as SPEC.md writes it (same rounding as the fast path)
+        return (self.value(s) - self.value(s2)) / self.scale  # as the docs write it (same rounding as the fast path)
 
     def fast_form(self) -> ShapingForm:
         return ShapingForm(self.fn, self.scale)
@@ -116,7 +116,7 @@ class Distance(Annotation):
 
 @dataclass(frozen=True)
 class Constraint(Annotation):
-    """A safety constraint: a violation counter with a budget (SPEC.md section 2).
+    """A safety constraint: a violation counter with a budget (docs/semantics.md, "Constraint penalties").
 
     Args:
         fn: ``fn(s, a) -> bool``, true for a violating state-action pair.
@@ -143,7 +143,7 @@ class Constraint(Annotation):
         object.__setattr__(self, "budget", check_budget(where, self.budget))
         object.__setattr__(self, "weight", check_weight(where, self.weight))
 
-    # The counter s_C = delta - violations (SPEC.md "Constraint annotation").
+    # The counter s_C = delta - violations (docs/semantics.md, "Constraint penalties").
     def state_slots(self) -> tuple[Slot, ...]:
         return (Slot("counter", 0.0, float(self.budget)),)
 

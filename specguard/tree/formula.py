@@ -2,7 +2,7 @@
 
 ``R[g]`` is the enter/exit reward of leaf ``g``, ``D[g]`` a distance shaping
 term and ``P[g]`` a constraint penalty; each node contributes its weighted
-components (SPEC.md section 2).
+components (docs/semantics.md, "Reward").
 
 Example:
     >>> import specguard as sg

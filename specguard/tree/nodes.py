@@ -1,4 +1,4 @@
-"""Goal-tree nodes and annotations (SPEC.md sections 1, 2 and 4).
+"""Goal-tree nodes and annotations (docs/semantics.md, "Goals and goal spaces" and "Reward").
 
 Nodes are small immutable values: building a tree computes nothing, it only
 records what the user stated. Checks that need nothing but the node itself
@@ -129,7 +129,7 @@ class Goal(Node):
         object.__setattr__(self, "bounds", parsed)
         object.__setattr__(self, "annotations", ())
 
-    # -- the extension protocol: a box goal, membership reward (SPEC.md "Leaf") --
+    # -- the extension protocol: a box goal, membership reward (docs/semantics.md, "Leaf reward")
 
     def box(self, child_boxes: Sequence[Box | None]) -> Box:
         return {f: (lo, hi) for f, lo, hi in self.bounds}
@@ -169,7 +169,7 @@ class All(Node):
 
     Its core reward is ``sum_i w_i R_i`` with ``w_i = 1/N`` unless ``weights``
     are given (they need not sum to 1); its termination is the union of the
-    children's (SPEC.md section 2).
+    children's (docs/semantics.md, "The AND operator and its weights", "Termination").
 
     ``weights="auto"`` starts at ``1/N`` and lets training adapt the weights
     to the children's observed success (:mod:`specguard.engine.auto_weights`): the
@@ -242,7 +242,7 @@ class All(Node):
         n = len(self.nodes)
         return self.weights if isinstance(self.weights, tuple) else (1.0 / n,) * n
 
-    # -- the extension protocol (SPEC.md "AND-operator") ----------------------
+    # -- the extension protocol (docs/semantics.md, "The AND operator and its weights") --
 
     def child_weights(self) -> tuple[ChildWeights, ...]:
         return tuple(ChildWeights.same(w) for w in self.weights_in_force())  # R = sum_i w_i R_i
