@@ -231,6 +231,14 @@ def seed_labels(fig):
     return [t for ax in fig.axes for t in ax.texts if (t.get_gid() or "").endswith(":label")]
 
 
+def test_the_mean_is_drawn_only_where_every_seed_has_a_point():
+    # Seed 0 stopped at a checkpoint after 20 steps (anytime verdicts); seed 1 trained on to 40.
+    row = {**ROW, "curves": [curve(0.5, 0.9), curve(0.2, 0.8, 0.0, 0.9)]}
+    (mean,) = [line for line in lines_of(curves_figure([row]), "pendulum") if line.get_gid() == "pendulum:mean"]
+    assert list(mean.get_xdata()) == [10, 20]  # not seed 1 alone at 30 and 40, where the mean would dip to 0
+    assert list(mean.get_ydata()) == pytest.approx([0.35, 0.85])
+
+
 def test_seed_labels_stack_inside_the_axes_or_are_left_out():
     labelled = seed_labels(curves_figure([ROW]))
     assert sorted(t.get_text().strip() for t in labelled) == ["s0", "s1"]
@@ -238,4 +246,4 @@ def test_seed_labels_stack_inside_the_axes_or_are_left_out():
     many = {**ROW, "per_seed": [{"seed": i} for i in range(30)], "curves": [curve(0.0, 0.0)] * 30}
     fig = curves_figure([many])
     assert seed_labels(fig) == []
-    assert "seeds; bold: mean" in [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert "seeds; bold: mean while every seed trains" in [t.get_text() for t in fig.axes[0].get_legend().get_texts()]

@@ -166,10 +166,19 @@ def reached_initial():
 def test_a_run_whose_thresholds_are_met_stops_at_the_first_checkpoint():
     budget = sg.Budget(timesteps=4096, eval_episodes=30, checkpoints=4)
     spec = sg.Spec(reached_initial(), sg.Goal("up", x=(0.5, None)), budget=budget, hyperparameters=TINY, expect=0.8)
-    result, _ = train_run(spec, seed=0)
+    result, model = train_run(spec, seed=0)
     assert result.met_early and result.timesteps == 1024  # judged at the first quarter, stopped there
     assert (result.successes, result.episodes) == ({"up": 30}, 30)
     assert result.curve[-1]["timesteps"] == 1024 and result.curve[-1]["evaluation"] == {"up": 1.0}
+    assert model.num_timesteps == 1024  # the model kept is the one judged: training stopped at the checkpoint
+
+
+def test_the_cached_model_of_a_run_stopped_at_a_checkpoint_is_the_one_judged(tmp_path):
+    budget = sg.Budget(timesteps=4096, eval_episodes=30, checkpoints=4)
+    spec = sg.Spec(reached_initial(), sg.Goal("up", x=(0.5, None)), budget=budget, hyperparameters=TINY, expect=0.8)
+    result = sg.run_spec(spec, workers=1, cache_dir=tmp_path, progress=None)
+    assert result.runs[0].met_early
+    assert result.model(0).num_timesteps == result.runs[0].timesteps == 1024
 
 
 def test_a_run_whose_thresholds_are_not_met_trains_its_whole_budget():

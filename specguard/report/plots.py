@@ -37,7 +37,8 @@ def curves_figure(rows: Sequence[Row]) -> Figure | None:
 
     One panel per spec (the paper's Figure 4 layout). Per asserted goal, in one
     colour: each seed's success over its training episodes as a thin line
-    labelled with the seed, the seeds' mean in bold, the goal's threshold as a
+    labelled with the seed, the seeds' mean in bold (drawn only at steps where
+    every seed has a point: up to where the first seed stopped), the goal's threshold as a
     dashed horizontal line and, where curve points carry ``"evaluation"``, the
     seeds' mean evaluation success as markers. Every artist has a ``gid``:
     ``"<goal>:seed <n>"``, ``"<goal>:mean"``, ``"<goal>:threshold"``, ``"<goal>:evaluation"``.
@@ -82,7 +83,10 @@ def curves_figure(rows: Sequence[Row]) -> Figure | None:
                 right = max(right, xs[-1])
                 ax.plot(xs, ys, color=colour, linewidth=0.8, alpha=0.45, gid=f"{goal}:seed {seed}")
                 ends.append((ys[-1], xs[-1], f"s{seed}", colour, f"{goal}:seed {seed}:label"))
-            steps = sorted(by_step)
+            # The mean only where every seed has a point: a seed that stopped early (anytime verdicts) would
+            # otherwise leave the mean to the seeds still training.
+            plotted = sum(1 for run in curves if any(goal in p["success"] for p in run))
+            steps = sorted(s for s, ys in by_step.items() if len(ys) == plotted)
             if steps:
                 mean = [sum(by_step[s]) / len(by_step[s]) for s in steps]
                 ax.plot(steps, mean, color=colour, linewidth=2.2, label=label(goal), gid=f"{goal}:mean")
@@ -115,7 +119,8 @@ def curves_figure(rows: Sequence[Row]) -> Figure | None:
         handles.append(Line2D([], [], color="grey", linestyle="--", linewidth=1.0))
         labels.append("threshold")
         handles.append(Line2D([], [], color="grey", linewidth=0.8, alpha=0.6))
-        labels.append("seeds (s<n>); bold: mean" if len(labelled) == len(ends) else "seeds; bold: mean")
+        seeds_text = "seeds (s<n>)" if len(labelled) == len(ends) else "seeds"
+        labels.append(f"{seeds_text}; bold: mean while every seed trains")
         if evaluated:
             handles.append(Line2D([], [], color="grey", linestyle="none", marker="o", markerfacecolor="white"))
             labels.append("evaluation")
