@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 import signal
 import subprocess
@@ -76,6 +77,15 @@ def test_reproduce_writes_a_table_beside_the_paper_and_a_plot_per_case(tmp_path,
     # Resumable: a second call trains nothing, every run comes from the cache.
     assert main(argv) == 0
     assert out.read_text() == text
+    # The plot is drawn from curve data written beside it: --replot redraws it, training nothing.
+    png = tmp_path / "docs" / "images" / "reproduction-tiny_case.png"
+    drawn = png.read_bytes()
+    data = json.loads(png.with_suffix(".json").read_text())
+    assert {row["group"] for row in data} == {"tiny_case (b)", "tiny_case (auto)", "tiny_case (baseline)"}
+    assert all(len(row["curves"]) == 2 for row in data)  # both seeds' curves
+    png.unlink()
+    assert main(["reproduce", "--replot", "--out", str(out)]) == 0
+    assert png.read_bytes() == drawn
 
 
 def test_a_reproduction_rewrites_its_own_cases_and_keeps_the_sections_of_others(tmp_path):
@@ -181,3 +191,15 @@ def test_a_run_counts_as_met_by_its_interval_as_every_door_judges_it():
     result = SpecResult(spec="w", runs=runs, goals=judge(spec, runs, failed_seeds=0), trained=spec)
     row = _root_row(CaseStudy("pendulum", {"w": spec}, {}), "w", result, seeds=2)
     assert row[3] == "1/2 (>= 0.5)"
+
+
+def test_replot_refuses_curve_data_it_did_not_write(tmp_path, capsys):
+    (tmp_path / "images").mkdir()
+    (tmp_path / "images" / "reproduction-x.json").write_text('{"not": "rows"}')
+    assert main(["reproduce", "--replot", "--out", str(tmp_path / "reproduction.md")]) == 2
+    assert "expected a list of rows with curves" in capsys.readouterr().err
+
+
+def test_reproduce_without_case_files_is_a_usage_error(capsys):
+    assert main(["reproduce"]) == 2
+    assert "expected at least one case-study file" in capsys.readouterr().err

@@ -199,7 +199,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="train every spec of the case-study files on N seeds at their whole budget; write a Markdown "
         "table beside the paper's figures and plots of success over training",
     )
-    rep.add_argument("targets", metavar="PATH", nargs="+", help="case-study files (their specs and PAPER figures)")
+    rep.add_argument("targets", metavar="PATH", nargs="*", help="case-study files (their specs and PAPER figures)")
+    rep.add_argument(
+        "--replot",
+        action="store_true",
+        help="train nothing: redraw the plots beside --out from the curve data written with them",
+    )
     rep.add_argument("--seeds", type=_positive, default=5, help="seeds per spec (default: 5)")
     rep.add_argument("--budget-scale", type=_scale, default=1.0, help="multiply training timesteps, e.g. 0.5")
     rep.add_argument(
@@ -239,7 +244,16 @@ def _reproduce(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from specguard.engine.progress import print_event
     from specguard.engine.reproduction import load_case, reproduce
     from specguard.parallel.workers import resolve_workers
-    from specguard.report.reproduction import write_markdown
+    from specguard.report.reproduction import replot, write_markdown
+
+    if args.replot:
+        if args.targets:
+            raise SpecError("reproduce --replot trains nothing: give no case files", hint="drop the PATHs")
+        drawn = replot(Path(args.out).parent / "images")
+        print(f"redrew {len(drawn)} plots: " + ", ".join(str(p) for p in drawn) if drawn else "no curve data found")
+        return 0
+    if not args.targets:
+        raise SpecError("reproduce: expected at least one case-study file", hint="e.g. example_specs/pendulum.py")
 
     cases = [load_case(path) for path in args.targets]
     command = "specguard " + " ".join(argv)

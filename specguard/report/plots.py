@@ -53,7 +53,7 @@ def curves_figure(rows: Sequence[Row]) -> Figure | None:
 
     ncols = min(4, len(specs))
     nrows = -(-len(specs) // ncols)
-    fig = Figure(figsize=(4.6 * ncols, 3.4 * nrows))
+    fig = Figure(figsize=(4.6 * ncols, 4.2 * nrows))
     FigureCanvasAgg(fig)
     axes = fig.subplots(nrows, ncols, squeeze=False, sharey=True)
     flat = [ax for row in axes for ax in row]
@@ -124,7 +124,8 @@ def curves_figure(rows: Sequence[Row]) -> Figure | None:
         if evaluated:
             handles.append(Line2D([], [], color="grey", linestyle="none", marker="o", markerfacecolor="white"))
             labels.append("evaluation")
-        ax.legend(handles, labels, fontsize=7)
+        # Below the axes, never over the curves.
+        ax.legend(handles, labels, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=2, frameon=False)
     for row in axes:
         row[0].set_ylabel("success (training episodes)")
     fig.tight_layout()

@@ -10,18 +10,28 @@ their mean bold), thresholds as dashed lines.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from specguard.engine.reproduction import CaseStudy, Reproduction
 from specguard.engine.spec_result import SpecResult
+from specguard.error import SpecError
 from specguard.report.plots import plot_curves
 from specguard.stats.intervals import RunVerdict, success_interval
 from specguard.utils.files import write_atomic
 from specguard.utils.text import interval_text, markdown_table, per_seed_text
 
-__all__ = ["case_section", "reproduction_markdown", "rows_for_plots", "sections", "write_markdown", "write_plots"]
+__all__ = [
+    "case_section",
+    "replot",
+    "reproduction_markdown",
+    "rows_for_plots",
+    "sections",
+    "write_markdown",
+    "write_plots",
+]
 
 
 def _steps(n: int) -> str:
@@ -58,7 +68,7 @@ INTRO = [
     "",
     "Columns: the root goal's success pooled over every seed's evaluation episodes, with its 95% interval; "
     "the runs met: runs whose own root-goal success interval lies at or above the spec's threshold, as "
-    "`specguard run` and `pytest --goal-specs` judge a run (sections under the older heading 'runs reaching "
+    "`specguard run` and `pytest --goal-specs` judge a run (sections under the earlier heading 'runs reaching "
     "the threshold' counted a run whose point estimate reached it); the paper's reported figure "
     "(10 runs at its budgets); the steps each run trained.",
 ]
@@ -137,14 +147,41 @@ def rows_for_plots(case: CaseStudy, results: Mapping[str, SpecResult]) -> list[d
 
 
 def write_plots(reproduction: Reproduction, folder: Path) -> dict[str, str]:
-    """One PNG per case in ``folder``; returns each case's image path relative to ``folder.parent``."""
+    """One PNG per case in ``folder``, drawn from its curve data written beside it as JSON.
+
+    The JSON (``reproduction-<case>.json``: every goal's per-run curves and
+    threshold) is small and committed with the PNG, so :func:`replot` redraws a
+    figure after a change to the plotting without training anything again.
+    Returns each case's image path relative to ``folder.parent``.
+    """
     folder.mkdir(parents=True, exist_ok=True)
     images = {}
     for case in reproduction.cases:
-        png = folder / f"reproduction-{case.name}.png"
-        if plot_curves(rows_for_plots(case, reproduction.results[case.name]), png):
-            images[case.name] = f"{folder.name}/{png.name}"
+        rows = rows_for_plots(case, reproduction.results[case.name])
+        data = folder / f"reproduction-{case.name}.json"
+        write_atomic(data, json.dumps(rows, sort_keys=True) + "\n")
+        if plot_curves(rows, data.with_suffix(".png")):
+            images[case.name] = f"{folder.name}/{data.with_suffix('.png').name}"
     return images
+
+
+def replot(folder: Path) -> list[Path]:
+    """Redraw every ``reproduction-<case>.png`` in ``folder`` from the curve data beside it; returns the PNGs.
+
+    Raises:
+        SpecError: a curve file that is not the JSON :func:`write_plots` writes.
+    """
+    drawn = []
+    for data in sorted(folder.glob("reproduction-*.json")):
+        try:
+            rows = json.loads(data.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as e:
+            raise SpecError(f"{data}: cannot read the curve data ({e})") from None
+        if not isinstance(rows, list) or not all(isinstance(r, dict) and "curves" in r for r in rows):
+            raise SpecError(f"{data}: expected a list of rows with curves, as specguard reproduce writes")
+        if plot_curves(rows, data.with_suffix(".png")):
+            drawn.append(data.with_suffix(".png"))
+    return drawn
 
 
 def write_markdown(reproduction: Reproduction, out: Path) -> Path:
