@@ -157,12 +157,26 @@ def write_plots(reproduction: Reproduction, folder: Path) -> dict[str, str]:
     folder.mkdir(parents=True, exist_ok=True)
     images = {}
     for case in reproduction.cases:
-        rows = rows_for_plots(case, reproduction.results[case.name])
+        rows = [_plotted(row) for row in rows_for_plots(case, reproduction.results[case.name])]
         data = folder / f"reproduction-{case.name}.json"
-        write_atomic(data, json.dumps(rows, sort_keys=True) + "\n")
+        write_atomic(data, json.dumps(rows, sort_keys=True) + "\n")  # the figure is drawn from exactly this
         if plot_curves(rows, data.with_suffix(".png")):
             images[case.name] = f"{folder.name}/{data.with_suffix('.png').name}"
     return images
+
+
+def _plotted(row: dict[str, Any]) -> dict[str, Any]:
+    """A plot row with only what its figure draws: its own goal's success per curve point, to 4 decimals."""
+    goal = row["goal"]
+
+    def point(p: dict[str, Any]) -> dict[str, Any]:
+        kept: dict[str, Any] = {"timesteps": p["timesteps"], "success": {}}
+        for part in ("success", "evaluation"):
+            if goal in (p.get(part) or {}):
+                kept[part] = {goal: round(p[part][goal], 4)}
+        return kept
+
+    return {**row, "curves": [[point(p) for p in curve] for curve in row["curves"]]}
 
 
 def replot(folder: Path) -> list[Path]:
