@@ -64,6 +64,7 @@ if TYPE_CHECKING:
     from hypothesis.strategies import SearchStrategy
 
 __all__ = [
+    "MARGIN_FLOOR",
     "SAFETY",
     "SHAPING",
     "Annotation",
@@ -83,6 +84,9 @@ __all__ = [
 
 Box = Mapping[str, tuple[float, float]]
 """A box goal: per named feature an inclusive ``(lo, hi)``, ``+-inf`` for an open side."""
+
+MARGIN_FLOOR = 1e-9
+"""The smallest size of a margin outside a goal (so that its sign says it is outside)."""
 
 SHAPING = "shaping"
 """Role of an annotation that shapes towards a goal (``Distance``): part of the ``1/N`` weighting."""
@@ -206,6 +210,15 @@ class Annotation:
         """Safety annotations: violations so far this episode (its safety rate counts episodes with none)."""
         return 0
 
+    def margin(self, s: Any, q: tuple[float, ...]) -> float:
+        """Safety annotations: how robustly the episode that ended in ``(s, q)`` kept it, ``< 0`` when it did not.
+
+        The falsifier (:mod:`specguard.falsify.robustness`) steers its search
+        by it. Default: ``1`` without a violation, else minus the violations.
+        """
+        n = self.violations(q)
+        return 1.0 if n == 0 else -float(n)
+
     def fast_form(self) -> ShapingForm | CounterForm | None:
         """A declared closed form the flat evaluator compiles to straight-line code, or ``None``.
 
@@ -277,6 +290,19 @@ class Node:
     def contains(self, ctx: Context) -> bool:
         """Whether ``(s, q)`` lies in the node's goal, given the children's memberships."""
         raise NotImplementedError(f"{type(self).__qualname__} must define contains(ctx)")
+
+    def margin(self, ctx: Context, margins: tuple[float, ...]) -> float:
+        """Robustness of ``(s, q)`` for the node's goal: ``>= 0`` inside, ``< 0`` outside, its size how far.
+
+        ``margins`` are the children's, in child order; a box goal's margin is
+        its box's, computed by the falsifier and never asked here
+        (:mod:`specguard.falsify.robustness`). Default: the smallest of the
+        children's distances to their boundaries (``1`` for a leaf), signed
+        by :meth:`contains`. An operator that knows better (a union: the
+        largest child margin) overrides it.
+        """
+        m = min((abs(x) for x in margins), default=1.0)
+        return m if self.contains(ctx) else -max(m, MARGIN_FLOOR)
 
     # -- own state -----------------------------------------------------------
 

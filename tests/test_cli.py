@@ -208,3 +208,24 @@ def test_a_spec_file_that_exits_at_import_is_one_line_naming_it(tmp_path, capsys
         assert main([command, str(path), "--no-cache"] if command == "run" else [command, str(path)]) == 2
         err = capsys.readouterr().err
         assert f"specguard: error: {path}: importing it called sys.exit(3)" in err and "Traceback" not in err
+
+
+def test_falsify_searches_each_run_and_prints_the_failure_rate(spec_file, tmp_path, capsys):
+    argv = ["falsify", f"{spec_file}::easy", "--cache-dir", str(tmp_path / "c"), "--examples", "5", "--uniform", "4"]
+    code = main([*argv, "--starts", "theta=-0.5:0.5", "--quiet"])
+    out = capsys.readouterr().out
+    assert code in (0, 1) and "== easy seed 0: " in out
+    assert "starts set by state over theta, omega" in out and "uniform draws), interval [" in out
+    assert ("COUNTEREXAMPLE" in out) == (code == 1)
+
+
+@pytest.mark.parametrize(
+    ("starts", "message"),
+    [
+        ("speed=0:1", "'speed', which its setter does not know; known: theta, omega"),
+        ("omega=-9:9", "outside its bounds"),
+    ],
+)
+def test_falsify_refuses_a_bad_start_space_before_training(spec_file, tmp_path, capsys, starts, message):
+    code = main(["falsify", f"{spec_file}::easy", "--cache-dir", str(tmp_path / "c"), "--starts", starts])
+    assert code == 2 and message in capsys.readouterr().err and not (tmp_path / "c").exists()

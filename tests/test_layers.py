@@ -7,6 +7,7 @@ design dependency). Parts, lowest first:
 - base: ``error``, ``validation``, ``version``, ``utils/``;
 - ``extend`` (the operator API), then ``tree/`` (the built-in nodes), then ``build/`` (the constructed env);
 - ``stats/`` (intervals, anytime looks, comparisons: numbers only);
+- ``falsify/`` (start spaces, robustness margins, the guided search for failing starts: over any policy callable);
 - ``parallel/`` (tasks in processes or on a cluster: generic, it knows nothing of specs);
 - the public tools over the core: ``strategies``, ``registry``, ``contract/``, ``testing``;
 - ``engine/`` (specs, training, runs, the cache);
@@ -44,11 +45,12 @@ ALLOWED: Mapping[str, frozenset[str]] = {
     "registry": BASE | {"extend", "tree", "registry"},
     "contract": CORE | {"strategies", "contract"},
     "testing": CORE | {"contract", "testing"},
+    "falsify": CORE | {"stats", "falsify"},
     "parallel": BASE | {"parallel"},
-    "engine": TOOLS | {"stats", "parallel", "engine"},
-    "report": TOOLS | {"stats", "parallel", "engine", "report"},
-    "pytest_plugin": TOOLS | {"stats", "parallel", "engine", "report", "pytest_plugin"},
-    "cli": TOOLS | {"stats", "parallel", "engine", "report", "pytest_plugin", "cli"},
+    "engine": TOOLS | {"stats", "parallel", "falsify", "engine"},
+    "report": TOOLS | {"stats", "parallel", "falsify", "engine", "report"},
+    "pytest_plugin": TOOLS | {"stats", "parallel", "falsify", "engine", "report", "pytest_plugin"},
+    "cli": TOOLS | {"stats", "parallel", "falsify", "engine", "report", "pytest_plugin", "cli"},
     "__main__": frozenset({"cli", "__main__"}),
 }
 NO_DEEP_LEARNING = (
@@ -56,6 +58,7 @@ NO_DEEP_LEARNING = (
     "tree",
     "build",
     "stats",
+    "falsify",
     "parallel",
     "contract",
     "strategies",

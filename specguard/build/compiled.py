@@ -490,6 +490,11 @@ class Evaluator:
         self.own_state: list[float] = [0.0] * len(tree.slots)
         self.goals: dict[str, bool] = {}
 
+    @property
+    def state(self) -> Any:
+        """The features of the last state reset or stepped to (``s.x`` by name)."""
+        return self._s
+
     def members(self, f: Sequence[float]) -> tuple[bool, ...]:
         """Every node's membership of one feature vector, at the start of an episode (no episode state)."""
         members: tuple[bool, ...] = self._start(f, [0.0] * len(self.slots), True)[0]

@@ -278,6 +278,12 @@ class ReferenceEvaluator:
         return self._members(self._x)
 
     @property
+    def state(self) -> Any:
+        """The features of the last state reset or stepped to (``s.x`` by name)."""
+        assert self._x is not None
+        return self._x.s
+
+    @property
     def own_state(self) -> list[float]:
         """The own-state slots in observation order."""
         assert self._x is not None

@@ -221,7 +221,27 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--cache-dir", default=".specguard/cache", help="run cache, to resume (default: .specguard/cache)")
     rep.add_argument("--out", default="docs/reproduction.md", help="the Markdown file; plots go to images/ beside it")
     rep.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    _add_falsify(sub)
     return parser
+
+
+def _add_falsify(sub: Any) -> None:
+    fz = sub.add_parser(
+        "falsify", help="search a trained spec's start space for starts from which its agents miss the spec"
+    )
+    fz.add_argument("target", metavar="PATH[::NAME]")
+    fz.add_argument("--seed", type=int, default=0, help="the search's seed (default: 0)")
+    fz.add_argument("--examples", type=_positive, default=200, help="guided episodes per run at most (default: 200)")
+    fz.add_argument("--uniform", type=int, default=100, help="uniform draws for the failure rate (default: 100)")
+    fz.add_argument(
+        "--starts",
+        type=_start_range,
+        nargs="+",
+        metavar="NAME=LO:HI",
+        help="start ranges of the env's state variables (default: the env's own reset ranges)",
+    )
+    fz.add_argument("--cache-dir", default=".specguard/cache", help="run cache (default: .specguard/cache)")
+    fz.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
 
 
 def _positive(text: str) -> int:
@@ -238,6 +258,43 @@ def _case_scale(text: str) -> tuple[str, float]:
     if not sep or not name:
         raise argparse.ArgumentTypeError(f"expected CASE=X, e.g. lunar_lander=0.5, got {text!r}")
     return name, _scale(value)
+
+
+def _start_range(text: str) -> tuple[str, tuple[float, float]]:
+    """``--starts NAME=LO:HI`` (e.g. ``theta=-0.1:0.1``)."""
+    name, _, rng = text.partition("=")
+    lo, _, hi = rng.partition(":")
+    try:
+        return name.strip(), (float(lo), float(hi))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected NAME=LO:HI, e.g. theta=-0.1:0.1, got {text!r}") from None
+
+
+def _falsify(args: argparse.Namespace) -> int:
+    """Train (or find in the cache) each spec, then search its start space for counterexamples, per run."""
+    from specguard.engine.progress import print_event
+    from specguard.engine.run import run_spec
+    from specguard.falsify.starts import StartSpace
+
+    starts = StartSpace(dict(args.starts)) if args.starts else None  # checked before anything trains
+    found_any = False
+    specs = load_objects(args.target)
+    for spec in specs.values():  # names and bounds checked before anything trains
+        if starts is not None:
+            starts.resolve(spec.initial_env.make())
+    for name, spec in specs.items():
+        quiet = args.quiet
+        result = run_spec(spec, cache_dir=args.cache_dir, progress=None if quiet else print_event)
+        say = None if quiet else (lambda line: print(f"[specguard] {line}", file=sys.stderr))
+        found = result.falsify(
+            starts, examples=args.examples, uniform=args.uniform, search_seed=args.seed, progress=say
+        )
+        for seed, f in found.items():
+            print(f"== {name} seed {seed}: {'COUNTEREXAMPLE' if f.found else 'none found'}")
+            print(f.report())
+            print()
+            found_any = found_any or f.found
+    return 1 if found_any else 0
 
 
 def _reproduce(args: argparse.Namespace, argv: Sequence[str]) -> int:
@@ -280,6 +337,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _show(args.target)
         if args.command == "reproduce":
             return _reproduce(args, argv)
+        if args.command == "falsify":
+            return _falsify(args)
         return _run(args)
     except SpecError as e:
         print(f"specguard: error: {e}", file=sys.stderr)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from specguard.engine.results import RunResult
 from specguard.engine.spec import Spec
@@ -12,6 +12,12 @@ from specguard.error import SpecError
 from specguard.stats.intervals import GoalOutcome, QuorumVerdict, RunVerdict, success_interval
 from specguard.tree.keys import GOAL, kind, label
 from specguard.utils.text import interval_text, render_table, weights_text
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from specguard.falsify.search import Falsification
+    from specguard.falsify.starts import StartSpace
 
 __all__ = ["GoalVerdict", "SpecResult"]
 
@@ -124,6 +130,53 @@ class SpecResult:
         model, normalizer = self._load(seed)
         assert self.trained is not None
         return rollout(model, self.trained, episodes=episodes, deterministic=deterministic, normalizer=normalizer)
+
+    def falsify(
+        self,
+        starts: StartSpace | None = None,
+        *,
+        seeds: list[int] | None = None,
+        examples: int = 200,
+        uniform: int = 100,
+        search_seed: int = 0,
+        database: str | Path | None = None,
+        progress: Callable[[str], None] | None = None,
+    ) -> dict[int, Falsification]:
+        """Search ``starts`` for starts from which each run's cached policy misses the spec (no retraining).
+
+        Args:
+            starts: the start space (:class:`~specguard.falsify.starts.StartSpace`); ``None``: the env's own.
+            seeds: the runs to falsify; ``None``: every run.
+            examples: guided episodes per run at most; ``uniform``: uniform draws for the failure rate.
+            database: the Hypothesis example database directory counterexamples are stored in and
+                replayed from; default ``<cache_dir>/falsify``.
+
+        Returns:
+            Per seed, what was found (:class:`~specguard.falsify.search.Falsification`).
+
+        Raises:
+            SpecError: a run was not cached.
+        """
+        from specguard.engine.falsification import falsify_run
+
+        found = {}
+        for seed in seeds if seeds is not None else [r.seed for r in self.runs]:
+            model, normalizer = self._load(seed)
+            assert self.trained is not None
+            found[seed] = falsify_run(
+                self.trained,
+                model,
+                normalizer,
+                seed=seed,
+                spec_key=self.spec_key,
+                starts=starts,
+                examples=examples,
+                uniform=uniform,
+                search_seed=search_seed,
+                database=database if database is not None else (Path(self.cache_dir or ".") / "falsify"),
+                progress=progress,
+            )
+        return found
 
     def _load(self, seed: int) -> tuple[Any, Any]:
         from specguard.engine.models import load_model

@@ -1,0 +1,366 @@
+"""The falsifier: a guided search for starts from which a trained policy misses its spec.
+
+:class:`EpisodeRunner` runs a policy (any callable from a batch of
+observations to a batch of actions: a trained model, or a planted policy in a
+test) on the spec's env from chosen starts, several starts in lockstep so
+the policy is asked once per step for all of them, and judges each
+episode's end by the spec's property (:mod:`specguard.falsify.robustness`).
+
+:func:`falsify` searches a start space:
+
+1. **replay**: the counterexample stored under ``key`` in the Hypothesis
+   example database (if any) is run first; if it still fails, that is the answer;
+2. **guided search**: Hypothesis draws starts (each variable as an offset
+   from the middle of its range) and :func:`hypothesis.target` steers it
+   towards low robustness scores; a failing start is shrunk by Hypothesis
+   towards the middle of the space, then each variable is bisected towards
+   the middle while the start still fails, so the counterexample lies on the
+   boundary of the failure region;
+3. **uniform draws**, counted apart: ``uniform`` starts drawn uniformly
+   give the failure rate over the space, with its interval.
+
+The shrunk start is saved under ``key`` so the next run replays it first.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from specguard.falsify.robustness import Judgement, feature_scales, judge_end, own_states
+from specguard.falsify.starts import START_OPTION, Starts, StartSpace
+from specguard.stats.intervals import success_interval
+
+__all__ = ["EpisodeRunner", "Falsification", "Outcome", "falsify"]
+
+BISECTIONS = 16
+"""Bisection steps per variable when a counterexample is moved to the failure region's boundary."""
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """One episode from one start.
+
+    Attributes:
+        start: the start, by variable.
+        judgement: the property at the episode's end (missed keys, score, margins).
+        steps: the episode's length.
+        ended: ``"terminated"`` or ``"truncated"``.
+        last: the last state's features, by name.
+    """
+
+    start: dict[str, float]
+    judgement: Judgement
+    steps: int
+    ended: str
+    last: dict[str, float]
+
+    @property
+    def failed(self) -> bool:
+        return bool(self.judgement.missed)
+
+    def summary(self) -> str:
+        """A short line: the episode's length, how it ended, its last state and what it missed."""
+        last = ", ".join(f"{k}={v:.3g}" for k, v in self.last.items())
+        missed = ", ".join(self.judgement.missed) or "nothing"
+        return f"{self.steps} steps, {self.ended} at ({last}); missed {missed}; score {self.judgement.score:.3g}"
+
+
+class EpisodeRunner:
+    """Runs a policy from chosen starts on fresh copies of one env, several starts in lockstep.
+
+    Args:
+        make_env: builds the spec's env (a ``SpecEnv``: it reports goals, safety and its evaluator).
+        act: ``act(observations) -> actions``, a batch (rows) to a batch.
+        space: the start space.
+        keys: the asserted goal paths and safety keys (the property).
+        batch: starts run in lockstep.
+    """
+
+    def __init__(
+        self,
+        make_env: Callable[[], Any],
+        act: Callable[[np.ndarray], Any],
+        space: StartSpace,
+        keys: Sequence[str],
+        *,
+        batch: int = 8,
+    ) -> None:
+        self._make_env = make_env
+        self.act = act
+        self.keys = tuple(keys)
+        self.batch = max(1, int(batch))
+        first = make_env()
+        self.starts: Starts = space.resolve(first.env)
+        first.env = self.starts.wrap(first.env)
+        self._envs: list[Any] = [first]
+        self.tree = first.tree
+        n = len(first.features)
+        box = first.observation_space
+        self.scales = feature_scales(first.features, box.low[:n], box.high[:n])
+        self.discrete = isinstance(first.action_space, gym.spaces.Discrete)
+        self.episodes = 0
+        """Episodes run so far."""
+
+    def _ready(self, k: int) -> list[Any]:
+        while len(self._envs) < k:
+            env = self._make_env()
+            env.env = self.starts.wrap(env.env)
+            self._envs.append(env)
+        return self._envs[:k]
+
+    def run(self, points: np.ndarray) -> list[Outcome]:
+        """One episode from each start (rows of ``points``), in lockstep batches."""
+        out: list[Outcome] = []
+        for lo in range(0, len(points), self.batch):
+            out.extend(self._run_batch(points[lo : lo + self.batch]))
+        return out
+
+    def _run_batch(self, points: np.ndarray) -> list[Outcome]:
+        envs = self._ready(len(points))
+        starts = [self.starts.values(p) for p in points]
+        obs = [env.reset(seed=0, options={START_OPTION: v})[0] for env, v in zip(envs, starts, strict=True)]
+        steps = [0] * len(envs)
+        results: list[Outcome | None] = [None] * len(envs)
+        active = list(range(len(envs)))
+        while active:
+            actions = self.act(np.stack([obs[i] for i in active]))
+            for j, i in enumerate(active):
+                action = int(actions[j]) if self.discrete else actions[j]
+                obs[i], _, terminated, truncated, info = envs[i].step(action)
+                steps[i] += 1
+                if terminated or truncated:
+                    results[i] = self._outcome(envs[i], starts[i], info, steps[i], bool(terminated))
+            active = [i for i in active if results[i] is None]
+        self.episodes += len(envs)
+        return [r for r in results if r is not None]
+
+    def _outcome(
+        self, env: Any, start: dict[str, float], info: dict[str, Any], steps: int, terminated: bool
+    ) -> Outcome:
+        ev = env.evaluator
+        s = ev.state
+        judgement = judge_end(
+            self.tree, self.keys, s, own_states(ev.slots, ev.own_state), info["goals"], info["safe"], self.scales
+        )
+        last = {f: float(v) for f, v in zip(s._fields, s, strict=True)}
+        return Outcome(start, judgement, steps, "terminated" if terminated else "truncated", last)
+
+
+@dataclass
+class Falsification:
+    """What :func:`falsify` found.
+
+    Attributes:
+        starts: the start space searched.
+        counterexample: the shrunk failing start's episode, or ``None``: none found.
+        first: the first failing episode found (before shrinking).
+        episodes_to_first: guided episodes run up to and including the first failure.
+        guided: guided episodes run (replay, search and shrinking).
+        replayed: the counterexample came from the database.
+        uniform_failures, uniform_episodes: the uniform draws, counted apart from the guided ones.
+        interval: the failure rate's interval over the uniform draws.
+        key: the database key the counterexample is stored under.
+    """
+
+    starts: Starts
+    counterexample: Outcome | None = None
+    first: Outcome | None = None
+    episodes_to_first: int | None = None
+    guided: int = 0
+    replayed: bool = False
+    uniform_failures: int = 0
+    uniform_episodes: int = 0
+    interval: tuple[float, float] = (0.0, 1.0)
+    key: str = ""
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def found(self) -> bool:
+        return self.counterexample is not None
+
+    @property
+    def failure_rate(self) -> float:
+        return self.uniform_failures / self.uniform_episodes if self.uniform_episodes else 0.0
+
+    def report(self) -> str:
+        """A few lines: the counterexample (or none), what it missed, its episode, and the failure rate."""
+        lines = [self.starts.note]
+        if self.counterexample is None:
+            lines.append(f"no counterexample in {self.guided} guided episodes")
+        else:
+            c = self.counterexample
+            start = ", ".join(f"{k}={v:.6g}" for k, v in c.start.items())
+            origin = "replayed from the database" if self.replayed else f"found after {self.episodes_to_first} episodes"
+            lines.append(f"counterexample ({origin}): {start}")
+            lines.append(f"  missed: {', '.join(c.judgement.missed)}")
+            lines.append(f"  episode: {c.summary()}")
+        if self.uniform_episodes:
+            lo, hi = self.interval
+            lines.append(
+                f"failure rate over the start space: {self.failure_rate:.1%} "
+                f"({self.uniform_failures}/{self.uniform_episodes} uniform draws), interval [{lo:.1%}, {hi:.1%}]"
+            )
+        return "\n".join([*lines, *self.notes])
+
+
+class _Failed(Exception):
+    """Raised inside the Hypothesis test for a failing start."""
+
+
+def _to_point(starts: Starts, u: Sequence[float]) -> np.ndarray:
+    if starts.how == "reset seeds":
+        return np.array([float(u[0])])
+    half = (starts.high - starts.low) / 2.0
+    point: np.ndarray = np.clip(starts.center + np.asarray(u, dtype=np.float64) * half, starts.low, starts.high)
+    return point
+
+
+def _strategy(starts: Starts) -> Any:
+    from hypothesis import strategies as st
+
+    if starts.how == "reset seeds":
+        return st.tuples(st.integers(int(starts.low[0]), int(starts.high[0])))
+    unit = st.floats(-1.0, 1.0, allow_nan=False)
+    return st.tuples(*(unit for _ in starts.names))
+
+
+def _load(database: Any, key: str) -> list[dict[str, float]]:
+    if database is None:
+        return []
+    found = []
+    for raw in database.fetch(key.encode()):
+        try:
+            found.append({str(k): float(v) for k, v in json.loads(raw.decode()).items()})
+        except (ValueError, AttributeError):
+            database.delete(key.encode(), raw)  # not ours: an entry that cannot be read is dropped
+    return found
+
+
+def _point_of(starts: Starts, values: dict[str, float]) -> np.ndarray | None:
+    if set(values) != set(starts.names):
+        return None
+    point = np.array([values[n] for n in starts.names], dtype=np.float64)
+    return point if np.all(point >= starts.low) and np.all(point <= starts.high) else None
+
+
+def _to_boundary(runner: EpisodeRunner, failing: Outcome, point: np.ndarray) -> tuple[Outcome, np.ndarray]:
+    """Move each variable of a failing start towards the middle of its range while it still fails (bisection)."""
+    starts = runner.starts
+    if starts.how == "reset seeds":
+        return failing, point
+    best, best_point = failing, point.copy()
+    for d in range(len(point)):
+        inner, outer = starts.center[d], best_point[d]  # inner passes or is unknown; outer fails
+        probe = best_point.copy()
+        probe[d] = inner
+        tried = runner.run(probe[None, :])[0]
+        if tried.failed:
+            best, best_point = tried, probe
+            continue
+        for _ in range(BISECTIONS):
+            probe = best_point.copy()
+            probe[d] = (inner + outer) / 2.0
+            tried = runner.run(probe[None, :])[0]
+            if tried.failed:
+                outer, best, best_point = probe[d], tried, probe
+            else:
+                inner = probe[d]
+    return best, best_point
+
+
+def falsify(
+    runner: EpisodeRunner,
+    *,
+    examples: int = 200,
+    uniform: int = 100,
+    seed: int = 0,
+    database: Any = None,
+    key: str = "",
+    shrink: bool = True,
+    confidence: float = 0.95,
+    progress: Callable[[str], None] | None = None,
+) -> Falsification:
+    """Search ``runner``'s start space for a start from which its policy misses the spec.
+
+    Args:
+        runner: the policy, env and property.
+        examples: guided episodes at most (Hypothesis's ``max_examples``; shrinking runs more).
+        uniform: uniform draws for the failure rate, counted apart (0: none).
+        seed: the search's and the draws' seed.
+        database: a Hypothesis ``ExampleDatabase`` (``None``: nothing replayed or stored).
+        key: the spec's identity, under which the counterexample is stored.
+        shrink: shrink the first failing start (else stop at it: the benchmark's episodes to a first failure).
+        progress: called with a line at each phase.
+    """
+    from hypothesis import HealthCheck, Phase, given, settings, target
+    from hypothesis import seed as hypothesis_seed
+
+    say = progress or (lambda line: None)
+    starts = runner.starts
+    result = Falsification(starts=starts, key=key)
+    say(starts.note)
+    start_count = runner.episodes
+
+    for values in _load(database, key):
+        point = _point_of(starts, values)
+        if point is None:
+            continue
+        replay = runner.run(point[None, :])[0]
+        if replay.failed:
+            say("counterexample replayed from the database: it still fails")
+            result.counterexample = result.first = replay
+            result.replayed, result.episodes_to_first = True, runner.episodes - start_count
+            break
+        database.delete(key.encode(), json.dumps(values).encode())
+
+    if result.counterexample is None:
+        say(f"guided search: up to {examples} episodes")
+        last: list[tuple[Outcome, np.ndarray]] = []
+
+        def episode(u: tuple[float, ...]) -> None:
+            point = _to_point(starts, u)
+            outcome = runner.run(point[None, :])[0]
+            target(-outcome.judgement.score, label="robustness")
+            if outcome.failed:
+                if result.first is None:
+                    result.first, result.episodes_to_first = outcome, runner.episodes - start_count
+                last.append((outcome, point))
+                raise _Failed(outcome.summary())
+
+        phases = [Phase.generate, Phase.target, *([Phase.shrink] if shrink else [])]
+        test = settings(
+            max_examples=examples,
+            database=None,
+            deadline=None,
+            phases=phases,
+            suppress_health_check=list(HealthCheck),
+            report_multiple_bugs=False,
+        )(given(_strategy(starts))(episode))  # type: ignore[no-untyped-call]
+        with contextlib.suppress(_Failed):  # the failing starts are kept in ``last``
+            hypothesis_seed(seed)(test)()  # type: ignore[no-untyped-call]
+        if last:
+            outcome, point = last[-1]
+            if shrink:
+                say("shrinking: moving each variable towards the middle of its range while it still fails")
+                outcome, point = _to_boundary(runner, outcome, point)
+            result.counterexample = outcome
+            if database is not None and key:
+                database.save(key.encode(), json.dumps(outcome.start).encode())
+    result.guided = runner.episodes - start_count
+
+    if uniform:
+        say(f"uniform draws: {uniform} episodes for the failure rate")
+        rng = np.random.default_rng(seed)
+        drawn = runner.run(starts.uniform(rng, uniform))
+        failures = sum(o.failed for o in drawn)
+        result.uniform_failures, result.uniform_episodes = failures, len(drawn)
+        ok_lo, ok_hi = success_interval(len(drawn) - failures, len(drawn), confidence)
+        result.interval = (1.0 - ok_hi, 1.0 - ok_lo)
+    return result

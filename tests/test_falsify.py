@@ -1,0 +1,124 @@
+"""The falsifier on planted policies: a failure region is found and shrunk to its boundary; a clean one is not."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from hypothesis.database import InMemoryExampleDatabase
+
+import specguard as sg
+from specguard.build.initial_env import state_type
+from specguard.falsify.robustness import box_margin, feature_scales, margins
+from specguard.falsify.search import EpisodeRunner, falsify
+from specguard.falsify.starts import StartSpace
+
+
+class Line(gym.Env):
+    """A point on a plane that action 0 moves right by 2 per step and action 1 keeps still; four steps an episode."""
+
+    observation_space = gym.spaces.Box(-10.0, 10.0, (2,), np.float32)
+    action_space = gym.spaces.Discrete(2)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.state, self.t = np.zeros(2), 0
+        return self.state.astype(np.float32), {}
+
+    def step(self, action):
+        self.state = self.state + np.array([2.0 * (1 - action), 0.0])
+        self.t += 1
+        return self.state.astype(np.float32), 0.0, False, self.t >= 4, {}
+
+
+def set_line(env, values):
+    env.unwrapped.state = np.array([values["x"], values["y"]])
+    return env.unwrapped.state.astype(np.float32)
+
+
+LINE = sg.InitialEnv(Line, features=("x", "y"))
+TREE = sg.Goal("home", x=(2.0, 10.0))
+SPACE = StartSpace({"x": (-1.0, 1.0), "y": (-1.0, 1.0)}, set_state=set_line)
+
+
+def planted(obs):
+    """Keeps still, so never gets home, exactly from starts with 0.7 < x <= 1 and y > -0.2."""
+    return ((obs[:, 0] > 0.7) & (obs[:, 0] <= 1.0) & (obs[:, 1] > -0.2)).astype(int)
+
+
+def clean(obs):
+    return np.zeros(len(obs), dtype=int)
+
+
+def runner(policy, **kwargs):
+    return EpisodeRunner(lambda: sg.make_env(LINE, TREE), policy, SPACE, ["home"], **kwargs)
+
+
+def test_a_planted_failure_region_is_found_and_shrunk_to_its_boundary():
+    found = falsify(runner(planted), examples=200, uniform=400, seed=1)
+    assert found.found and found.first is not None and found.first.failed
+    c = found.counterexample
+    assert c.judgement.missed == ("home",) and c.judgement.score < 0
+    assert c.start["x"] == pytest.approx(0.7, abs=1e-3) and c.start["x"] > 0.7  # on the boundary, still failing
+    assert c.start["y"] == 0.0  # the middle of y's range fails too: the simplest value
+    # The region is 15% x 60% of the space: 9%.
+    assert 0.05 < found.failure_rate < 0.14 and found.interval[0] < 0.09 < found.interval[1]
+    assert "counterexample (found after" in found.report() and "missed: home" in found.report()
+
+
+def test_a_clean_policy_is_never_reported():
+    found = falsify(runner(clean), examples=100, uniform=100, seed=1)
+    assert not found.found and found.first is None and found.uniform_failures == 0
+    assert found.guided == 100 and "no counterexample in 100 guided episodes" in found.report()
+
+
+def test_the_counterexample_is_stored_under_the_key_and_replayed_first():
+    db = InMemoryExampleDatabase()
+    first = falsify(runner(planted), examples=200, uniform=0, database=db, key="spec-a")
+    assert first.found and not first.replayed and len(list(db.fetch(b"spec-a"))) == 1
+    again = falsify(runner(planted), examples=200, uniform=0, database=db, key="spec-a")
+    assert again.replayed and again.guided == 1 and again.counterexample.start == first.counterexample.start
+    other = falsify(runner(clean), examples=20, uniform=0, database=db, key="spec-a")  # fixed: the entry is dropped
+    assert not other.found and list(db.fetch(b"spec-a")) == []
+
+
+def test_batches_give_the_same_episodes_as_one_at_a_time():
+    points = SPACE.resolve(Line()).uniform(np.random.default_rng(0), 20)
+    one = runner(planted, batch=1).run(points)
+    many = runner(planted, batch=8).run(points)
+    assert [o.start for o in one] == [o.start for o in many]
+    assert [o.judgement for o in one] == [o.judgement for o in many]
+
+
+def test_a_box_margin_is_the_nearest_side_inside_and_the_largest_violation_outside():
+    s = state_type(("x", "y"))
+    box = {"x": (-1.0, 1.0), "y": (0.0, float("inf"))}
+    assert box_margin(box, s(0.5, 3.0), {"x": 1.0, "y": 1.0}) == 0.5
+    assert box_margin(box, s(0.5, 3.0), {"x": 0.1, "y": 1.0}) == pytest.approx(3.0)  # y is now the nearer side
+    assert box_margin(box, s(2.0, -0.5), {"x": 1.0, "y": 1.0}) == -1.0
+    assert feature_scales(("x", "y"), np.array([-4.0, -np.inf]), np.array([4.0, np.inf])) == {"x": 4.0, "y": 1.0}
+
+
+def test_an_operator_without_a_box_gets_a_margin_signed_by_membership():
+    class Either(sg.Node):  # no margin() of its own: the default applies
+        kind = "Either"
+
+        def __init__(self, *children, name):
+            self.nodes, self.name, self.annotations = children, name, ()
+
+        @property
+        def children(self):
+            return self.nodes
+
+        def contains(self, ctx):
+            return any(ctx.inside)
+
+        def describe(self):
+            return f"Either {self.name!r}"
+
+    tree = Either(sg.Goal("a", x=(0.0, 1.0)), sg.Goal("b", x=(2.0, 3.0)), name="e")
+    s = state_type(("x",))
+    out = margins(tree, s(0.25), {}, {"e": True, "e/a": True, "e/b": False}, {"x": 1.0})
+    assert out == {"e/a": 0.25, "e/b": -1.75, "e": 0.25}
+    out = margins(tree, s(1.5), {}, {"e": False, "e/a": False, "e/b": False}, {"x": 1.0})
+    assert out["e"] == -0.5
