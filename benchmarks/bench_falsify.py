@@ -9,7 +9,7 @@ the CartPole "lean and catch" agents at the env's default starts and on a
 wider space, and Pendulum (w) from any angle (no failure known: "none found
 within budget" is the expected answer).
 
-Target (issue 22): where failures are rarer than 1 in 20 episodes, the median
+Target: where failures are rarer than 1 in 20 episodes, the median
 episodes to the first failure of the guided search <= 1/3 of random's. Also
 printed: the shrunk start's distance from the middle of the space against the
 first failing start's (normalised per variable), and the cost per episode of
