@@ -255,22 +255,27 @@ def test_save_then_compare_gates_regressions(pytester):
         """,
     )
     baselines = pytester.path / "baselines"
-    opts = [f"--goal-specs-baseline-dir={baselines}"]
+    opts = [f"--goal-specs-baseline-dir={baselines}", "--goal-specs-compare-seeds=4"]
     saved = run(pytester, "--goal-specs", "--goal-specs-save", "main", *opts)
     saved.assert_outcomes(passed=1)
     stored = json.loads((baselines / "main.json").read_text())
     key = "test_specs.py::test_gate::pendulum/stabilization"
-    assert len(stored["goals"][key]["runs"]) == 2 and len(stored["goals"][key]["spec"]) == 64
+    assert stored["format"] == 3 and stored["goals"][key]["seeds"] == [0, 1, 2, 3]  # more seeds than the spec's 2
+    assert len(stored["goals"][key]["runs"]) == 4 and len(stored["goals"][key]["spec"]) == 64
     same = run(pytester, "--goal-specs", "--goal-specs-compare", *opts)
     same.assert_outcomes(passed=1)
-    same.stdout.fnmatch_lines(["*unchanged within chance*"])
-    assert "spec changed" not in same.stdout.str()
-    # A baseline where every episode succeeded: the tiny policy's success is a drop.
-    stored["goals"][key]["runs"] = [[40, 40], [40, 40]]
+    same.stdout.fnmatch_lines(["*unchanged: the same spec and runs as baseline 'latest' (seeds 0, 1); not compared*"])
+    # A baseline where every episode succeeded: the tiny policy's success is a drop, flagged once 4 seeds are in.
+    stored["goals"][key]["runs"] = [[40, 40]] * 4
     (baselines / "perfect.json").write_text(json.dumps(stored))
     dropped = run(pytester, "--goal-specs", "--goal-specs-compare", "perfect", *opts)
     dropped.assert_outcomes(failed=1)
-    dropped.stdout.fnmatch_lines(["*hint: success dropped: 100% -> *against baseline 'perfect'*"])
+    dropped.stdout.fnmatch_lines(
+        [
+            "*hint: success dropped: 100% -> *(p = * <= 0.05; 4 seeds vs 4 in the baseline, looks at 2, 4)*",
+            "*compared with the baseline: Holm's step-down procedure over 1 comparison at family-wise 5%; each*",
+        ]
+    )
     # The same goal of a changed spec (another threshold) is compared, and said to come from a changed spec.
     pytester.makepyfile(test_specs=(pytester.path / "test_specs.py").read_text().replace("0.0}", "0.01}"))
     changed = run(pytester, "--goal-specs", "--goal-specs-compare", "main", *opts)

@@ -23,7 +23,7 @@ from specguard.pytest_plugin.declare import GOAL_FIXTURE, SpecItem
 from specguard.pytest_plugin.items import GoalMissed, group_of, one_line_errors, raise_outcome, spec_of
 from specguard.pytest_plugin.options import add_options, baseline_path, parse_options
 from specguard.pytest_plugin.recorder import PROPERTY, Recorder
-from specguard.pytest_plugin.session import Session, run, scaled, terminal_progress
+from specguard.pytest_plugin.session import Session, gate_of, run, saved_runs, scaled, terminal_progress
 
 __all__ = ["GoalMissed"]
 
@@ -137,12 +137,18 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     state = pyfuncitem.config.stash[_SESSION]
     if marker.kwargs.get("error"):  # a malformed @goal_spec fails its own item, not the collection
         pytest.fail(f"{pyfuncitem.path.name}::{pyfuncitem.name}: {marker.kwargs['error']}", pytrace=False)
+    group = group_of(pyfuncitem)
     with one_line_errors(pyfuncitem):
         spec, paths = spec_of(pyfuncitem, marker.kwargs.get("expect"))
-        result = run(state, scaled(state, spec))
+        trained = scaled(state, spec)
+        result = run(state, trained)
+        gate = gate_of(state, trained, result, group)
+        stored = saved_runs(state, trained, result, gate) if state.options.save else None
     baseline = (state.baseline, state.options.compare or "latest") if state.baseline is not None else None
-    checks = check_item(result, spec, paths, group_of(pyfuncitem), baseline=baseline)
+    checks = check_item(result, spec, paths, group, baseline=baseline, gate=gate)
     for check in checks:
+        if stored is not None:
+            check.baseline_runs = [[r.seed, r.successes[check.goal], r.episodes] for r in stored.runs]
         row = check.to_row()
         if state.options.report_dir is not None:
             row["curves"] = [r.curve for r in result.runs]
