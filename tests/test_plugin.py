@@ -453,6 +453,7 @@ def test_checkpoints_make_the_budget_a_ceiling(pytester):
         ),
         ("--goal-specs-workers=05", "--goal-specs-workers: expected an integer >= 1 (or 'auto'*), got '05'"),
         ("--goal-specs-compare=nosuch", "--goal-specs-compare: baseline '*nosuch.json' does not exist*"),
+        ("--goal-specs-compare-seeds=0", "--goal-specs-compare-seeds: expected an integer >= 1, got '0'"),
     ],
 )
 def test_bad_option_values_are_usage_errors(pytester, option, message):
@@ -558,7 +559,7 @@ def test_baselines_live_beside_the_cache_dir_by_default(pytester):
             return tiny(pendulum, tree)
         """,
     )
-    run(pytester, "--goal-specs", "--goal-specs-save", "main").assert_outcomes(passed=1)
+    run(pytester, "--goal-specs", "--goal-specs-save", "main", "--goal-specs-compare-seeds=2").assert_outcomes(passed=1)
     assert (pytester.path / "baselines" / "main.json").is_file()  # run() puts the cache at ./cache
     assert not (pytester.path / ".specguard").exists()
 
