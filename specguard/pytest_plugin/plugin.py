@@ -6,7 +6,7 @@ Hooks, fixtures and the marker only. The logic lives in plain modules:
 :mod:`~specguard.pytest_plugin.items` (what an item runs and its outcome),
 :mod:`~specguard.pytest_plugin.gate` (judging each goal),
 :mod:`~specguard.pytest_plugin.recorder` (reports and baselines) and
-:mod:`~specguard.pytest_plugin.show` (``--goal-specs-show``). Training
+:mod:`~specguard.pytest_plugin.show` (``--goal-specs-show``, ``--goal-specs-plan``). Training
 imports only when a goal spec runs, so plain ``pytest`` in a project with
 specguard installed stays fast.
 """
@@ -110,6 +110,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         marker = item.get_closest_marker(MARKER)
         if marker is None or not isinstance(item, pytest.Function):
             continue
+        state.goal_items += 1
         if not state.options.enabled:
             item.add_marker(pytest.mark.skip(reason=SKIP_REASON))
             continue
@@ -167,19 +168,21 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) ->
     return report
 
 
-# -- showing (--goal-specs-show) -----------------------------------------------------
+# -- showing (--goal-specs-show, --goal-specs-plan) ------------------------------------
 
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_runtest_call(item: pytest.Item) -> None:
-    """Under ``--goal-specs-show``, a goal spec item renders its spec and is skipped instead of training."""
+    """Under ``--goal-specs-show`` or ``--goal-specs-plan``, a goal spec item renders its spec (or its plan) and is
+    skipped instead of training."""
     marker = item.get_closest_marker(MARKER)
-    if not item.config.getoption("goal_specs_show", False) or marker is None or not isinstance(item, pytest.Function):
+    show, plan = item.config.getoption("goal_specs_show", False), item.config.getoption("goal_specs_plan", False)
+    if not (show or plan) or marker is None or not isinstance(item, pytest.Function):
         return
     state = item.config.stash[_SESSION]
     if not state.options.enabled or marker.kwargs.get("error"):
         return  # skipped without --goal-specs; a malformed @goal_spec fails as usual
-    from specguard.pytest_plugin.show import SHOW_PROPERTY, SHOWN, render_spec
+    from specguard.pytest_plugin.show import SHOW_PROPERTY, SHOWN, plan_text, render_spec
 
     group = group_of(item)
     shown = item.config.stash.setdefault(_SHOWN_GROUPS, set())
@@ -187,9 +190,21 @@ def pytest_runtest_call(item: pytest.Item) -> None:
         pytest.skip(SHOWN)
     with one_line_errors(item):
         spec, _ = spec_of(item, marker.kwargs.get("expect"))
-        text = render_spec(scaled(state, spec), group)
+        trained = scaled(state, spec)
+        texts = [render_spec(trained, group)] if show else []
+        if plan:
+            family = len(state.baseline.runs) if state.baseline is not None else state.goal_items
+            texts.append(
+                plan_text(
+                    trained,
+                    group,
+                    family=max(1, family),
+                    compare_seeds=state.options.compare_seeds,
+                    baseline=state.baseline,
+                )
+            )
     shown.add(group)
-    item.user_properties.append((SHOW_PROPERTY, text))
+    item.user_properties.append((SHOW_PROPERTY, "\n".join(texts)))
     pytest.skip(SHOWN)
 
 
@@ -197,7 +212,7 @@ _SHOWN_GROUPS = pytest.StashKey[set[str]]()
 
 
 def pytest_terminal_summary(terminalreporter: Any) -> None:
-    """Print the specs ``--goal-specs-show`` rendered (on the xdist controller too: they travel in the reports)."""
+    """Print what ``--goal-specs-show`` and ``--goal-specs-plan`` rendered (on the xdist controller too)."""
     from specguard.pytest_plugin.show import SHOW_PROPERTY, SHOWN
 
     texts: dict[str, None] = {}

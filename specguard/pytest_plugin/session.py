@@ -27,6 +27,7 @@ class Session:
     progress: Callable[[Any], None] | None = None  # the run_spec sink: events to the terminal reporter
     gates: dict[str, Any] = dataclasses.field(default_factory=dict)  # spec key -> its SpecGate with the baseline
     saved: dict[str, Any] = dataclasses.field(default_factory=dict)  # spec key -> the runs a saved baseline stores
+    goal_items: int = 0  # goal-spec items collected: a plan's family of comparisons when no baseline gives one
 
 
 def scaled(state: Session, spec: Any) -> Any:

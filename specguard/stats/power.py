@@ -206,11 +206,14 @@ def _binomial_pmf(n: int, p: float) -> np.ndarray:
     return np.asarray(np.exp(logs + k * math.log(p) + (n - k) * math.log1p(-p)))
 
 
-def chance_met(p: float, *, threshold: float, stages: Sequence[int], confidence: float) -> float:
+def chance_met(
+    p: float, *, threshold: float, stages: Sequence[int], confidence: float, undecided_met: bool = False
+) -> float:
     """The chance that a run with true success ``p`` is judged met at its final evaluation.
 
     Stage by stage (cumulative episodes ``stages``), as :func:`specguard.stats.anytime.final_evaluation`
-    judges: met or missed ends the evaluation, undecided goes on to the next stage.
+    judges: met or missed ends the evaluation, undecided goes on to the next stage. A run still
+    undecided after the last stage counts as met when ``undecided_met`` (a spec's ``undecided="pass"``).
     """
     met = 0.0
     carried = np.array([1.0])  # the chance of each success count so far among runs still undecided
@@ -222,6 +225,8 @@ def chance_met(p: float, *, threshold: float, stages: Sequence[int], confidence:
         met += float(sum(c for c, v in zip(counts, verdicts) if v is RunVerdict.MET))
         carried = np.array([c if v is RunVerdict.UNDECIDED else 0.0 for c, v in zip(counts, verdicts)])
         done = total
+    if undecided_met:
+        met += float(carried.sum())
     return min(1.0, met)
 
 
