@@ -267,8 +267,8 @@ def test_holm_over_the_session_flags_what_the_items_first_step_could_not():
     assert rows[1]["verdict"] == "failed" and rows[1]["comparison"].startswith("dropped by Holm's step 2 (p = 0.02 <=")
     assert [r["gate"]["holm"] for r in rows] == [1, 2, None] and rows[2]["verdict"] == "passed"
     assert family_lines(rows) == [
-        "compared with the baseline: Holm's step-down procedure over 3 comparisons at family-wise 5%; each comparison "
-        "was judged at 0.017 while its seeds trained (Holm's first step over the baseline's 3 goals and safety rates)",
+        "Holm's step-down procedure over 3 comparisons at family-wise 5%; each comparison was judged at 0.017 while "
+        "its seeds trained (Holm's first step over the 3 goals and safety rates of the baseline)",
         "dropped: f.py::test::a, f.py::test::b",
         "seeds compared per spec: f.py::test 4 (2 beyond the specs' own)",
     ]

@@ -273,7 +273,8 @@ def test_save_then_compare_gates_regressions(pytester):
     dropped.stdout.fnmatch_lines(
         [
             "*hint: success dropped: 100% -> *(p = * <= 0.05; 4 seeds vs 4 in the baseline, looks at 2, 4)*",
-            "*compared with the baseline: Holm's step-down procedure over 1 comparison at family-wise 5%; each*",
+            "specguard: Holm's step-down procedure over 1 comparison at family-wise 5%; each comparison was judged at "
+            "0.05 while its seeds trained (Holm's first step over the 1 goal and safety rate of the baseline)",
         ]
     )
     # The same goal of a changed spec (another threshold) is compared, and said to come from a changed spec.

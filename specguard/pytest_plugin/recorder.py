@@ -62,7 +62,7 @@ class Recorder:
         for line in table_lines(self.state.rows):
             terminalreporter.write_line(line)
         for line in family_lines(self.state.rows):
-            terminalreporter.write_line(line)
+            terminalreporter.write_line(f"specguard: {line}")
         for path in write_outputs(self.config, self.state):
             terminalreporter.write_line(f"specguard: wrote {path}")
         note = unsigned_cache_note(self.state.rows, os.environ)

@@ -98,10 +98,11 @@ def family_lines(rows: Sequence[Row]) -> list[str]:
         specs.setdefault(r["group"], (len(r["gate"]["seeds"]), len(r.get("per_seed") or [])))
     extra = sum(max(0, seeds - own) for seeds, own in specs.values())
     level = compared[0]["gate"]["level"]
+    stored = round(DEFAULT_ALPHA / level)
     lines = [
-        f"compared with the baseline: {procedure_text(DEFAULT_ALPHA, len(compared))}; each comparison was judged "
-        f"at {level:.2g} while its seeds trained (Holm's first step over the baseline's {round(DEFAULT_ALPHA / level)} "
-        "goals and safety rates)",
+        f"{procedure_text(DEFAULT_ALPHA, len(compared))}; each comparison was judged at {level:.2g} while its "
+        f"seeds trained (Holm's first step over the {stored} goal{'s' if stored != 1 else ''} and safety "
+        f"rate{'s' if stored != 1 else ''} of the baseline)",
         f"dropped: {', '.join(flagged) if flagged else 'none'}",
         "seeds compared per spec: "
         + ", ".join(f"{group} {seeds}" for group, (seeds, _) in specs.items())
