@@ -140,7 +140,7 @@ def main() -> int:
 
     print(f"\n(3) one comparison, nothing changed: false alarms at its level {d.alpha:.2g}, as a multiple of it")
     print(f"{'seeds of one comparison':<38} {'permutation (gate)':>18} {'pooled t (contrast)':>20}")
-    grid_sims = max(sims * 5, 2000)
+    grid_sims = sims * 5
     worst = 0.0
     for success, spread in [
         (0.42, 0.15),
