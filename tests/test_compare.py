@@ -1,34 +1,10 @@
-"""Baselines and the two-sample comparison."""
+"""Stored baselines: saving, loading, old formats, corrupt files, and runs that are the baseline's own."""
 
 from __future__ import annotations
 
 import pytest
 
-from specguard.stats.compare import Baseline, BaselineError, compare, load_baseline, save_baseline
-
-
-def test_clear_drop_across_seeds():
-    c = compare([(29, 30), (30, 30), (28, 30)], [(10, 30), (12, 30), (9, 30)])
-    assert c.dropped and not c.improved
-    assert c.method.startswith("Welch t-test over 3 vs 3 seeds")
-    assert c.describe().startswith("dropped: 97% -> 34%")
-
-
-def test_noise_is_not_a_drop():
-    c = compare([(20, 30), (25, 30)], [(24, 30), (19, 30)])
-    assert not c.dropped and not c.improved
-    assert "unchanged within chance" in c.describe()
-
-
-def test_identical_seeds_fall_back_to_fisher():
-    c = compare([(30, 30), (30, 30)], [(0, 30), (0, 30)])
-    assert c.dropped and c.method == "Fisher exact test over 60 vs 60 episodes"
-    assert compare([(0, 30)], [(30, 30)]).improved
-
-
-def test_needs_runs():
-    with pytest.raises(ValueError):
-        compare([], [(1, 2)])
+from specguard.stats.compare import Baseline, BaselineError, load_baseline, save_baseline
 
 
 def test_save_and_load_round_trip(tmp_path):
@@ -38,6 +14,28 @@ def test_save_and_load_round_trip(tmp_path):
     assert baseline.runs == {"f.py::test::goal": [(3, 4), (4, 4)]}
     assert baseline.spec_changed("f.py::test::goal", "abd") and not baseline.spec_changed("f.py::test::goal", "abc")
     assert not baseline.spec_changed("other", "abc")
+
+
+def test_seeds_round_trip_and_the_baselines_own_runs_are_recognised(tmp_path):
+    path = tmp_path / "main.json"
+    save_baseline(path, {"k": [(3, 4), (4, 4)]}, {"k": "abc"}, {"k": [0, 1]})
+    baseline = load_baseline(path)
+    assert baseline.seeds == {"k": [0, 1]}
+    assert baseline.same_runs("k", "abc", [(0, 3, 4), (1, 4, 4)])
+    assert baseline.same_runs("k", "abc", [(1, 4, 4)])
+    assert not baseline.same_runs("k", "abd", [(0, 3, 4)])  # another spec
+    assert not baseline.same_runs("k", "abc", [(0, 4, 4)])  # another result
+    assert not baseline.same_runs("k", "abc", [(2, 3, 4)])  # a seed the baseline lacks
+    assert not baseline.same_runs("k", None, [(0, 3, 4)]) and not baseline.same_runs("k", "abc", [])
+    with pytest.raises(ValueError, match="'k': 1 seeds for 2 runs"):
+        save_baseline(path, {"k": [(3, 4), (4, 4)]}, seeds={"k": [0]})
+
+
+def test_a_format_2_baseline_has_no_seeds_and_no_runs_of_its_own(tmp_path):
+    path = tmp_path / "old.json"
+    path.write_text('{"format": 2, "goals": {"k": {"runs": [[3, 4]], "spec": "abc"}}}')
+    baseline = load_baseline(path)
+    assert baseline.seeds == {} and not baseline.same_runs("k", "abc", [(0, 3, 4)])
 
 
 def test_format_1_baselines_still_load(tmp_path):
@@ -50,10 +48,13 @@ def test_format_1_baselines_still_load(tmp_path):
     "content",
     [
         "{oops",
-        '{"format": 3, "goals": {}}',
+        '{"format": 4, "goals": {}}',
         '{"format": 2, "goals": {"k": {"runs": [[1, 2]], "spec": 5}}}',
         '{"format": 1, "goals": {"k": [[5, 4]]}}',
         '{"format": 1, "goals": {"k": "x"}}',
+        '{"format": 3, "goals": {"k": {"runs": [[1, 2]], "spec": null, "seeds": [0, 1]}}}',
+        '{"format": 3, "goals": {"k": {"runs": [[1, 2], [1, 2]], "spec": null, "seeds": [0, 0]}}}',
+        '{"format": 3, "goals": {"k": {"runs": [[1, 2]], "spec": null, "seeds": ["a"]}}}',
     ],
 )
 def test_corrupt_baselines_name_the_file(tmp_path, content):
@@ -93,7 +94,7 @@ def test_safety_rates_round_trip_and_old_baselines_without_them_are_noted(tmp_pa
     result = SpecResult(spec="pendulum", runs=runs, goals=_judge(spec, runs, 0))
     paths = ["pendulum", "pendulum:fast"]
     goal, safety = check_item(result, spec, paths, "g", baseline=(load_baseline(old), "old"))
-    assert goal.comparison.startswith("unchanged within chance")
+    assert goal.comparison.startswith("unchanged within chance: 98% -> 100%")
     assert safety.comparison == "not compared: baseline 'old' has no figures for it" and safety.outcome == "passed"
     _, safety = check_item(result, spec, paths, "g", baseline=(load_baseline(new), "new"))
     assert safety.comparison.startswith("unchanged within chance: 97% -> 97%")

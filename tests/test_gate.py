@@ -113,21 +113,44 @@ def test_with_thresholds_resolves_decorator_goals():
 def test_check_item_fails_a_passing_goal_that_dropped_against_the_baseline():
     from specguard.pytest_plugin.gate import check_item
 
-    s = spec(expect={"pendulum": 0.3})
-    result = result_of(s, [(20, 30), (21, 30)])
+    s = spec(expect={"pendulum": 0.3}, max_seeds=4)
+    result = result_of(s, [(20, 30), (21, 30), (19, 30), (22, 30)])
     key = "g::pendulum"
-    dropped = check_item(result, s, ["pendulum"], "g", baseline=(Baseline({key: [(30, 30), (30, 30)]}, {}), "main"))[0]
+    dropped = check_item(result, s, ["pendulum"], "g", baseline=(Baseline({key: [(30, 30)] * 8}, {}), "main"))[0]
     assert dropped.outcome == "failed"
-    assert dropped.hint.startswith("success dropped: 100% -> 68% (Welch t-test over 2 vs 2 seeds")
+    assert dropped.hint.startswith("success dropped: 100% -> 68% (p = 0.002 <= 0.05; 4 seeds vs 8 in the baseline)")
     assert dropped.hint.endswith("against baseline 'main'")
-    same = check_item(result, s, ["pendulum"], "g", baseline=(Baseline({key: [(20, 30), (21, 30)]}, {}), "main"))[0]
-    assert same.outcome == "passed" and same.comparison.startswith("unchanged within chance")
+    assert dropped.gate["state"] == "dropped" and dropped.gate["seeds"] == [0, 1, 2, 3]
+    # Two seeds against two cannot show a drop at 5% (every split of 4 seeds is 1 in 6): undecided, not failed.
+    two = spec(expect={"pendulum": 0.3})
+    few = result_of(two, [(20, 30), (21, 30)])
+    open_ = check_item(few, two, ["pendulum"], "g", baseline=(Baseline({key: [(30, 30)] * 2}, {}), "main"))[0]
+    assert open_.outcome == "passed" and open_.comparison.startswith("undecided: 100% -> 68% (p = 0.17 > 0.05")
+    like = Baseline({key: [(20, 30), (21, 30)] * 4}, {})
+    same = check_item(result, s, ["pendulum"], "g", baseline=(like, "main"))[0]
+    assert same.outcome == "passed"
+    assert same.comparison.startswith("unchanged within chance: 68% -> 68% (a drop of 12 points at most, under the")
     assert "spec changed" not in same.comparison
     result.spec_key = "new"
     changed = Baseline({key: [(20, 30), (21, 30)]}, {key: "old"})
     moved = check_item(result, s, ["pendulum"], "g", baseline=(changed, "main"))[0]
     assert moved.comparison.endswith("(the spec changed since baseline 'main')")
     assert dict(same.junit_properties())["interval"].startswith("[0.")
+
+
+def test_a_spec_whose_identity_and_runs_are_the_baselines_own_is_not_compared():
+    from specguard.pytest_plugin.gate import check_item
+
+    s = spec(expect={"pendulum": 0.3})
+    result = result_of(s, [(20, 30), (21, 30)])
+    result.spec_key = "same"
+    key = "g::pendulum"
+    own = Baseline({key: [(20, 30), (21, 30), (25, 30)]}, {key: "same"}, {key: [0, 1, 2]})
+    check = check_item(result, s, ["pendulum"], "g", baseline=(own, "main"))[0]
+    assert check.comparison == "unchanged: the same spec and runs as baseline 'main' (seeds 0, 1); not compared"
+    assert check.gate is None and check.outcome == "passed"
+    other = Baseline({key: [(20, 30), (22, 30)]}, {key: "same"}, {key: [0, 1]})  # same identity, another result
+    assert check_item(result, s, ["pendulum"], "g", baseline=(other, "main"))[0].gate is not None
 
 
 def test_never_reached_suggests_a_distance_only_for_a_reachable_goal():
@@ -212,7 +235,51 @@ def test_old_baselines_without_a_safety_rate_are_noted_not_compared():
     goal, safety = check_item(result, s, ["pendulum", "pendulum:fast"], "g", baseline=(old, "main"))
     assert goal.comparison.startswith("unchanged within chance")
     assert safety.outcome == "passed" and safety.comparison == "not compared: baseline 'main' has no figures for it"
-    dropped = Baseline({"g::pendulum:fast": [(30, 30), (30, 30)]}, {})
+    s = safety_spec({"pendulum": 0.3, "fast": 0.3}, max_seeds=4)
+    result = safety_result(s, [20, 21, 19, 22])
+    dropped = Baseline({"g::pendulum:fast": [(30, 30)] * 8}, {})
     safety = check_item(result, s, ["pendulum:fast"], "g", baseline=(dropped, "main"))[0]
     assert safety.outcome == "failed"
     assert safety.hint.startswith("safety rate dropped: 100% -> 68%") and safety.hint.endswith("baseline 'main'")
+
+
+def compared_row(goal, p_drop, state="open", verdict="passed", seeds=(0, 1, 2, 3)):
+    return {
+        "group": "f.py::test",
+        "goal": goal,
+        "verdict": verdict,
+        "per_seed": [{"seed": 0}, {"seed": 1}],
+        "comparison": f"undecided: ({goal})",
+        "gate": {"p_drop": p_drop, "state": state, "level": 0.05 / 3, "seeds": list(seeds)},
+    }
+
+
+def test_holm_over_the_session_flags_what_the_items_first_step_could_not():
+    from specguard.pytest_plugin.recorder import apply_family
+    from specguard.report.session import family_lines
+
+    rows = [
+        compared_row("a", 0.001, state="dropped", verdict="failed"),
+        compared_row("b", 0.02),
+        compared_row("c", 0.5),
+    ]
+    assert apply_family(rows)  # b: 0.02 <= 0.05 / 2 at Holm's second step, though above the first step's 0.0167
+    assert rows[1]["verdict"] == "failed" and rows[1]["comparison"].startswith("dropped by Holm's step 2 (p = 0.02 <=")
+    assert [r["gate"]["holm"] for r in rows] == [1, 2, None] and rows[2]["verdict"] == "passed"
+    assert family_lines(rows) == [
+        "Holm's step-down procedure over 3 comparisons at family-wise 5%; each comparison was judged at 0.017 while "
+        "its seeds trained (Holm's first step over the 3 goals and safety rates of the baseline)",
+        "dropped: f.py::test::a, f.py::test::b",
+        "seeds compared per spec: f.py::test 4 (2 beyond the specs' own)",
+    ]
+
+
+def test_holm_leaves_expected_misses_and_a_quiet_session_alone():
+    from specguard.pytest_plugin.recorder import apply_family
+    from specguard.report.session import family_lines
+
+    xfailed = [compared_row("a", 0.001, verdict="xfailed")]
+    assert not apply_family(xfailed) and xfailed[0]["verdict"] == "xfailed"
+    quiet = [compared_row("a", 0.4), compared_row("b", 0.9)]
+    assert not apply_family(quiet) and family_lines(quiet)[1] == "dropped: none"
+    assert not apply_family([{"group": "g", "goal": "x", "verdict": "passed"}]) and family_lines([]) == []

@@ -255,22 +255,28 @@ def test_save_then_compare_gates_regressions(pytester):
         """,
     )
     baselines = pytester.path / "baselines"
-    opts = [f"--goal-specs-baseline-dir={baselines}"]
+    opts = [f"--goal-specs-baseline-dir={baselines}", "--goal-specs-compare-seeds=4"]
     saved = run(pytester, "--goal-specs", "--goal-specs-save", "main", *opts)
     saved.assert_outcomes(passed=1)
     stored = json.loads((baselines / "main.json").read_text())
     key = "test_specs.py::test_gate::pendulum/stabilization"
-    assert len(stored["goals"][key]["runs"]) == 2 and len(stored["goals"][key]["spec"]) == 64
+    assert stored["format"] == 3 and stored["goals"][key]["seeds"] == [0, 1, 2, 3]  # more seeds than the spec's 2
+    assert len(stored["goals"][key]["runs"]) == 4 and len(stored["goals"][key]["spec"]) == 64
     same = run(pytester, "--goal-specs", "--goal-specs-compare", *opts)
     same.assert_outcomes(passed=1)
-    same.stdout.fnmatch_lines(["*unchanged within chance*"])
-    assert "spec changed" not in same.stdout.str()
-    # A baseline where every episode succeeded: the tiny policy's success is a drop.
-    stored["goals"][key]["runs"] = [[40, 40], [40, 40]]
+    same.stdout.fnmatch_lines(["*unchanged: the same spec and runs as baseline 'latest' (seeds 0, 1); not compared*"])
+    # A baseline where every episode succeeded: the tiny policy's success is a drop, flagged once 4 seeds are in.
+    stored["goals"][key]["runs"] = [[40, 40]] * 4
     (baselines / "perfect.json").write_text(json.dumps(stored))
     dropped = run(pytester, "--goal-specs", "--goal-specs-compare", "perfect", *opts)
     dropped.assert_outcomes(failed=1)
-    dropped.stdout.fnmatch_lines(["*hint: success dropped: 100% -> *against baseline 'perfect'*"])
+    dropped.stdout.fnmatch_lines(
+        [
+            "*hint: success dropped: 100% -> *(p = * <= 0.05; 4 seeds vs 4 in the baseline, looks at 2, 4)*",
+            "specguard: Holm's step-down procedure over 1 comparison at family-wise 5%; each comparison was judged at "
+            "0.05 while its seeds trained (Holm's first step over the 1 goal and safety rate of the baseline)",
+        ]
+    )
     # The same goal of a changed spec (another threshold) is compared, and said to come from a changed spec.
     pytester.makepyfile(test_specs=(pytester.path / "test_specs.py").read_text().replace("0.0}", "0.01}"))
     changed = run(pytester, "--goal-specs", "--goal-specs-compare", "main", *opts)
@@ -448,6 +454,7 @@ def test_checkpoints_make_the_budget_a_ceiling(pytester):
         ),
         ("--goal-specs-workers=05", "--goal-specs-workers: expected an integer >= 1 (or 'auto'*), got '05'"),
         ("--goal-specs-compare=nosuch", "--goal-specs-compare: baseline '*nosuch.json' does not exist*"),
+        ("--goal-specs-compare-seeds=0", "--goal-specs-compare-seeds: expected an integer >= 1, got '0'"),
     ],
 )
 def test_bad_option_values_are_usage_errors(pytester, option, message):
@@ -553,7 +560,7 @@ def test_baselines_live_beside_the_cache_dir_by_default(pytester):
             return tiny(pendulum, tree)
         """,
     )
-    run(pytester, "--goal-specs", "--goal-specs-save", "main").assert_outcomes(passed=1)
+    run(pytester, "--goal-specs", "--goal-specs-save", "main", "--goal-specs-compare-seeds=2").assert_outcomes(passed=1)
     assert (pytester.path / "baselines" / "main.json").is_file()  # run() puts the cache at ./cache
     assert not (pytester.path / ".specguard").exists()
 

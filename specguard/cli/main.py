@@ -1,7 +1,9 @@
 """The ``specguard`` command line.
 
 ``specguard show PATH[::NAME]`` prints the tree and the reward formula of the
-specs (or trees) a Python file defines; ``specguard run PATH[::NAME]`` trains
+specs (or trees) a Python file defines; ``specguard plan PATH[::NAME]`` prints
+what each spec's gate can see, training nothing (:mod:`specguard.engine.plan`);
+``specguard run PATH[::NAME]`` trains
 them within their budgets and prints the per-goal table; ``specguard reproduce
 PATH...`` trains every spec of case-study files on several seeds and writes a
 Markdown table and plots (:mod:`specguard.engine.reproduction`,
@@ -47,6 +49,25 @@ def _show(target: str) -> int:
             print(render_spec(obj, name))
         else:
             print("\n".join([f"== {name}", *render_tree(obj)]))
+        print()
+    return 0
+
+
+def _plan(args: argparse.Namespace) -> int:
+    from specguard.engine.plan import plan_spec
+    from specguard.pytest_plugin.show import has_goal_specs, plan_goal_spec_file
+    from specguard.report.plan import plan_lines
+
+    if has_goal_specs(Path(args.target.partition("::")[0])):  # a pytest file: only pytest resolves its fixtures
+        return plan_goal_spec_file(args.target, compare_seeds=args.compare_seeds)
+    specs = load_objects(args.target)
+    family = args.comparisons or max(1, sum(len(spec.thresholds) for spec in specs.values()))
+    for name, spec in specs.items():
+        if not spec.thresholds:
+            print(f"== {name}: no thresholds, nothing to judge or compare\n")
+            continue
+        plan = plan_spec(spec, family=family, compare_seeds=args.compare_seeds, spread=args.spread, label=name)
+        print("\n".join(plan_lines(plan)))
         print()
     return 0
 
@@ -159,6 +180,39 @@ def build_parser() -> argparse.ArgumentParser:
         "(a pytest goal-spec file too), training nothing",
     )
     show.add_argument("target", metavar="PATH[::NAME]")
+    from specguard.stats.power import DEFAULT_SPREAD
+    from specguard.stats.sequential import DEFAULT_COMPARE_SEEDS
+
+    plan = sub.add_parser(
+        "plan",
+        help="print what each spec's gate can see, training nothing: the chance a run is judged met around each "
+        "threshold, and the smallest drop a comparison with a baseline flags with 80%% power",
+    )
+    plan.add_argument("target", metavar="PATH[::NAME]")
+    plan.add_argument(
+        "--spread",
+        type=_spread,
+        default=DEFAULT_SPREAD,
+        metavar="S",
+        help=f"seed-to-seed spread of success (standard deviation of per-seed success) to assume "
+        f"(default: {DEFAULT_SPREAD:g})",
+    )
+    plan.add_argument(
+        "--compare-seeds",
+        type=_positive,
+        default=DEFAULT_COMPARE_SEEDS,
+        metavar="N",
+        help=f"the most seeds a comparison trains and a saved baseline stores, as --goal-specs-compare-seeds "
+        f"(default {DEFAULT_COMPARE_SEEDS}, or a spec's max_seeds if more)",
+    )
+    plan.add_argument(
+        "--comparisons",
+        type=_positive,
+        default=None,
+        metavar="N",
+        help="comparisons in a session, over which the family-wise 5%% is shared (default: the thresholded "
+        "goals and safety rates of the specs planned)",
+    )
     run = sub.add_parser("run", help="train specs within their budgets and print per-goal verdicts")
     run.add_argument("target", metavar="PATH[::NAME]")
     run.add_argument(
@@ -242,6 +296,18 @@ def _add_falsify(sub: Any) -> None:
     )
     fz.add_argument("--cache-dir", default=".specguard/cache", help="run cache (default: .specguard/cache)")
     fz.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+
+
+def _spread(text: str) -> float:
+    from specguard.validation import parse_positive
+
+    try:
+        value = parse_positive(text, "a standard deviation of success, below 0.5")
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+    if value >= 0.5:
+        raise argparse.ArgumentTypeError(f"expected a standard deviation of success below 0.5, got {text!r}")
+    return value
 
 
 def _positive(text: str) -> int:
@@ -339,6 +405,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _reproduce(args, argv)
         if args.command == "falsify":
             return _falsify(args)
+        if args.command == "plan":
+            return _plan(args)
         return _run(args)
     except SpecError as e:
         print(f"specguard: error: {e}", file=sys.stderr)

@@ -17,8 +17,9 @@ Example:
 
 from __future__ import annotations
 
+import contextlib
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 from specguard.engine.cache import Cache
@@ -31,7 +32,7 @@ from specguard.error import SpecError
 from specguard.parallel.executors import LOCAL, Executor, make_executor
 from specguard.parallel.workers import resolve_workers
 
-__all__ = ["GoalVerdict", "SpecResult", "resolve_workers", "run_spec"]
+__all__ = ["GoalVerdict", "SpecResult", "resolve_workers", "run_spec", "train_seeds"]
 
 Progress = Callable[[ProgressEvent], None]
 
@@ -91,17 +92,8 @@ def run_spec(
             rejected hyperparameters), or cannot be fingerprinted for the cache.
     """
     _refuse_in_spawned_import()
-    say = progress or (lambda event: None)
-    n_workers = resolve_workers(workers)
-    cache = Cache(Path(cache_dir)) if cache_dir is not None else None
     start = time.perf_counter()
-    result = SpecResult(spec=spec.label, runs=[], goals={}, confidence=spec.confidence, trained=spec)
-    owned = isinstance(executor, str)
-    runner = make_executor(executor, workers=n_workers) if isinstance(executor, str) else executor
-    try:
-        runs = Runs(spec, result, cache, runner, lock_timeout, say)
-        result.spec_key = None if runs.fingerprint is None else runs.fingerprint.spec_key
-        result.cache_dir = None if runs.cache is None else runs.cache.root
+    with _seeds_of(spec, workers, cache_dir, progress, lock_timeout, executor) as (runs, result):
         next_seed = 0
         while True:
             result.goals = judge(spec, result.runs, len(result.errors))
@@ -111,8 +103,56 @@ def run_spec(
             runs.run(list(range(next_seed, next_seed + needed)))
             next_seed += needed
             result.runs.sort(key=lambda r: r.seed)
+    result.seconds = time.perf_counter() - start
+    return result
+
+
+def train_seeds(
+    spec: Spec,
+    seeds: Sequence[int],
+    *,
+    workers: int | str = "auto",
+    cache_dir: str | Path | None = ".specguard/cache",
+    progress: Progress | None = print_event,
+    lock_timeout: float = 3600.0,
+    executor: str | Executor = LOCAL,
+) -> SpecResult:
+    """Train exactly ``seeds`` of ``spec`` (each from the cache when an identical run was stored), as ``run_spec`` does.
+
+    For seeds beyond a spec's own: the extra seeds of a comparison with a baseline, and the
+    seeds a saved baseline stores (:mod:`specguard.engine.gating`). The result has runs and
+    errors only: no verdicts (these seeds are beyond the spec's quorum).
+    """
+    _refuse_in_spawned_import()
+    start = time.perf_counter()
+    with _seeds_of(spec, workers, cache_dir, progress, lock_timeout, executor) as (runs, result):
+        runs.run(list(seeds))
+        result.runs.sort(key=lambda r: r.seed)
+    result.seconds = time.perf_counter() - start
+    return result
+
+
+@contextlib.contextmanager
+def _seeds_of(
+    spec: Spec,
+    workers: int | str,
+    cache_dir: str | Path | None,
+    progress: Progress | None,
+    lock_timeout: float,
+    executor: str | Executor,
+) -> Iterator[tuple[Runs, SpecResult]]:
+    """The seeds of one call (cache, executor) and the result they fill; an executor made here is closed here."""
+    say = progress or (lambda event: None)
+    n_workers = resolve_workers(workers)
+    cache = Cache(Path(cache_dir)) if cache_dir is not None else None
+    result = SpecResult(spec=spec.label, runs=[], goals={}, confidence=spec.confidence, trained=spec)
+    owned = isinstance(executor, str)
+    runner = make_executor(executor, workers=n_workers) if isinstance(executor, str) else executor
+    try:
+        runs = Runs(spec, result, cache, runner, lock_timeout, say)
+        result.spec_key = None if runs.fingerprint is None else runs.fingerprint.spec_key
+        result.cache_dir = None if runs.cache is None else runs.cache.root
+        yield runs, result
     finally:
         if owned:
             runner.close()
-    result.seconds = time.perf_counter() - start
-    return result

@@ -20,6 +20,7 @@ from specguard.utils.text import interval_text
 from specguard.validation import child_path
 
 if TYPE_CHECKING:
+    from specguard.engine.gating import SpecGate
     from specguard.stats.compare import Baseline
 
 __all__ = ["GoalCheck", "check_item", "gate_goal", "with_thresholds"]
@@ -37,6 +38,9 @@ class GoalCheck:
             episodes without a violation.
         comparison: against the stored baseline, or a note that the baseline has no figures for it.
         kind: ``"goal"`` or ``"safety"``.
+        gate: the comparison's figures (repeated p-values, state, seeds at each look, the seeds of
+            each side, the level it was judged at), for the session's family-wise procedure.
+        baseline_runs: ``[seed, successes, episodes]`` per run a saved baseline stores for this goal.
     """
 
     group: str
@@ -59,6 +63,8 @@ class GoalCheck:
     comparison: str | None = None
     spec_key: str | None = None
     kind: str = GOAL
+    gate: dict[str, Any] | None = None
+    baseline_runs: list[list[int]] | None = None
 
     @property
     def key(self) -> str:
@@ -240,6 +246,7 @@ def check_item(
     paths: list[str],
     group: str,
     baseline: tuple[Baseline, str] | None = None,
+    gate: SpecGate | None = None,
 ) -> list[GoalCheck]:
     """Check the goals of one test item, failing a passing goal whose success dropped against ``baseline``.
 
@@ -249,22 +256,68 @@ def check_item(
 
     Args:
         baseline: the stored baseline and its name.
+        gate: the spec's comparisons with it (:func:`specguard.engine.gating.compare_spec`, extra seeds
+            included); without one, the spec's own runs are compared at one look, at the level of
+            a family of the baseline's size.
     """
+    if baseline is not None and gate is None:
+        gate = _one_look(result, spec, group, baseline[0])
     checks = []
     for path in paths:
         check = gate_goal(result, spec, path, group)
-        if baseline is not None and check.key not in baseline[0].runs:
-            check.comparison = f"not compared: baseline {baseline[1]!r} has no figures for it"
-        elif baseline is not None and check.runs_counts:
-            from specguard.stats.compare import compare
-
-            comparison = compare(baseline[0].runs[check.key], check.runs_counts)
-            check.comparison = comparison.describe()
-            if baseline[0].spec_changed(check.key, check.spec_key):
-                check.comparison += f" (the spec changed since baseline {baseline[1]!r})"
-            if comparison.dropped and check.outcome is GoalOutcome.PASSED:
-                check.outcome = GoalOutcome.FAILED
-                rate = "safety rate" if check.kind == SAFETY else "success"
-                check.hint = f"{rate} {check.comparison} against baseline {baseline[1]!r}"
+        if baseline is not None and gate is not None:
+            _compare(check, gate, *baseline)
         checks.append(check)
     return checks
+
+
+def _compare(check: GoalCheck, gate: SpecGate, baseline: Baseline, name: str) -> None:
+    """Judge one goal's comparison: its text and figures; a drop fails a goal that passed its threshold."""
+    if check.key not in baseline.runs:
+        check.comparison = f"not compared: baseline {name!r} has no figures for it"
+        return
+    if gate.unchanged:
+        seeds = ", ".join(map(str, gate.seeds))
+        check.comparison = f"unchanged: the same spec and runs as baseline {name!r} (seeds {seeds}); not compared"
+        return
+    look = gate.looks.get(check.goal)
+    if look is None:  # no run to compare (every seed failed)
+        check.comparison = "not compared: no run of this spec finished"
+        return
+    check.comparison = look.describe()
+    if baseline.spec_changed(check.key, check.spec_key):
+        check.comparison += f" (the spec changed since baseline {name!r})"
+    check.gate = {
+        "p_drop": look.p_drop,
+        "p_rise": look.p_rise,
+        "state": look.state.value,
+        "looks": list(look.seeds),
+        "baseline_seeds": look.baseline_seeds,
+        "seeds": gate.seeds,
+        "level": look.alpha,
+        "before": look.before,
+        "after": look.after,
+    }
+    if look.dropped and check.outcome is GoalOutcome.PASSED:
+        check.outcome = GoalOutcome.FAILED
+        rate = "safety rate" if check.kind == SAFETY else "success"
+        check.hint = f"{rate} {check.comparison} against baseline {name!r}"
+
+
+def _one_look(result: SpecResult, spec: Spec, group: str, baseline: Baseline) -> SpecGate:
+    """The spec's comparisons at one look, on its own runs (nothing more is trained)."""
+    from specguard.engine.gating import compare_spec
+    from specguard.engine.spec_result import SpecResult as Empty
+    from specguard.stats.family import first_level
+    from specguard.stats.sequential import DEFAULT_ALPHA
+
+    keys = {path: f"{group}::{path}" for path in spec.thresholds}
+    return compare_spec(
+        spec,
+        result,
+        baseline,
+        keys,
+        level=first_level(DEFAULT_ALPHA, max(1, len(baseline.runs))),
+        ceiling=len(result.runs),
+        train=lambda seeds: Empty(spec=spec.label, runs=[], goals={}),
+    )

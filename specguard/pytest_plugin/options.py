@@ -13,6 +13,8 @@ from typing import Any
 
 import pytest
 
+from specguard.stats.sequential import DEFAULT_COMPARE_SEEDS
+
 __all__ = ["Options", "add_options", "baseline_path", "parse_options"]
 
 
@@ -31,6 +33,8 @@ class Options:
     compare: str | None
     baseline_dir: Path
     executor: str
+    compare_seeds: int = DEFAULT_COMPARE_SEEDS
+    plan: bool = False
 
 
 # (option, ini name, ini type, default, help)
@@ -81,6 +85,14 @@ _SETTINGS: list[tuple[str, str, str, Any, str]] = [
         "where runs train: local (this machine) or a Dask scheduler address, tcp://host:8786",
     ),
     (
+        "--goal-specs-compare-seeds",
+        "goal_specs_compare_seeds",
+        "string",
+        str(DEFAULT_COMPARE_SEEDS),
+        "the most seeds a spec trains for a comparison that is still open, and the seeds --goal-specs-save stores "
+        "per spec (a spec's own Budget.max_seeds when that is more)",
+    ),
+    (
         "--goal-specs-baseline-dir",
         "goal_specs_baseline_dir",
         "string",
@@ -117,7 +129,15 @@ def add_options(parser: pytest.Parser) -> None:
         nargs="?",
         const="latest",
         default=None,
-        help="fail goals whose success dropped against baseline NAME (default: the latest saved)",
+        help="fail goals whose success dropped against baseline NAME (default: the latest saved), training more "
+        "seeds while a comparison is open; Holm's procedure over the session's comparisons at family-wise 5%",
+    )
+    group.addoption(
+        "--goal-specs-plan",
+        action="store_true",
+        default=False,
+        help="with --goal-specs: print what each spec's gate can see (the chance a run is judged met around each "
+        "threshold; the smallest drop a comparison flags), train nothing, and report its items skipped",
     )
 
 
@@ -137,7 +157,7 @@ def parse_options(config: pytest.Config) -> Options:
         ini = next(i for o, i, *_ in _SETTINGS if o == option)
         return _setting(config, option, ini)
 
-    from specguard.validation import parse_positive
+    from specguard.validation import parse_count, parse_positive
 
     try:
         scale = parse_positive(get("--goal-specs-budget-scale"))
@@ -164,6 +184,10 @@ def parse_options(config: pytest.Config) -> Options:
         raise pytest.UsageError(
             f"--goal-specs-undecided: expected one of {', '.join(UNDECIDED_OUTCOMES)}, got {undecided!r}"
         )
+    try:
+        compare_seeds = parse_count(get("--goal-specs-compare-seeds"))
+    except ValueError as e:
+        raise pytest.UsageError(f"--goal-specs-compare-seeds: {e}") from None
     report = get("--goal-specs-report")
     return Options(
         enabled=bool(config.getoption("goal_specs") or config.getini("goal_specs")),
@@ -177,6 +201,8 @@ def parse_options(config: pytest.Config) -> Options:
         compare=config.getoption("goal_specs_compare"),
         baseline_dir=Path(get("--goal-specs-baseline-dir") or Path(get("--goal-specs-cache-dir")).parent / "baselines"),
         executor=_checked_executor(get("--goal-specs-executor")),
+        compare_seeds=compare_seeds,
+        plan=bool(config.getoption("goal_specs_plan")),
     )
 
 

@@ -6,7 +6,7 @@ Hooks, fixtures and the marker only. The logic lives in plain modules:
 :mod:`~specguard.pytest_plugin.items` (what an item runs and its outcome),
 :mod:`~specguard.pytest_plugin.gate` (judging each goal),
 :mod:`~specguard.pytest_plugin.recorder` (reports and baselines) and
-:mod:`~specguard.pytest_plugin.show` (``--goal-specs-show``). Training
+:mod:`~specguard.pytest_plugin.show` (``--goal-specs-show``, ``--goal-specs-plan``). Training
 imports only when a goal spec runs, so plain ``pytest`` in a project with
 specguard installed stays fast.
 """
@@ -23,7 +23,7 @@ from specguard.pytest_plugin.declare import GOAL_FIXTURE, SpecItem
 from specguard.pytest_plugin.items import GoalMissed, group_of, one_line_errors, raise_outcome, spec_of
 from specguard.pytest_plugin.options import add_options, baseline_path, parse_options
 from specguard.pytest_plugin.recorder import PROPERTY, Recorder
-from specguard.pytest_plugin.session import Session, run, scaled, terminal_progress
+from specguard.pytest_plugin.session import Session, gate_of, run, saved_runs, scaled, terminal_progress
 
 __all__ = ["GoalMissed"]
 
@@ -110,6 +110,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         marker = item.get_closest_marker(MARKER)
         if marker is None or not isinstance(item, pytest.Function):
             continue
+        state.goal_items += 1
         if not state.options.enabled:
             item.add_marker(pytest.mark.skip(reason=SKIP_REASON))
             continue
@@ -137,13 +138,18 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     state = pyfuncitem.config.stash[_SESSION]
     if marker.kwargs.get("error"):  # a malformed @goal_spec fails its own item, not the collection
         pytest.fail(f"{pyfuncitem.path.name}::{pyfuncitem.name}: {marker.kwargs['error']}", pytrace=False)
+    group = group_of(pyfuncitem)
     with one_line_errors(pyfuncitem):
         spec, paths = spec_of(pyfuncitem, marker.kwargs.get("expect"))
         trained = scaled(state, spec)
         result = run(state, trained)
+        gate = gate_of(state, trained, result, group)
+        stored = saved_runs(state, trained, result, gate) if state.options.save else None
     baseline = (state.baseline, state.options.compare or "latest") if state.baseline is not None else None
-    checks = check_item(result, spec, paths, group_of(pyfuncitem), baseline=baseline)
+    checks = check_item(result, spec, paths, group, baseline=baseline, gate=gate)
     for check in checks:
+        if stored is not None:
+            check.baseline_runs = [[r.seed, r.successes[check.goal], r.episodes] for r in stored.runs]
         row = check.to_row()
         if state.options.report_dir is not None:
             row["curves"] = [r.curve for r in result.runs]
@@ -162,19 +168,21 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) ->
     return report
 
 
-# -- showing (--goal-specs-show) -----------------------------------------------------
+# -- showing (--goal-specs-show, --goal-specs-plan) ------------------------------------
 
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_runtest_call(item: pytest.Item) -> None:
-    """Under ``--goal-specs-show``, a goal spec item renders its spec and is skipped instead of training."""
+    """Under ``--goal-specs-show`` or ``--goal-specs-plan``, a goal spec item renders its spec (or its plan) and is
+    skipped instead of training."""
     marker = item.get_closest_marker(MARKER)
-    if not item.config.getoption("goal_specs_show", False) or marker is None or not isinstance(item, pytest.Function):
+    show, plan = item.config.getoption("goal_specs_show", False), item.config.getoption("goal_specs_plan", False)
+    if not (show or plan) or marker is None or not isinstance(item, pytest.Function):
         return
     state = item.config.stash[_SESSION]
     if not state.options.enabled or marker.kwargs.get("error"):
         return  # skipped without --goal-specs; a malformed @goal_spec fails as usual
-    from specguard.pytest_plugin.show import SHOW_PROPERTY, SHOWN, render_spec
+    from specguard.pytest_plugin.show import SHOW_PROPERTY, SHOWN, plan_text, render_spec
 
     group = group_of(item)
     shown = item.config.stash.setdefault(_SHOWN_GROUPS, set())
@@ -182,9 +190,21 @@ def pytest_runtest_call(item: pytest.Item) -> None:
         pytest.skip(SHOWN)
     with one_line_errors(item):
         spec, _ = spec_of(item, marker.kwargs.get("expect"))
-        text = render_spec(scaled(state, spec), group)
+        trained = scaled(state, spec)
+        texts = [render_spec(trained, group)] if show else []
+        if plan:
+            family = len(state.baseline.runs) if state.baseline is not None else state.goal_items
+            texts.append(
+                plan_text(
+                    trained,
+                    group,
+                    family=max(1, family),
+                    compare_seeds=state.options.compare_seeds,
+                    baseline=state.baseline,
+                )
+            )
     shown.add(group)
-    item.user_properties.append((SHOW_PROPERTY, text))
+    item.user_properties.append((SHOW_PROPERTY, "\n".join(texts)))
     pytest.skip(SHOWN)
 
 
@@ -192,7 +212,7 @@ _SHOWN_GROUPS = pytest.StashKey[set[str]]()
 
 
 def pytest_terminal_summary(terminalreporter: Any) -> None:
-    """Print the specs ``--goal-specs-show`` rendered (on the xdist controller too: they travel in the reports)."""
+    """Print what ``--goal-specs-show`` and ``--goal-specs-plan`` rendered (on the xdist controller too)."""
     from specguard.pytest_plugin.show import SHOW_PROPERTY, SHOWN
 
     texts: dict[str, None] = {}

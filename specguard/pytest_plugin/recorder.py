@@ -1,6 +1,8 @@
 """Recording goal items' figures as reports arrive (on the xdist controller too), and writing them out.
 
-The terminal table, the ``--goal-specs-report`` files and the ``--goal-specs-save`` baseline.
+The terminal table, the ``--goal-specs-report`` files, the ``--goal-specs-save``
+baseline, and the session's family-wise procedure over its comparisons with a
+baseline (:func:`apply_family`).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import pytest
 
 from specguard.pytest_plugin.session import Session
 
-__all__ = ["PROPERTY", "Recorder", "unsigned_cache_note", "write_outputs"]
+__all__ = ["PROPERTY", "Recorder", "apply_family", "unsigned_cache_note", "write_outputs"]
 
 PROPERTY = "specguard"  # the user property that carries a goal item's row
 
@@ -44,14 +46,23 @@ class Recorder:
             row["verdict"] = "undecided" if verdict == "passed" and row["outcome"] == "undecided" else verdict
             self.state.rows.append(row)
 
+    def pytest_sessionfinish(self, session: pytest.Session) -> None:
+        """Holm's procedure over the session's comparisons: a drop it flags beyond the items' own fails the session."""
+        if hasattr(self.config, "workerinput"):  # an xdist worker: the controller has every row
+            return
+        if apply_family(self.state.rows):
+            session.exitstatus = pytest.ExitCode.TESTS_FAILED
+
     def pytest_terminal_summary(self, terminalreporter: Any) -> None:
         if not self.state.rows:
             return
-        from specguard.report.session import table_lines
+        from specguard.report.session import family_lines, table_lines
 
         terminalreporter.write_sep("=", "specguard goal specs")
         for line in table_lines(self.state.rows):
             terminalreporter.write_line(line)
+        for line in family_lines(self.state.rows):
+            terminalreporter.write_line(f"specguard: {line}")
         for path in write_outputs(self.config, self.state):
             terminalreporter.write_line(f"specguard: wrote {path}")
         note = unsigned_cache_note(self.state.rows, os.environ)
@@ -103,11 +114,44 @@ def write_outputs(config: pytest.Config, state: Session) -> list[Path]:
         from specguard.stats.compare import save_baseline
 
         path = state.options.baseline_dir / f"{state.options.save}.json"
-        rows = [r for r in state.rows if r["runs_counts"]]
+        rows = [r for r in state.rows if r.get("baseline_runs")]
+        key = "{0[group]}::{0[goal]}".format
         save_baseline(
             path,
-            {f"{r['group']}::{r['goal']}": r["runs_counts"] for r in rows},
-            {f"{r['group']}::{r['goal']}": r["spec_key"] for r in rows if r.get("spec_key")},
+            {key(r): [(k, n) for _, k, n in r["baseline_runs"]] for r in rows},
+            {key(r): r["spec_key"] for r in rows if r.get("spec_key")},
+            {key(r): [seed for seed, _, _ in r["baseline_runs"]] for r in rows},
         )
         written.append(path)
     return written
+
+
+def apply_family(rows: list[dict[str, Any]]) -> bool:
+    """Holm's procedure over the rows compared with a baseline; True when it flags a drop no item failed for.
+
+    Each item judged its own comparison at Holm's first step (the family-wise level over
+    the baseline's comparisons), so it failed already for any drop that step flags; later
+    steps can flag more. Those rows are marked failed, with the step in their comparison,
+    and the session fails. Every compared row gets ``gate["holm"]``: the step that flags it, or None.
+    """
+    from specguard.stats.family import holm
+    from specguard.stats.sequential import DEFAULT_ALPHA
+
+    compared = {f"{r['group']}::{r['goal']}": r for r in rows if r.get("gate")}
+    if not compared:
+        return False
+    steps = holm({key: r["gate"]["p_drop"] for key, r in compared.items()}, DEFAULT_ALPHA)
+    beyond = False
+    for key, row in compared.items():
+        step = row["gate"]["holm"] = steps[key]
+        if step is not None and row["gate"]["state"] != "dropped":
+            level = DEFAULT_ALPHA / (len(compared) - step + 1)
+            row["comparison"] = (
+                f"dropped by Holm's step {step} (p = {row['gate']['p_drop']:.2g} <= {level:.2g}): "
+                + str(row.get("comparison") or "")
+            )
+            if row.get("verdict") == "passed":  # an item that failed or was expected to miss keeps its verdict
+                row["verdict"] = "failed"
+                row["hint"] = row["comparison"]
+                beyond = True
+    return beyond

@@ -11,7 +11,7 @@ import pytest
 
 from specguard.pytest_plugin.options import Options
 
-__all__ = ["Session", "run", "scaled", "terminal_progress"]
+__all__ = ["Session", "gate_of", "run", "saved_runs", "scaled", "terminal_progress"]
 
 
 @dataclasses.dataclass
@@ -25,6 +25,9 @@ class Session:
     rows: list[dict[str, Any]] = dataclasses.field(default_factory=list)
     specs: dict[str, Any] = dataclasses.field(default_factory=dict)  # group -> its trained Spec, for report GIFs
     progress: Callable[[Any], None] | None = None  # the run_spec sink: events to the terminal reporter
+    gates: dict[str, Any] = dataclasses.field(default_factory=dict)  # spec key -> its SpecGate with the baseline
+    saved: dict[str, Any] = dataclasses.field(default_factory=dict)  # spec key -> the runs a saved baseline stores
+    goal_items: int = 0  # goal-spec items collected: a plan's family of comparisons when no baseline gives one
 
 
 def scaled(state: Session, spec: Any) -> Any:
@@ -82,3 +85,61 @@ def run(state: Session, spec: Any) -> Any:
         )
         state.memo[key].spec_key = key
     return state.memo[key]
+
+
+def _train(state: Session, spec: Any) -> Callable[[list[int]], Any]:
+    """Train given seeds of ``spec`` with the session's options (cached seeds are reused)."""
+    from specguard.engine.run import train_seeds
+
+    def train(seeds: list[int]) -> Any:
+        return train_seeds(
+            spec,
+            seeds,
+            workers=state.options.workers,
+            cache_dir=state.options.cache_dir,
+            progress=state.progress,
+            executor=state.executor or "local",
+        )
+
+    return train
+
+
+def gate_of(state: Session, spec: Any, result: Any, group: str) -> Any:
+    """The spec's comparisons with the session's baseline (None without one), once per spec: extra seeds are
+    trained here while a comparison is open (:func:`specguard.engine.gating.compare_spec`).
+
+    Each comparison is judged at Holm's first step over the baseline's goals and safety rates.
+    """
+    if state.baseline is None:
+        return None
+    key = result.spec_key or group
+    if key not in state.gates:
+        from specguard.engine.gating import compare_spec, gate_ceiling
+        from specguard.stats.family import first_level
+        from specguard.stats.sequential import DEFAULT_ALPHA
+
+        state.gates[key] = compare_spec(
+            spec,
+            result,
+            state.baseline,
+            {path: f"{group}::{path}" for path in spec.thresholds},
+            level=first_level(DEFAULT_ALPHA, max(1, len(state.baseline.runs))),
+            ceiling=gate_ceiling(spec, state.options.compare_seeds),
+            train=_train(state, spec),
+        )
+    return state.gates[key]
+
+
+def saved_runs(state: Session, spec: Any, result: Any, gate: Any) -> Any:
+    """The runs ``--goal-specs-save`` stores for the spec: its own and more, up to the ceiling, once per spec."""
+    key = result.spec_key or spec.label
+    if key not in state.saved:
+        from specguard.engine.gating import baseline_runs, gate_ceiling
+
+        state.saved[key] = baseline_runs(
+            result,
+            ceiling=gate_ceiling(spec, state.options.compare_seeds),
+            train=_train(state, spec),
+            runs=gate.runs if gate is not None else (),
+        )
+    return state.saved[key]

@@ -1,11 +1,13 @@
-"""Look before you train: a spec as text (tree, reward formula, observation layout, budget).
+"""Look before you train: a spec as text (tree, reward formula, observation layout, budget), and its plan.
 
 :func:`render_spec` is the one rendering, used by ``specguard show`` and by
 ``pytest --goal-specs --goal-specs-show``; it builds the env (to read its
 observation space, and so runs the static checks of :mod:`specguard.build.checks`)
 but trains nothing. :func:`show_goal_spec_file` shows the goal specs of a
 pytest file, whose fixtures only pytest can resolve, by running pytest on it
-in-process with ``--goal-specs-show``.
+in-process with ``--goal-specs-show``. :func:`plan_text` is the plan of a goal
+item's spec (``--goal-specs-plan``, :mod:`specguard.engine.plan`), and
+:func:`plan_goal_spec_file` the same for ``specguard plan`` on a pytest file.
 """
 
 from __future__ import annotations
@@ -21,7 +23,16 @@ from specguard.tree.formula import formula
 from specguard.tree.nodes import Node
 from specguard.utils.text import bounds_text
 
-__all__ = ["SHOWN", "SHOW_PROPERTY", "has_goal_specs", "render_spec", "render_tree", "show_goal_spec_file"]
+__all__ = [
+    "SHOWN",
+    "SHOW_PROPERTY",
+    "has_goal_specs",
+    "plan_goal_spec_file",
+    "plan_text",
+    "render_spec",
+    "render_tree",
+    "show_goal_spec_file",
+]
 
 SHOW_PROPERTY = "specguard.show"  # the user property that carries a rendered spec to the summary
 SHOWN = "shown, not trained"  # the skip reason of a goal item under --goal-specs-show
@@ -99,18 +110,23 @@ def render_spec(spec: Spec, name: str | None = None) -> str:
 
 
 def has_goal_specs(path: Path) -> bool:
-    """Whether the Python file ``path`` declares test functions with ``@goal_spec`` (read, not imported)."""
+    """Whether the Python file ``path`` declares goal specs for pytest (read, not imported): test functions with
+    ``@goal_spec``, or tests made by ``goal_specs(...)``."""
     try:
         module = ast.parse(path.read_text(), filename=str(path))
     except (OSError, SyntaxError, ValueError):
         return False
+
+    def name(node: ast.expr) -> str | None:
+        target = node.func if isinstance(node, ast.Call) else node
+        return target.attr if isinstance(target, ast.Attribute) else getattr(target, "id", None)
+
     for node in ast.walk(module):
         if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
-            for deco in node.decorator_list:
-                target = deco.func if isinstance(deco, ast.Call) else deco
-                name = target.attr if isinstance(target, ast.Attribute) else getattr(target, "id", None)
-                if name == "goal_spec":
-                    return True
+            if any(name(deco) == "goal_spec" for deco in node.decorator_list):
+                return True
+        elif isinstance(node, ast.Call) and name(node) == "goal_specs":
+            return True
     return False
 
 
@@ -120,9 +136,31 @@ def show_goal_spec_file(target: str) -> int:
     Returns:
         0 when every spec was shown, else 2 (pytest's report says which failed).
     """
+    return _look_at_goal_spec_file(target, "--goal-specs-show")
+
+
+def plan_goal_spec_file(target: str, *, compare_seeds: int) -> int:
+    """Print the plan of the goal specs of a pytest file ``PATH[::TEST]`` (``--goal-specs-plan``); nothing trains."""
+    return _look_at_goal_spec_file(target, "--goal-specs-plan", f"--goal-specs-compare-seeds={compare_seeds}")
+
+
+def _look_at_goal_spec_file(target: str, *flags: str) -> int:
     import pytest
 
     path, _, test = target.partition("::")
-    args = [f"{path}::{test}" if test else path, "--goal-specs", "--goal-specs-show", "-q", "-p", "no:cacheprovider"]
+    args = [f"{path}::{test}" if test else path, "--goal-specs", *flags, "-q", "-p", "no:cacheprovider"]
     code = pytest.main(args)
     return 0 if code == pytest.ExitCode.OK else 2
+
+
+def plan_text(spec: Spec, group: str, *, family: int, compare_seeds: int, baseline: Any = None) -> str:
+    """The plan of a goal item's spec (:mod:`specguard.engine.plan`), its baseline's figures where it has them."""
+    from specguard.engine.plan import plan_spec
+    from specguard.report.plan import plan_lines
+
+    runs = None
+    if baseline is not None:
+        keys = {path: f"{group}::{path}" for path in spec.thresholds}
+        runs = {path: baseline.runs[key] for path, key in keys.items() if key in baseline.runs}
+    plan = plan_spec(spec, family=family, compare_seeds=compare_seeds, baseline=runs, label=group)
+    return "\n".join(plan_lines(plan))

@@ -29,7 +29,7 @@ from specguard.report.plots import plot_curves
 from specguard.tree.keys import is_safety_key, label
 from specguard.utils.text import render_table
 
-__all__ = ["session_markdown", "table_lines", "write_reports"]
+__all__ = ["family_lines", "session_markdown", "table_lines", "write_reports"]
 
 Row = dict[str, Any]
 
@@ -83,6 +83,34 @@ def table_lines(rows: Sequence[Row]) -> list[str]:
     return out
 
 
+def family_lines(rows: Sequence[Row]) -> list[str]:
+    """The comparison with a baseline in words: the family-wise procedure and its level, what it flagged, and the
+    seeds the comparisons trained (none without a comparison)."""
+    from specguard.stats.family import procedure_text
+    from specguard.stats.sequential import DEFAULT_ALPHA
+
+    compared = [r for r in _ordered(rows) if r.get("gate")]
+    if not compared:
+        return []
+    flagged = [f"{r['group']}::{r['goal']}" for r in compared if r["gate"].get("holm") is not None]
+    specs: dict[str, tuple[int, int]] = {}  # per spec: seeds compared, seeds of its own
+    for r in compared:
+        specs.setdefault(r["group"], (len(r["gate"]["seeds"]), len(r.get("per_seed") or [])))
+    extra = sum(max(0, seeds - own) for seeds, own in specs.values())
+    level = compared[0]["gate"]["level"]
+    stored = round(DEFAULT_ALPHA / level)
+    lines = [
+        f"{procedure_text(DEFAULT_ALPHA, len(compared))}; each comparison was judged at {level:.2g} while its "
+        f"seeds trained (Holm's first step over the {stored} goal{'s' if stored != 1 else ''} and safety "
+        f"rate{'s' if stored != 1 else ''} of the baseline)",
+        f"dropped: {', '.join(flagged) if flagged else 'none'}",
+        "seeds compared per spec: "
+        + ", ".join(f"{group} {seeds}" for group, (seeds, _) in specs.items())
+        + f" ({extra} beyond the specs' own)",
+    ]
+    return lines
+
+
 def _first_seed(rows: Sequence[Row], group: str) -> int | None:
     for r in rows:
         if r["group"] == group and r.get("per_seed"):
@@ -115,6 +143,9 @@ def session_markdown(rows: Sequence[Row], *, plot: str | None = None, gifs: Mapp
         cells[1] = f"`{r['goal']}` (safe)" if is_safety_key(r["goal"]) else f"`{cells[1]}`"
         table.append(cells)
     lines += markdown_table(header, table)
+    family = family_lines(rows)
+    if family:
+        lines += ["", "### Compared with the baseline", ""] + [f"- {line}" for line in family]
     failing = [r for r in _ordered(rows) if r["verdict"] in ("failed", "undecided")]
     if failing:
         lines += ["", "### Failing goals", ""]

@@ -1,17 +1,13 @@
-"""Regression gating: stored baselines of per-seed success, and whether a goal dropped.
+"""Stored baselines: per goal, each seed's successes and episodes, and the identity of the spec they came from.
 
-``--goal-specs-save NAME`` stores, per (spec, goal), every run's successes and
-episodes in ``<dir>/NAME.json``; ``--goal-specs-compare NAME`` compares a new
-run with it. A goal *dropped* when its success fell by more than chance
-allows, by a one-sided two-sample test at level ``alpha`` (default 0.05):
-
-* across seeds, Welch's t-test on the per-seed success rates, when both sides
-  have at least 2 seeds and the rates vary;
-* otherwise (one seed a side, or every seed alike), Fisher's exact test on the
-  pooled episode counts, which treats episodes as independent and so is the
-  less cautious of the two.
-
-It *improved* when the same test finds a rise.
+``--goal-specs-save NAME`` stores, per (spec, goal), every seed's successes and
+episodes in ``<dir>/NAME.json``: the spec's own seeds and more, up to
+:data:`specguard.stats.sequential.DEFAULT_COMPARE_SEEDS` (8) or the spec's
+``max_seeds``, so that a pull request's few seeds are compared with a
+well-measured baseline. ``--goal-specs-compare NAME`` compares a new run with
+it, by the sequential test of :mod:`specguard.stats.sequential` (extra seeds
+only while a comparison is open) under the family-wise procedure of
+:mod:`specguard.stats.family`.
 
 Safety rates (keys ``path:name``, :mod:`specguard.tree.keys`) are stored and
 compared exactly as goals are, under ``group::path:name``. A goal or safety
@@ -21,55 +17,31 @@ asserted, or before safety rates were measured) is not compared:
 
 Each stored goal also records its spec's identity
 (:attr:`specguard.engine.fingerprint.SpecFingerprint.spec_key`, the key the cache and
-the plugin's shared results use), so a comparison says whether the spec
-itself changed since the baseline or only its result did.
+the plugin's shared results use) and its seeds, so a comparison says whether
+the spec itself changed since the baseline or only its result did, and a spec
+whose identity and runs are the baseline's own is not compared at all
+(:meth:`Baseline.same_runs`).
 """
 
 from __future__ import annotations
 
 import json
-import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from specguard.error import SpecError
 from specguard.utils.files import write_atomic
 
-__all__ = ["Baseline", "BaselineError", "Comparison", "compare", "load_baseline", "save_baseline"]
+__all__ = ["Baseline", "BaselineError", "load_baseline", "save_baseline"]
 
-FORMAT = 2
-FORMATS = (1, 2)  # format 1 stored runs only
+FORMAT = 3
+FORMATS = (1, 2, 3)  # format 1 stored runs only; 2 added the spec identity; 3 the seeds
 
 
 class BaselineError(SpecError):
     """A stored baseline cannot be read."""
-
-
-@dataclass(frozen=True)
-class Comparison:
-    """A goal's success now against its stored baseline."""
-
-    before: float
-    after: float
-    p_drop: float
-    p_rise: float
-    method: str
-    alpha: float = 0.05
-
-    @property
-    def dropped(self) -> bool:
-        return self.p_drop < self.alpha
-
-    @property
-    def improved(self) -> bool:
-        return self.p_rise < self.alpha
-
-    def describe(self) -> str:
-        change = "dropped" if self.dropped else "improved" if self.improved else "unchanged within chance"
-        p = self.p_drop if self.dropped else self.p_rise if self.improved else min(self.p_drop, self.p_rise)
-        return f"{change}: {self.before:.0%} -> {self.after:.0%} ({self.method}, p = {p:.3g})"
 
 
 Runs = Sequence[tuple[int, int]]  # (successes, episodes) per seed
@@ -77,46 +49,44 @@ Runs = Sequence[tuple[int, int]]  # (successes, episodes) per seed
 
 @dataclass(frozen=True)
 class Baseline:
-    """A stored baseline: per goal key, every run's counts, and the spec identity they came from."""
+    """A stored baseline: per goal key, every run's counts, the spec identity they came from, and their seeds."""
 
     runs: dict[str, list[tuple[int, int]]]
     specs: dict[str, str]
+    seeds: dict[str, list[int]] = field(default_factory=dict)
 
     def spec_changed(self, key: str, spec_key: str | None) -> bool:
         """Whether the goal's spec differs from the one the baseline measured (False when unknown)."""
         stored = self.specs.get(key)
         return stored is not None and spec_key is not None and stored != spec_key
 
+    def same_runs(self, key: str, spec_key: str | None, runs: Sequence[tuple[int, int, int]]) -> bool:
+        """Whether ``runs`` (seed, successes, episodes) are the baseline's own: the same spec, seed for seed.
 
-def compare(before: Runs, after: Runs, alpha: float = 0.05) -> Comparison:
-    """Compare per-seed ``(successes, episodes)`` of a baseline with a new run."""
-    from scipy.stats import fisher_exact, ttest_ind
-
-    if not before or not after:
-        raise ValueError("both sides need at least one run")
-    rates_b = [k / n for k, n in before]
-    rates_a = [k / n for k, n in after]
-    kb, nb = sum(k for k, _ in before), sum(n for _, n in before)
-    ka, na = sum(k for k, _ in after), sum(n for _, n in after)
-    varies = len(set(rates_b)) > 1 or len(set(rates_a)) > 1
-    if len(before) >= 2 and len(after) >= 2 and varies:
-        with warnings.catch_warnings():  # identical samples: scipy warns, the p-value (0.5) is right
-            warnings.simplefilter("ignore", RuntimeWarning)
-            p_drop = float(ttest_ind(rates_a, rates_b, equal_var=False, alternative="less").pvalue)
-            p_rise = float(ttest_ind(rates_a, rates_b, equal_var=False, alternative="greater").pvalue)
-        method = f"Welch t-test over {len(before)} vs {len(after)} seeds"
-    else:
-        table = [[ka, na - ka], [kb, nb - kb]]
-        p_drop = float(fisher_exact(table, alternative="less").pvalue)
-        p_rise = float(fisher_exact(table, alternative="greater").pvalue)
-        method = f"Fisher exact test over {nb} vs {na} episodes"
-    return Comparison(before=kb / nb, after=ka / na, p_drop=p_drop, p_rise=p_rise, method=method, alpha=alpha)
+        A pull request that leaves a spec alone gets its runs from the cache the
+        baseline filled; comparing them with themselves would test nothing.
+        """
+        if not runs or spec_key is None or self.specs.get(key) != spec_key or key not in self.seeds:
+            return False
+        stored = {seed: tuple(run) for seed, run in zip(self.seeds[key], self.runs[key])}
+        return all(stored.get(seed) == (k, n) for seed, k, n in runs)
 
 
-def save_baseline(path: Path, rows: Mapping[str, Runs], specs: Mapping[str, str] | None = None) -> None:
-    """Write ``{key: [(successes, episodes), ...]}`` (and each key's spec identity) atomically to ``path``."""
-    specs = specs or {}
-    goals = {k: {"runs": [list(r) for r in runs], "spec": specs.get(k)} for k, runs in rows.items()}
+def save_baseline(
+    path: Path,
+    rows: Mapping[str, Runs],
+    specs: Mapping[str, str] | None = None,
+    seeds: Mapping[str, Sequence[int]] | None = None,
+) -> None:
+    """Write ``{key: [(successes, episodes), ...]}`` (each key's spec identity and seeds, when known) atomically."""
+    specs, seeds = specs or {}, seeds or {}
+    goals: dict[str, Any] = {}
+    for key, runs in rows.items():
+        goals[key] = {"runs": [list(r) for r in runs], "spec": specs.get(key)}
+        if key in seeds:
+            if len(seeds[key]) != len(runs):
+                raise ValueError(f"{key!r}: {len(seeds[key])} seeds for {len(runs)} runs")
+            goals[key]["seeds"] = [int(s) for s in seeds[key]]
     data = {"format": FORMAT, "goals": goals}
     write_atomic(path, json.dumps(data, indent=1, sort_keys=True))
 
@@ -133,7 +103,7 @@ def load_baseline(path: Path) -> Baseline:
         data: Any = json.loads(path.read_text())
         if data.get("format") not in FORMATS:
             raise ValueError(f"unknown format {data.get('format')!r}")
-        runs, specs = {}, {}
+        runs, specs, seeds = {}, {}, {}
         for key, entry in data["goals"].items():
             if data["format"] == 1:
                 entry = {"runs": entry, "spec": None}
@@ -147,6 +117,11 @@ def load_baseline(path: Path) -> Baseline:
                 if not isinstance(entry["spec"], str):
                     raise ValueError(f"bad spec identity for {key!r}: {entry['spec']!r}")
                 specs[str(key)] = entry["spec"]
-        return Baseline(runs, specs)
+            if entry.get("seeds") is not None:
+                stored = entry["seeds"]
+                if not isinstance(stored, list) or len(stored) != len(parsed) or len(set(stored)) != len(stored):
+                    raise ValueError(f"bad seeds for {key!r}: {stored!r}")
+                seeds[str(key)] = [int(x) for x in stored]
+        return Baseline(runs, specs, seeds)
     except (ValueError, TypeError, KeyError, AttributeError) as e:
         raise BaselineError(f"baseline {str(path)!r} is corrupt ({e}); delete it and save a new one") from e
