@@ -8,6 +8,8 @@ comparison judged at Holm's first step over a session of ``--family``
 comparisons (15, as the main job's):
 
 * **no change**: the same spec on fresh seeds (8 and 9 to start, then 10, 11, ...);
+* **no change, 2 seeds a side**: a baseline of seeds 0 and 1 only, the pull request on seeds 2 and 3
+  (then 4, 5, ...): the pairing of a baseline saved at the spec's own seeds;
 * **weight cut**: the position weight cut from 0.8 to 0.2 (stabilization 0.8), seeds 0, 1, ...;
 * **distance removed**: the position goal without its Distance (weights 0.8 / 0.2), seeds 0, 1, ...
 
@@ -95,13 +97,19 @@ def main() -> int:
         "level": first_level(DEFAULT_ALPHA, args.family),
         "pull_requests": {},
     }
-    cases = [("no change", BASE, [ceiling, ceiling + 1])] + [(name, s, [0, 1]) for name, s in SABOTAGED.items()]
-    for name, spec, seeds in cases:
+    pair = Baseline(
+        runs={keys[p]: [(r.successes[p], r.episodes) for r in saved.runs[:2]] for p in paths},
+        specs={keys[p]: saved.spec_key or "" for p in paths},
+        seeds={keys[p]: [r.seed for r in saved.runs[:2]] for p in paths},
+    )
+    cases = [("no change", BASE, [ceiling, ceiling + 1], baseline), ("no change, 2 seeds a side", BASE, [2, 3], pair)]
+    cases += [(name, s, [0, 1], baseline) for name, s in SABOTAGED.items()]
+    for name, spec, seeds, against in cases:
         own = train(spec, seeds)
         gate = compare_spec(
             spec,
             own,
-            baseline,
+            against,
             keys,
             level=first_level(DEFAULT_ALPHA, args.family),
             ceiling=ceiling,

@@ -1,4 +1,4 @@
-"""The CI recipe: the workflow shipped in examples/ci does what docs/ci.md says, and its local play reads it.
+"""The CI recipe: the workflow shipped in examples/ci does what docs/guide/ci.md says, and its local play reads it.
 
 The play itself (``examples/ci/play_recipe.py``: main saves, a sabotaged pull
 request fails, an unchanged one passes) trains a tiny spec for about a minute:
