@@ -41,6 +41,7 @@ _EXPORTS = {
     "Constraint": "specguard.tree.builtin_annotations",
     "Distance": "specguard.tree.builtin_annotations",
     "EvaluationError": "specguard.error",
+    "Falsify": "specguard.falsify.check",
     "FingerprintError": "specguard.error",
     "Goal": "specguard.tree.nodes",
     "GoalEnv": "specguard.build.env",  # deprecated name of SpecEnv (warns)
@@ -55,6 +56,7 @@ _EXPORTS = {
     "Spec": "specguard.engine.spec",
     "SpecError": "specguard.error",
     "SpecResult": "specguard.engine.spec_result",
+    "StartSpace": "specguard.falsify.starts",
     "StateMappingError": "specguard.error",
     "UnknownFeature": "specguard.error",
     "UnreachableGoal": "specguard.error",
@@ -119,6 +121,8 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.error import VersionMismatch as VersionMismatch
     from specguard.extend import Annotation as Annotation
     from specguard.extend import Node as Node
+    from specguard.falsify.check import Falsify as Falsify
+    from specguard.falsify.starts import StartSpace as StartSpace
     from specguard.pytest_plugin.declare import goal_spec as goal_spec
     from specguard.pytest_plugin.declare import goal_specs as goal_specs
     from specguard.tree.builtin_annotations import Constraint as Constraint

@@ -66,6 +66,15 @@ def test_a_planted_failure_region_is_found_and_shrunk_to_its_boundary():
     assert "counterexample (found after" in found.report() and "missed: home" in found.report()
 
 
+def test_a_failing_uniform_draw_is_the_counterexample_when_the_guided_search_found_none():
+    db = InMemoryExampleDatabase()
+    found = falsify(runner(planted), examples=1, uniform=200, seed=1, database=db, key="spec-u")
+    assert found.first is None and found.guided >= 1  # the one guided start, the middle, passes
+    assert found.found and found.from_uniform and found.uniform_failures > 0
+    assert found.counterexample.start["x"] == pytest.approx(0.7, abs=1e-3) and found.counterexample.start["x"] > 0.7
+    assert "found by the uniform draws" in found.report() and len(list(db.fetch(b"spec-u"))) == 1
+
+
 def test_a_clean_policy_is_never_reported():
     found = falsify(runner(clean), examples=100, uniform=100, seed=1)
     assert not found.found and found.first is None and found.uniform_failures == 0

@@ -17,7 +17,9 @@ episode's end by the spec's property (:mod:`specguard.falsify.robustness`).
    the middle while the start still fails, so the counterexample lies on the
    boundary of the failure region;
 3. **uniform draws**, counted apart: ``uniform`` starts drawn uniformly
-   give the failure rate over the space, with its interval.
+   give the failure rate over the space, with its interval; where the guided
+   search found nothing but a uniform draw failed, that draw, shrunk the
+   same way, is the counterexample (the rate still counts only the draws).
 
 The shrunk start is saved under ``key`` so the next run replays it first.
 """
@@ -164,6 +166,7 @@ class Falsification:
         episodes_to_first: guided episodes run up to and including the first failure.
         guided: guided episodes run (replay, search and shrinking).
         replayed: the counterexample came from the database.
+        from_uniform: the guided search found none; the counterexample is the first failing uniform draw, shrunk.
         uniform_failures, uniform_episodes: the uniform draws, counted apart from the guided ones.
         interval: the failure rate's interval over the uniform draws.
         key: the database key the counterexample is stored under.
@@ -175,6 +178,7 @@ class Falsification:
     episodes_to_first: int | None = None
     guided: int = 0
     replayed: bool = False
+    from_uniform: bool = False
     uniform_failures: int = 0
     uniform_episodes: int = 0
     interval: tuple[float, float] = (0.0, 1.0)
@@ -197,7 +201,13 @@ class Falsification:
         else:
             c = self.counterexample
             start = ", ".join(f"{k}={v:.6g}" for k, v in c.start.items())
-            origin = "replayed from the database" if self.replayed else f"found after {self.episodes_to_first} episodes"
+            origin = (
+                "replayed from the database"
+                if self.replayed
+                else f"found by the uniform draws, none in {self.guided} guided episodes"
+                if self.from_uniform
+                else f"found after {self.episodes_to_first} episodes"
+            )
             lines.append(f"counterexample ({origin}): {start}")
             lines.append(f"  missed: {', '.join(c.judgement.missed)}")
             lines.append(f"  episode: {c.summary()}")
@@ -358,9 +368,19 @@ def falsify(
     if uniform:
         say(f"uniform draws: {uniform} episodes for the failure rate")
         rng = np.random.default_rng(seed)
-        drawn = runner.run(starts.uniform(rng, uniform))
+        points = starts.uniform(rng, uniform)
+        drawn = runner.run(points)
         failures = sum(o.failed for o in drawn)
         result.uniform_failures, result.uniform_episodes = failures, len(drawn)
         ok_lo, ok_hi = success_interval(len(drawn) - failures, len(drawn), confidence)
         result.interval = (1.0 - ok_hi, 1.0 - ok_lo)
+        if result.counterexample is None and failures:  # a failure is a failure, whoever drew it
+            i = next(i for i, o in enumerate(drawn) if o.failed)
+            outcome, point = drawn[i], points[i]
+            if shrink:
+                say("shrinking the first failing uniform draw towards the middle of the space")
+                outcome, point = _to_boundary(runner, outcome, point)
+            result.counterexample, result.from_uniform = outcome, True
+            if database is not None and key:
+                database.save(key.encode(), json.dumps(outcome.start).encode())
     return result

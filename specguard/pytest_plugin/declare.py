@@ -23,7 +23,7 @@ from typing import Any, TypeVar
 from specguard.error import InvalidSpec
 from specguard.tree.keys import ROOT, check_expect, check_xfail, check_xfail_thresholded, require_thresholds
 
-__all__ = ["GOAL_FIXTURE", "SpecItem", "goal_spec", "goal_specs"]
+__all__ = ["FALSIFY", "GOAL_FIXTURE", "FalsifyItem", "SpecItem", "goal_spec", "goal_specs"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -34,6 +34,7 @@ def goal_spec(
     expect: Mapping[str, float] | float | None = None,
     *,
     xfail: Mapping[str, str] | Sequence[str] | None = None,
+    falsify: Any = None,
 ) -> Callable[[F], F]:
     """Mark a test function returning a ``Spec`` as a goal spec.
 
@@ -45,6 +46,10 @@ def goal_spec(
         xfail: goals expected to miss their threshold, with the reason
             (``{goal: reason}`` or a list of goals): they report XFAIL, and
             XPASS once they start passing.
+        falsify: add an item ``[falsify]`` that searches each trained run's start space for
+            starts from which its policy misses the spec (:class:`specguard.Falsify`; a start
+            space or its ranges; ``True``: the env's own starts). It fails on a counterexample,
+            or with ``Falsify(max_rate=...)`` on a failure rate over the start space above it.
 
     A malformed ``expect`` or ``xfail`` does not stop collection: the test
     becomes one item that fails with the error (naming the test and the
@@ -57,11 +62,12 @@ def goal_spec(
         where = f"goal_spec {getattr(fn, '__qualname__', fn)!r}"
         try:
             thresholds, reasons = _check_declaration(where, expect, xfail)
+            check = _check_falsify(where, falsify)
         except InvalidSpec as e:
             marked = pytest.mark.usefixtures(GOAL_FIXTURE)(fn)
             return pytest.mark.goal_spec(expect=None, xfail={}, error=str(e))(marked)  # type: ignore[no-any-return]
         marked = pytest.mark.usefixtures(GOAL_FIXTURE)(fn)
-        return pytest.mark.goal_spec(expect=thresholds, xfail=reasons)(marked)  # type: ignore[no-any-return]
+        return pytest.mark.goal_spec(expect=thresholds, xfail=reasons, falsify=check)(marked)  # type: ignore[no-any-return]
 
     return apply
 
@@ -82,6 +88,26 @@ def _check_declaration(where: str, expect: object, xfail: object) -> tuple[dict[
             reasons = {ROOT if k == "root" else k: v for k, v in reasons.items()}
         check_xfail_thresholded(where, reasons, thresholds)
     return thresholds, reasons
+
+
+def _check_falsify(where: str, falsify: object) -> Any:
+    """The decorator's falsify check (:func:`specguard.falsify.check.as_falsify`), or None."""
+    if falsify is None or falsify is False:
+        return None
+    from specguard.falsify.check import as_falsify
+
+    return as_falsify(where, falsify)
+
+
+@dataclass(frozen=True)
+class FalsifyItem:
+    """The ``[falsify]`` item of a goal spec declared with ``falsify=``."""
+
+    def __str__(self) -> str:
+        return "falsify"
+
+
+FALSIFY = FalsifyItem()
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ from typing import Any
 
 import pytest
 
-from specguard.pytest_plugin.declare import GOAL_FIXTURE, SpecItem
+from specguard.pytest_plugin.declare import GOAL_FIXTURE, FalsifyItem, SpecItem
 
 __all__ = ["GoalMissed", "detailed", "goal_of", "group_of", "one_line_errors", "raise_outcome", "spec_of"]
 
@@ -40,8 +40,10 @@ def group_of(item: pytest.Item) -> str:
 
 
 def goal_of(item: pytest.Function) -> Any:
-    """The goal the item asserts (``None``: every threshold of its spec)."""
+    """The goal the item asserts (``None``: every threshold of its spec, as the ``[falsify]`` item does)."""
     goal = item.funcargs.get(GOAL_FIXTURE)
+    if isinstance(goal, FalsifyItem):
+        return None
     return goal.goal if isinstance(goal, SpecItem) else goal  # sg.goal_specs: the spec's own thresholds
 
 

@@ -19,7 +19,7 @@ from typing import Any
 
 import pytest
 
-from specguard.pytest_plugin.declare import GOAL_FIXTURE, SpecItem
+from specguard.pytest_plugin.declare import FALSIFY, GOAL_FIXTURE, FalsifyItem, SpecItem
 from specguard.pytest_plugin.items import GoalMissed, group_of, one_line_errors, raise_outcome, spec_of
 from specguard.pytest_plugin.options import add_options, baseline_path, parse_options
 from specguard.pytest_plugin.recorder import PROPERTY, Recorder
@@ -99,7 +99,9 @@ def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
         metafunc.parametrize(GOAL_FIXTURE, marker.kwargs["cases"], indirect=True)
         return
     expect = marker.kwargs.get("expect")
-    goals = list(expect) if expect else [None]
+    goals: list[Any] = list(expect) if expect else [None]
+    if marker.kwargs.get("falsify") is not None:  # one more item, after the goals': the falsifier on the runs
+        goals.append(FALSIFY)
     metafunc.parametrize(GOAL_FIXTURE, goals, ids=["spec" if g is None else str(g) for g in goals], indirect=True)
 
 
@@ -139,6 +141,11 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     if marker.kwargs.get("error"):  # a malformed @goal_spec fails its own item, not the collection
         pytest.fail(f"{pyfuncitem.path.name}::{pyfuncitem.name}: {marker.kwargs['error']}", pytrace=False)
     group = group_of(pyfuncitem)
+    if isinstance(getattr(pyfuncitem, "callspec", None) and pyfuncitem.callspec.params.get(GOAL_FIXTURE), FalsifyItem):
+        from specguard.pytest_plugin.falsifying import run_falsify_item
+
+        run_falsify_item(pyfuncitem, state, marker.kwargs["falsify"])
+        return True
     with one_line_errors(pyfuncitem):
         spec, paths = spec_of(pyfuncitem, marker.kwargs.get("expect"))
         trained = scaled(state, spec)

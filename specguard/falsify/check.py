@@ -1,0 +1,146 @@
+"""A falsification asserted as a test: what to search, and when the search fails the spec.
+
+``@sg.goal_spec(..., falsify=sg.Falsify(...))`` adds one item per spec to a
+pytest session, ``[falsify]``, that searches each trained run's start space
+(:func:`specguard.falsify.search.falsify`, on the cached model) and fails by
+:func:`falsify_verdict`:
+
+* without ``max_rate``: when any run has a counterexample, a start from which
+  its policy misses the spec;
+* with ``max_rate``: when a run's failure rate over the start space (its
+  uniform draws, counted apart from the guided search) is above ``max_rate``
+  by the same interval rule that judges success thresholds
+  (:func:`specguard.stats.intervals.run_verdict` on the starts that did not
+  fail, against ``1 - max_rate``): *met* once the interval lies at or under
+  it, *missed* once it lies above, *undecided* in between, which counts as
+  the spec's ``Spec.undecided`` says.
+
+Example:
+    >>> check = Falsify({"x": (-1.0, 1.0)}, max_rate=0.05)
+    >>> check.starts.ranges, check.max_rate
+    ((('x', -1.0, 1.0),), 0.05)
+    >>> from specguard.error import InvalidSpec
+    >>> try:
+    ...     Falsify(examples=0)
+    ... except InvalidSpec as e:
+    ...     print(str(e).splitlines()[0])
+    Falsify: expected examples to be an integer >= 1 (guided episodes per run at most), got 0
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from numbers import Integral, Real
+from typing import Any
+
+from specguard.error import InvalidSpec
+from specguard.falsify.search import Falsification
+from specguard.falsify.starts import StartSpace
+from specguard.stats.intervals import RunVerdict, run_verdict
+from specguard.validation import check_count
+
+__all__ = ["Falsify", "as_falsify", "falsify_verdict"]
+
+
+@dataclass(frozen=True, init=False)
+class Falsify:
+    """What a spec's ``[falsify]`` item searches, and the failure rate it tolerates.
+
+    Args:
+        starts: the start space: a :class:`~specguard.falsify.starts.StartSpace`, or its ranges
+            ``{variable: (lo, hi)}``; ``None``: the env's own reset ranges.
+        examples: guided episodes per run at most.
+        uniform: uniform draws per run for the failure rate (at least 1 with ``max_rate``).
+        max_rate: the failure rate over the start space a run may have, in ``(0, 1)``: uniform
+            draws can bound a rate away from a positive number, never from 0; ``None``: no failing
+            start at all (any counterexample fails).
+        seed: the search's seed.
+    """
+
+    starts: StartSpace
+    examples: int
+    uniform: int
+    max_rate: float | None
+    seed: int
+
+    def __init__(
+        self,
+        starts: StartSpace | Mapping[str, tuple[float, float]] | None = None,
+        *,
+        examples: int = 200,
+        uniform: int = 100,
+        max_rate: float | None = None,
+        seed: int = 0,
+    ) -> None:
+        where = "Falsify"
+        if starts is None:
+            starts = StartSpace()
+        elif not isinstance(starts, StartSpace):
+            if not isinstance(starts, Mapping):
+                raise InvalidSpec(where, f"expected starts to be a StartSpace or {{name: (lo, hi)}}, got {starts!r}")
+            starts = StartSpace(dict(starts))
+        examples = check_count(where, "examples", examples, "guided episodes per run at most")
+        if isinstance(uniform, bool) or not isinstance(uniform, Integral) or uniform < 0:
+            raise InvalidSpec(where, f"expected uniform to be an integer >= 0 (uniform draws per run), got {uniform!r}")
+        if max_rate is not None:
+            if isinstance(max_rate, bool) or not isinstance(max_rate, Real) or not 0 < max_rate < 1:
+                raise InvalidSpec(
+                    where,
+                    f"expected max_rate to be a number in (0, 1), or None for no failing start, got {max_rate!r}",
+                )
+            if uniform < 1:
+                raise InvalidSpec(where, f"max_rate={max_rate!r} needs uniform draws: expected uniform >= 1, got 0")
+        if isinstance(seed, bool) or not isinstance(seed, Integral):
+            raise InvalidSpec(where, f"expected seed to be an integer, got {seed!r}")
+        object.__setattr__(self, "starts", starts)
+        object.__setattr__(self, "examples", examples)
+        object.__setattr__(self, "uniform", int(uniform))
+        object.__setattr__(self, "max_rate", None if max_rate is None else float(max_rate))
+        object.__setattr__(self, "seed", int(seed))
+
+    def kwargs(self) -> dict[str, Any]:
+        """The keyword arguments of :meth:`specguard.SpecResult.falsify` this check runs with."""
+        return {"examples": self.examples, "uniform": self.uniform, "search_seed": self.seed}
+
+
+def falsify_verdict(found: Falsification, max_rate: float | None, confidence: float = 0.95) -> RunVerdict:
+    """A run's verdict under a falsify check: MISSED when it is falsified, MET when it is not, else UNDECIDED.
+
+    Without ``max_rate`` a counterexample is MISSED and none is MET. With it, the
+    failure rate of the uniform draws is judged against ``max_rate`` by the
+    interval rule of success thresholds (never by the guided episodes, which seek
+    failures and so overcount them).
+
+    Example:
+        >>> from specguard.falsify.starts import StartSpace
+        >>> from specguard.falsify.search import Falsification
+        >>> found = Falsification(StartSpace(), uniform_failures=0, uniform_episodes=100)
+        >>> falsify_verdict(found, None).value, falsify_verdict(found, 0.05).value
+        ('met', 'met')
+        >>> falsify_verdict(Falsification(StartSpace(), uniform_failures=20, uniform_episodes=100), 0.05).value
+        'missed'
+    """
+    if max_rate is None:
+        return RunVerdict.MISSED if found.found else RunVerdict.MET
+    held = found.uniform_episodes - found.uniform_failures
+    return run_verdict(held, found.uniform_episodes, 1.0 - max_rate, confidence)
+
+
+def as_falsify(where: str, value: object) -> Falsify | None:
+    """``falsify=`` as declared: ``None``/``False`` (none), ``True`` (the env's own starts), a start space or its
+    ranges, or a :class:`Falsify`.
+
+    Raises:
+        InvalidSpec: naming ``where`` and the value given.
+    """
+    if value is None or value is False:
+        return None
+    if value is True:
+        return Falsify()
+    if isinstance(value, Falsify):
+        return value
+    if isinstance(value, (StartSpace, Mapping)):
+        return Falsify(value)
+    expected = "a Falsify, a StartSpace, {name: (lo, hi)} or a bool"
+    raise InvalidSpec(where, f"expected falsify to be {expected}, got {value!r}")

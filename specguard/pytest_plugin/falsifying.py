@@ -1,0 +1,56 @@
+"""The ``[falsify]`` item of a goal spec: the falsifier on the session's trained runs, and its pytest outcome.
+
+The spec is trained (or read back) once per session, as for its goal items; the
+falsifier then searches each run's start space on the cached model
+(:meth:`specguard.SpecResult.falsify`) and each run is judged by
+:func:`specguard.falsify.check.falsify_verdict`. A run falsified fails the item
+with its report: the shrunk start, the goals it missed, a summary of its episode,
+and the failure rate over the start space with its interval. A run left
+undecided by ``max_rate`` counts as the spec's ``Spec.undecided`` says, as an
+undecided goal does.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+import pytest
+
+from specguard.pytest_plugin.items import GoalMissed, one_line_errors, spec_of
+from specguard.pytest_plugin.session import Session, run, scaled
+
+__all__ = ["falsify_lines", "run_falsify_item"]
+
+
+def falsify_lines(found: dict[int, Any], verdicts: dict[int, Any], max_rate: float | None) -> list[str]:
+    """Per run, its verdict and the falsifier's report, indented."""
+    rule = "no counterexample" if max_rate is None else f"a failure rate at most {max_rate:g} over the start space"
+    lines = []
+    for seed, falsification in sorted(found.items()):
+        lines.append(f"seed {seed}: {verdicts[seed].value} ({rule})")
+        lines += [f"  {line}" for line in falsification.report().splitlines()]
+    return lines
+
+
+def run_falsify_item(item: pytest.Function, state: Session, check: Any) -> None:
+    """Train (or read back) the item's spec, falsify every run, and pass, fail or xfail the item."""
+    from specguard.falsify.check import falsify_verdict
+    from specguard.stats.intervals import RunVerdict
+
+    marker = item.get_closest_marker("goal_spec")
+    with one_line_errors(item):
+        spec, _ = spec_of(item, marker.kwargs.get("expect") if marker is not None else None)
+        trained = scaled(state, spec)
+        result = run(state, trained)
+        found = result.falsify(check.starts, **check.kwargs())
+    verdicts = {seed: falsify_verdict(f, check.max_rate, trained.confidence) for seed, f in found.items()}
+    text = "\n".join(falsify_lines(found, verdicts, check.max_rate))
+    item.user_properties.append(("specguard.falsify", text))
+    states = set(verdicts.values())
+    if RunVerdict.MISSED in states or (RunVerdict.UNDECIDED in states and trained.undecided == "fail"):
+        raise GoalMissed(f"falsified:\n{text}")
+    if RunVerdict.UNDECIDED in states and trained.undecided == "xfail":
+        pytest.xfail(f"undecided:\n{text}")
+    if RunVerdict.UNDECIDED in states:
+        warnings.warn(f"undecided falsification passed by undecided='pass':\n{text}", stacklevel=1)

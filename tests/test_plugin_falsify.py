@@ -1,0 +1,168 @@
+"""The ``[falsify]`` item of ``@sg.goal_spec(falsify=...)``, driven through pytester on tiny budgets; its rule alone."""
+
+from __future__ import annotations
+
+import textwrap
+
+import pytest
+
+import specguard as sg
+from specguard.falsify.check import Falsify, as_falsify, falsify_verdict
+from specguard.falsify.search import Falsification
+from specguard.falsify.starts import StartSpace
+from specguard.stats.intervals import RunVerdict
+
+HEADER = """
+import pytest
+import specguard as sg
+
+TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
+PENDULUM = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
+# Upright: a policy trained for 128 steps misses it from nearly every start.
+UPRIGHT = sg.All(sg.Goal("position", x=(0.966, 1.0), y=(-0.259, 0.259)), sg.Goal("slow", omega=(-8, 8)), name="up")
+# Anywhere: met by every state, so nothing can falsify it.
+ANYWHERE = sg.All(sg.Goal("position", x=(-1.0, 1.0)), sg.Goal("slow", omega=(-8, 8)), name="anywhere")
+SEARCH = dict(examples=4, uniform=8)
+
+
+def tiny(tree):
+    budget = sg.Budget(timesteps=128, min_seeds=1, eval_episodes=4, checkpoints=1)
+    return sg.Spec(PENDULUM, tree, budget=budget, hyperparameters=TINY)
+"""
+
+
+def run(pytester: pytest.Pytester, body: str, *args: str) -> pytest.RunResult:
+    pytester.makepyfile(test_specs=HEADER + textwrap.dedent(body))
+    pytester.makeini("[pytest]\ngoal_specs_workers = 1\n")
+    cache = pytester.path / "cache"
+    return pytester.runpytest_subprocess("-p", "no:cacheprovider", f"--goal-specs-cache-dir={cache}", *args)
+
+
+def test_a_counterexample_fails_the_falsify_item_with_its_report(pytester):
+    result = run(
+        pytester,
+        """
+        @sg.goal_spec(expect={"slow": 0.0}, falsify=sg.Falsify({"theta": (-1.0, 1.0)}, **SEARCH))
+        def test_up():
+            return tiny(UPRIGHT)
+
+
+        @sg.goal_spec(expect={"slow": 0.0}, falsify=sg.Falsify(**SEARCH))
+        def test_anywhere():
+            return tiny(ANYWHERE)
+        """,
+        "--goal-specs",
+        "-v",
+    )
+    result.assert_outcomes(passed=3, failed=1)
+    result.stdout.fnmatch_lines(
+        [
+            "*test_up[[]slow[]] PASSED*",
+            "*test_up[[]falsify[]] FAILED*",
+            "*test_anywhere[[]falsify[]] PASSED*",
+            "*falsified:*",
+            "*seed 0: missed (no counterexample)*",
+            "*counterexample (*): theta=*, omega=*",
+            "*missed: up*",
+            "*failure rate over the start space: *(*/8 uniform draws), interval*",
+        ]
+    )
+
+
+def test_a_failure_rate_above_max_rate_fails_and_one_allowed_passes(pytester):
+    result = run(
+        pytester,
+        """
+        @sg.goal_spec(expect={"slow": 0.0}, falsify=sg.Falsify(max_rate=0.1, **SEARCH))
+        def test_strict():
+            return tiny(UPRIGHT)
+
+
+        @sg.goal_spec(expect={"slow": 0.0}, falsify=sg.Falsify(max_rate=0.5, **SEARCH))  # 0 of 8 failed: at most 37%
+        def test_anywhere():
+            return tiny(ANYWHERE)
+        """,
+        "--goal-specs",
+        "-v",
+    )
+    result.assert_outcomes(passed=3, failed=1)
+    result.stdout.fnmatch_lines(["*test_strict[[]falsify[]] FAILED*", "*seed 0: missed (a failure rate at most 0.1*"])
+
+
+def test_a_malformed_falsify_fails_its_own_item_and_no_falsify_adds_no_item(pytester):
+    result = run(
+        pytester,
+        """
+        @sg.goal_spec(expect={"slow": 0.0}, falsify="everywhere")
+        def test_bad():
+            return tiny(ANYWHERE)
+
+
+        @sg.goal_spec(expect={"slow": 0.0})
+        def test_plain():
+            return tiny(ANYWHERE)
+        """,
+        "--goal-specs",
+        "--collect-only",
+        "-q",
+    )
+    result.stdout.fnmatch_lines(["test_specs.py::test_bad[[]spec[]]", "test_specs.py::test_plain[[]slow[]]"])
+    assert "falsify]" not in result.stdout.str()
+
+
+def test_the_verdict_without_max_rate_is_whether_a_counterexample_was_found():
+    none = Falsification(StartSpace(), uniform_failures=0, uniform_episodes=10)
+    assert falsify_verdict(none, None) is RunVerdict.MET
+    assert falsify_verdict(none, 0.5) is RunVerdict.MET  # 0/10 failed: at most 31% at 95%
+    assert falsify_verdict(none, 0.05) is RunVerdict.UNDECIDED  # ten draws cannot show a rate under 5%
+
+
+def test_the_verdict_with_max_rate_is_the_interval_rule_of_thresholds():
+    def rate(failures, episodes, max_rate):
+        return falsify_verdict(
+            Falsification(StartSpace(), uniform_failures=failures, uniform_episodes=episodes), max_rate
+        )
+
+    assert rate(0, 100, 0.05) is RunVerdict.MET  # at most 3.6% at 95%
+    assert rate(20, 100, 0.05) is RunVerdict.MISSED  # at least 12.7%
+    assert rate(5, 100, 0.05) is RunVerdict.UNDECIDED  # [1.6%, 11.3%] holds 5%
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ("everywhere", "expected falsify to be a Falsify"),
+        (Falsify, "expected falsify to be a Falsify"),
+    ],
+)
+def test_as_falsify_refuses_what_is_not_a_falsification(value, message):
+    with pytest.raises(sg.InvalidSpec, match=message):
+        as_falsify("goal_spec 'test'", value)
+
+
+def test_as_falsify_reads_every_declared_form():
+    assert as_falsify("w", None) is None and as_falsify("w", False) is None
+    assert as_falsify("w", True) == Falsify()
+    assert as_falsify("w", {"x": (-1, 1)}).starts == StartSpace({"x": (-1, 1)})
+    check = Falsify(max_rate=0.05)
+    assert as_falsify("w", check) is check
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"examples": 0}, "examples to be an integer >= 1"),
+        ({"uniform": -1}, "uniform to be an integer >= 0"),
+        ({"max_rate": 1.0}, r"max_rate to be a number in \(0, 1\)"),
+        ({"max_rate": 0.0}, r"max_rate to be a number in \(0, 1\), or None for no failing start"),
+        ({"max_rate": float("nan")}, r"max_rate to be a number in \(0, 1\)"),
+        ({"max_rate": True}, r"max_rate to be a number in \(0, 1\)"),
+        ({"max_rate": 0.1, "uniform": 0}, "needs uniform draws"),
+        ({"seed": 1.5}, "seed to be an integer"),
+        ({"starts": 3}, "starts to be a StartSpace"),
+    ],
+)
+def test_falsify_refuses_bad_arguments_naming_them(kwargs, message):
+    starts = kwargs.pop("starts", None)
+    with pytest.raises(sg.InvalidSpec, match=message):
+        Falsify(starts, **kwargs)
