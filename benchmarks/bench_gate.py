@@ -171,7 +171,7 @@ def main() -> int:
             f"mean seeds {seeds[:, 0].mean():.1f} (dropped), {seeds0.mean():.1f} (nothing changed)"
         )
 
-    print("\n(5) the cost on the main job's specs (training seconds per seed from the main job's table in docs/guide/case-studies.md)")
+    print("\n(5) the cost on the main job's specs (s per seed: the main job's table, docs/guide/case-studies.md)")
     print(f"{'spec':<26} {'s per seed':>10} {'save: +6 seeds':>14} {'PR, spec changed, no drop':>26}")
     save_total = pr_total = 0.0
     for spec, (kind, both) in MAIN_JOB.items():

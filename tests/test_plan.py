@@ -93,6 +93,26 @@ def test_balance():
 """
 
 
+OWN_THRESHOLDS = """
+import specguard as sg
+
+
+@sg.goal_spec(falsify=True)
+def test_balance():
+    cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+    tree = sg.All(sg.Goal("centre", x=(-0.5, 0.5)), sg.Goal("upright", theta=(-0.05, 0.05)), name="balance")
+    expect = {"balance": 0.8, "centre": 0.9, "upright": 0.9}
+    return sg.Spec(cartpole, tree, expect=expect, budget=sg.Budget(timesteps=512))
+"""
+
+
+def test_goal_specs_plan_counts_the_thresholds_of_an_item_asserting_a_whole_spec_and_no_falsify_item(pytester):
+    pytester.makepyfile(test_plan_specs=OWN_THRESHOLDS)
+    result = pytester.runpytest_subprocess("-p", "no:cacheprovider", "--goal-specs", "--goal-specs-plan")
+    result.assert_outcomes(skipped=2)  # [spec] and [falsify]
+    assert "each judged at 0.017 (5% over 3 comparisons, Holm's first step)" in result.stdout.str()
+
+
 def test_goal_specs_plan_prints_each_spec_once_and_trains_nothing(pytester):
     pytester.makepyfile(test_plan_specs=PYTEST_SPECS)
     cache = pytester.path / "cache"

@@ -112,13 +112,13 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         marker = item.get_closest_marker(MARKER)
         if marker is None or not isinstance(item, pytest.Function):
             continue
-        state.goal_items += 1
+        param = item.callspec.params.get(GOAL_FIXTURE) if hasattr(item, "callspec") else None
+        state.goal_items += not isinstance(param, FalsifyItem)  # a falsify item compares nothing with a baseline
         if not state.options.enabled:
             item.add_marker(pytest.mark.skip(reason=SKIP_REASON))
             continue
         if xdist:  # one spec's items on one xdist worker: one training (the marker is xdist's)
             item.add_marker(pytest.mark.xdist_group(name=group_of(item)))
-        param = item.callspec.params.get(GOAL_FIXTURE) if hasattr(item, "callspec") else None
         reasons: dict[Any, str] = marker.kwargs.get("xfail") or {}
         goal = param
         if isinstance(param, SpecItem):  # sg.goal_specs: the spec's own xfail
@@ -200,7 +200,10 @@ def pytest_runtest_call(item: pytest.Item) -> None:
         trained = scaled(state, spec)
         texts = [render_spec(trained, group)] if show else []
         if plan:
+            # without a baseline: the session's goal items, and at least this spec's own thresholds (an item
+            # asserting a spec's own thresholds is one item for several comparisons)
             family = len(state.baseline.runs) if state.baseline is not None else state.goal_items
+            family = max(family, len(trained.thresholds))
             texts.append(
                 plan_text(
                     trained,
