@@ -166,3 +166,24 @@ def test_falsify_refuses_bad_arguments_naming_them(kwargs, message):
     starts = kwargs.pop("starts", None)
     with pytest.raises(sg.InvalidSpec, match=message):
         Falsify(starts, **kwargs)
+
+
+def test_goal_specs_take_falsify_per_spec(pytester):
+    result = run(
+        pytester,
+        """
+        up = sg.Spec(PENDULUM, UPRIGHT, budget=tiny(UPRIGHT).budget, hyperparameters=TINY, expect={"slow": 0.0})
+        test_specs = sg.goal_specs({"up": up}, falsify={"up": sg.Falsify(**SEARCH)})
+        """,
+        "--goal-specs",
+        "-v",
+    )
+    result.assert_outcomes(passed=1, failed=1)
+    result.stdout.fnmatch_lines(["*test_specs[[]up-up/slow[]] PASSED*", "*test_specs[[]up-falsify[]] FAILED*"])
+
+
+def test_goal_specs_refuse_falsify_for_a_spec_they_do_not_have():
+    pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
+    spec = sg.Spec(pendulum, sg.Goal("up", x=(0.9, 1.0)), budget=sg.Budget(timesteps=128), expect={"up": 0.5})
+    with pytest.raises(sg.InvalidSpec, match=r"goal_specs\(falsify=...\).*names specs \['down'\]"):
+        sg.goal_specs({"up": spec}, falsify={"down": True})

@@ -117,13 +117,16 @@ class SpecItem:
     spec: str
     goal: str
     xfail: str | None = None  # the spec's reason when it expects this goal to miss
+    falsify: Any = None  # the falsify item's check (specguard.falsify.check.Falsify); its goal is "falsify"
 
     @property
     def id(self) -> str:
         return f"{self.spec}-{self.goal}"
 
 
-def goal_specs(specs: Mapping[str, Any], *, marks: Mapping[str, Any] | None = None) -> Callable[..., Any]:
+def goal_specs(
+    specs: Mapping[str, Any], *, marks: Mapping[str, Any] | None = None, falsify: Mapping[str, Any] | None = None
+) -> Callable[..., Any]:
     """A pytest test asserting every spec of ``specs`` by its own thresholds, one item per spec and goal.
 
     Assign it to a ``test_*`` name in a test module; the specs are declared once
@@ -134,6 +137,8 @@ def goal_specs(specs: Mapping[str, Any], *, marks: Mapping[str, Any] | None = No
         specs: ``{key: Spec}``; items are named ``test_x[key-goal/path]``.
         marks: ``{key: mark or list of marks}`` for some specs' items, e.g. an
             opt-in marker for specs that need their whole budget.
+        falsify: ``{key: falsify}`` for some specs: one more item ``test_x[key-falsify]``
+            each, as ``goal_spec(falsify=...)`` adds.
 
     Example:
         >>> import specguard as sg
@@ -157,9 +162,15 @@ def goal_specs(specs: Mapping[str, Any], *, marks: Mapping[str, Any] | None = No
         for goal in spec.thresholds:
             case = SpecItem(key, goal, spec.xfail.get(goal))
             cases.append(pytest.param(case, id=case.id, marks=extra))
-    unknown = sorted(set(marks or {}) - set(specs))
-    if unknown:
-        raise InvalidSpec("goal_specs(marks=...)", f"names specs {unknown} that are not among {list(specs)}")
+        if key in (falsify or {}):
+            check = _check_falsify(f"goal_specs(falsify={{{key!r}: ...}})", (falsify or {})[key])
+            if check is not None:
+                case = SpecItem(key, "falsify", falsify=check)
+                cases.append(pytest.param(case, id=case.id, marks=extra))
+    for option, given in (("marks", marks), ("falsify", falsify)):
+        unknown = sorted(set(given or {}) - set(specs))
+        if unknown:
+            raise InvalidSpec(f"goal_specs({option}=...)", f"names specs {unknown} that are not among {list(specs)}")
 
     def test(specguard_goal: SpecItem) -> Any:
         return specs[specguard_goal.spec]

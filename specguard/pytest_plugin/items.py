@@ -17,7 +17,16 @@ import pytest
 
 from specguard.pytest_plugin.declare import GOAL_FIXTURE, FalsifyItem, SpecItem
 
-__all__ = ["GoalMissed", "detailed", "goal_of", "group_of", "one_line_errors", "raise_outcome", "spec_of"]
+__all__ = [
+    "GoalMissed",
+    "detailed",
+    "falsify_check",
+    "goal_of",
+    "group_of",
+    "one_line_errors",
+    "raise_outcome",
+    "spec_of",
+]
 
 
 class GoalMissed(AssertionError):
@@ -42,9 +51,17 @@ def group_of(item: pytest.Item) -> str:
 def goal_of(item: pytest.Function) -> Any:
     """The goal the item asserts (``None``: every threshold of its spec, as the ``[falsify]`` item does)."""
     goal = item.funcargs.get(GOAL_FIXTURE)
-    if isinstance(goal, FalsifyItem):
+    if isinstance(goal, FalsifyItem) or (isinstance(goal, SpecItem) and goal.falsify is not None):
         return None
     return goal.goal if isinstance(goal, SpecItem) else goal  # sg.goal_specs: the spec's own thresholds
+
+
+def falsify_check(item: pytest.Function, marker: pytest.Mark) -> Any:
+    """The check of a ``[falsify]`` item (``goal_spec(falsify=...)``, ``goal_specs(falsify=...)``), or None."""
+    param = item.callspec.params.get(GOAL_FIXTURE) if hasattr(item, "callspec") else None
+    if isinstance(param, FalsifyItem):
+        return marker.kwargs["falsify"]
+    return param.falsify if isinstance(param, SpecItem) else None
 
 
 def where(item: pytest.Item) -> str:

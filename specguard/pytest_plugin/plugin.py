@@ -19,8 +19,8 @@ from typing import Any
 
 import pytest
 
-from specguard.pytest_plugin.declare import FALSIFY, GOAL_FIXTURE, FalsifyItem, SpecItem
-from specguard.pytest_plugin.items import GoalMissed, group_of, one_line_errors, raise_outcome, spec_of
+from specguard.pytest_plugin.declare import FALSIFY, GOAL_FIXTURE, SpecItem
+from specguard.pytest_plugin.items import GoalMissed, falsify_check, group_of, one_line_errors, raise_outcome, spec_of
 from specguard.pytest_plugin.options import add_options, baseline_path, parse_options
 from specguard.pytest_plugin.recorder import PROPERTY, Recorder
 from specguard.pytest_plugin.session import Session, gate_of, run, saved_runs, scaled, terminal_progress
@@ -112,13 +112,13 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         marker = item.get_closest_marker(MARKER)
         if marker is None or not isinstance(item, pytest.Function):
             continue
-        param = item.callspec.params.get(GOAL_FIXTURE) if hasattr(item, "callspec") else None
-        state.goal_items += not isinstance(param, FalsifyItem)  # a falsify item compares nothing with a baseline
+        state.goal_items += falsify_check(item, marker) is None  # a falsify item compares nothing with a baseline
         if not state.options.enabled:
             item.add_marker(pytest.mark.skip(reason=SKIP_REASON))
             continue
         if xdist:  # one spec's items on one xdist worker: one training (the marker is xdist's)
             item.add_marker(pytest.mark.xdist_group(name=group_of(item)))
+        param = item.callspec.params.get(GOAL_FIXTURE) if hasattr(item, "callspec") else None
         reasons: dict[Any, str] = marker.kwargs.get("xfail") or {}
         goal = param
         if isinstance(param, SpecItem):  # sg.goal_specs: the spec's own xfail
@@ -141,10 +141,11 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     if marker.kwargs.get("error"):  # a malformed @goal_spec fails its own item, not the collection
         pytest.fail(f"{pyfuncitem.path.name}::{pyfuncitem.name}: {marker.kwargs['error']}", pytrace=False)
     group = group_of(pyfuncitem)
-    if isinstance(getattr(pyfuncitem, "callspec", None) and pyfuncitem.callspec.params.get(GOAL_FIXTURE), FalsifyItem):
+    check = falsify_check(pyfuncitem, marker)
+    if check is not None:
         from specguard.pytest_plugin.falsifying import run_falsify_item
 
-        run_falsify_item(pyfuncitem, state, marker.kwargs["falsify"])
+        run_falsify_item(pyfuncitem, state, check)
         return True
     with one_line_errors(pyfuncitem):
         spec, paths = spec_of(pyfuncitem, marker.kwargs.get("expect"))
