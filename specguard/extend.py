@@ -219,20 +219,6 @@ class Annotation:
         n = self.violations(q)
         return 1.0 if n == 0 else -float(n)
 
-    def state_margin(self, s: Any, region_margin: Callable[[Node], float]) -> float | None:
-        """Safety annotations: how far the state ``s`` lies from a violation, ``< 0`` where ``s`` is one.
-
-        The falsifier grades an episode that kept the annotation by the smallest
-        of these over its states after the first, so that one that came close to
-        a violation scores lower than one that stayed clear, and its search can
-        follow the score towards violations. ``region_margin(node)`` is the
-        margin of ``s`` in a stateless node's goal, in the falsifier's units
-        (:func:`specguard.falsify.robustness.region_margin`): an annotation that
-        forbids a region returns ``-region_margin(region)``. Default ``None``:
-        not graded per state (:meth:`margin` at the end of the episode alone).
-        """
-        return None
-
     def fast_form(self) -> ShapingForm | CounterForm | None:
         """A declared closed form the flat evaluator compiles to straight-line code, or ``None``.
 

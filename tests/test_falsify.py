@@ -9,7 +9,6 @@ from hypothesis.database import InMemoryExampleDatabase
 
 import specguard as sg
 from specguard.build.initial_env import state_type
-from specguard.extend import SAFETY
 from specguard.falsify.robustness import box_margin, feature_scales, margins
 from specguard.falsify.search import EpisodeRunner, falsify
 from specguard.falsify.starts import StartSpace
@@ -74,29 +73,6 @@ def test_a_failing_uniform_draw_is_the_counterexample_when_the_guided_search_fou
     assert found.found and found.from_uniform and found.uniform_failures > 0
     assert found.counterexample.start["x"] == pytest.approx(0.7, abs=1e-3) and found.counterexample.start["x"] > 0.7
     assert "found by the uniform draws" in found.report() and len(list(db.fetch(b"spec-u"))) == 1
-
-
-class Near(sg.Annotation):
-    """A safety annotation that is never violated but grades states by how far ``x`` stays below 3.2."""
-
-    role = SAFETY
-    name = "near"
-    weight = None
-
-    def state_margin(self, s, region_margin):
-        return (3.2 - s.x) / 10.0
-
-
-def test_a_kept_annotation_that_grades_states_scores_its_closest_approach():
-    keys = ["home", "home:near"]
-    graded = EpisodeRunner(lambda: sg.make_env(LINE, TREE.annotate(Near())), clean, SPACE, keys)
-    # Steps of +2 until x >= 2 (home ends the episode): x = 2.5; x = 1, 3; x = 1.5, 3.5.
-    far, close, past = graded.run(np.array([[0.5, 0.0], [-1.0, 0.0], [-0.5, 0.0]]))
-    assert far.judgement.margins["home:near"] == pytest.approx(0.07)
-    assert close.judgement.margins["home:near"] == pytest.approx(0.02)  # closest at x = 3: lower
-    assert past.judgement.margins["home:near"] == 0.0  # past 3.2: never below 0 while the annotation is kept
-    plain = EpisodeRunner(lambda: sg.make_env(LINE, TREE.annotate(Near())), clean, SPACE, ["home"])
-    assert plain.graded == []  # only asserted keys are graded
 
 
 def test_a_clean_policy_is_never_reported():

@@ -139,10 +139,6 @@ class Avoid(Annotation):
         """Whether the state ``s`` (features by attribute) lies in the region."""
         return bool(self._test(s))  # type: ignore[attr-defined]
 
-    def state_margin(self, s: Any, region_margin: abc.Callable[[Node], float]) -> float:
-        """How far ``s`` lies outside the region (``< 0`` inside it): the falsifier grades near misses by it."""
-        return -region_margin(self.region)
-
     # -- the extension protocol: a counter from ``budget`` down ---------------
 
     def state_slots(self) -> tuple[Slot, ...]:

@@ -204,20 +204,3 @@ def test_constructed_envs_pass_both_checkers():
         Avoid(AnyOf(sg.Goal("spin_l", omega=(None, -1.0)), sg.Goal("spin_r", omega=(1.0, None)), name="spin")),
     )
     both_checkers(tree)
-
-
-def test_the_falsifier_grades_an_avoid_by_the_distance_to_its_region():
-    from specguard.build.initial_env import state_type
-    from specguard.falsify.robustness import region_margin
-
-    edges = AnyOf(sg.Goal("left", x=(None, -2.0)), sg.Goal("right", x=(2.0, None)), name="edges")
-    avoid = Avoid(edges)
-    state = state_type(("x",))
-    scales = {"x": 4.0}
-
-    def margin(x):
-        s = state(x)
-        return avoid.state_margin(s, lambda node: region_margin(node, s, scales))
-
-    assert margin(0.0) == pytest.approx(0.5) and margin(1.0) == pytest.approx(0.25)  # nearer the edge: lower
-    assert margin(-1.8) == pytest.approx(0.05) and margin(3.0) < 0  # inside the region: a violation

@@ -12,15 +12,7 @@ steered by a *robustness score*, the smallest margin over those keys:
   its children's; the default signs the children's smallest margin by
   membership, so a new operator has one without writing anything;
 * a safety annotation says its own (:meth:`specguard.extend.Annotation.margin`),
-  by default ``1`` without a violation and minus the violations with; one
-  that grades states (:meth:`specguard.extend.Annotation.state_margin`, as
-  ``Avoid`` does: the distance to its region) and was kept has the smallest
-  of its state margins over the episode instead, so that a near miss scores
-  lower than a wide berth;
-* the root goal, when the episode ended by reaching it, has ``1 - steps /
-  limit`` instead (the runner's, :class:`specguard.falsify.search.EpisodeRunner`):
-  reaching the root goal ends the episode, so every success ends just inside
-  it and its end margin says nothing; how early it was reached does.
+  by default ``1`` without a violation and minus the violations with.
 
 Example:
     >>> import specguard as sg
@@ -34,7 +26,7 @@ Example:
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -43,16 +35,7 @@ import numpy as np
 from specguard.extend import SAFETY, Box, Context, Node, annotation_key
 from specguard.validation import child_path
 
-__all__ = [
-    "Judgement",
-    "box_margin",
-    "feature_scales",
-    "judge_end",
-    "margins",
-    "own_states",
-    "region_margin",
-    "region_margin_fn",
-]
+__all__ = ["Judgement", "box_margin", "feature_scales", "judge_end", "margins", "own_states"]
 
 SCORE_LIMIT = 1e6
 """Margins are clipped to ``+-SCORE_LIMIT`` (an open box is infinitely far inside)."""
@@ -114,45 +97,6 @@ def margins(
     return out
 
 
-def region_margin_fn(node: Node, scales: Mapping[str, float]) -> Callable[[Any], float]:
-    """The margin of a state in the goal of a node without own state (a region), as a function of the state.
-
-    The same margins :func:`margins` gives, with the region's boxes found once:
-    the falsifier asks it at every step of an episode.
-    """
-    Compiled = tuple[Node, "Box | None", list[Any]]
-
-    def build(n: Node) -> Compiled:
-        kids = [build(c) for c in n.children]
-        return n, n.box([k[1] for k in kids]), kids
-
-    def evaluate(t: Compiled, s: Any) -> tuple[float, bool]:
-        n, box, kids = t
-        if box is not None:
-            m = box_margin(box, s, scales)
-            return m, m >= 0.0
-        results = [evaluate(k, s) for k in kids]
-        ctx = Context(s, (), tuple(inside for _, inside in results))
-        m = float(np.clip(n.margin(ctx, tuple(m for m, _ in results)), -SCORE_LIMIT, SCORE_LIMIT))
-        return m, bool(n.contains(ctx))
-
-    root = build(node)
-    return lambda s: evaluate(root, s)[0]
-
-
-def region_margin(node: Node, s: Any, scales: Mapping[str, float]) -> float:
-    """The margin of state ``s`` in the goal of a node without own state (a region), as :func:`margins` gives it.
-
-    Example:
-        >>> import specguard as sg
-        >>> from specguard.build.initial_env import state_type
-        >>> edge = sg.Goal("edge", x=(2.0, None))
-        >>> round(region_margin(edge, state_type(("x",))(1.0), {"x": 4.0}), 6)  # outside, a quarter unit away
-        -0.25
-    """
-    return region_margin_fn(node, scales)(s)
-
-
 def own_states(slots: Iterable[tuple[str, Any]], values: Sequence[float]) -> dict[str, tuple[float, ...]]:
     """An evaluator's own-state slots grouped by key (node path or annotation key)."""
     grouped: dict[str, list[float]] = {}
@@ -184,18 +128,9 @@ def judge_end(
     goals: Mapping[str, bool],
     safe: Mapping[str, bool],
     scales: Mapping[str, float],
-    graded: Mapping[str, float] | None = None,
 ) -> Judgement:
-    """The property at an episode's end: each of ``keys`` (goal paths, safety keys) met, with margins.
-
-    ``graded``: per safety key, the smallest state margin over the episode
-    (:meth:`specguard.extend.Annotation.state_margin`); it replaces the key's
-    margin when the episode kept the annotation (never below 0 then).
-    """
+    """The property at an episode's end: each of ``keys`` (goal paths, safety keys) met, with margins."""
     every = margins(tree, s, own, goals, scales)
-    for key, m in (graded or {}).items():
-        if safe.get(key) and math.isfinite(m):
-            every[key] = float(np.clip(max(m, 0.0), 0.0, SCORE_LIMIT))
     missed = tuple(k for k in keys if not (goals[k] if k in goals else safe[k]))
     asserted = {k: every[k] for k in keys}
     return Judgement(missed, min(asserted.values()), asserted)

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import contextlib
 import json
-import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -36,8 +35,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from specguard.extend import SAFETY, Annotation, annotation_key
-from specguard.falsify.robustness import Judgement, feature_scales, judge_end, own_states, region_margin_fn
+from specguard.falsify.robustness import Judgement, feature_scales, judge_end, own_states
 from specguard.falsify.starts import START_OPTION, Starts, StartSpace
 from specguard.stats.intervals import success_interval
 
@@ -109,16 +107,6 @@ class EpisodeRunner:
         box = first.observation_space
         self.scales = feature_scales(first.features, box.low[:n], box.high[:n])
         self.discrete = isinstance(first.action_space, gym.spaces.Discrete)
-        self.graded = [  # asserted safety annotations that may grade states (Annotation.state_margin)
-            (key, a)
-            for path, node in self.tree.walk()
-            for a in node.annotations
-            if a.role == SAFETY
-            and (key := annotation_key(path, a)) in self.keys
-            and type(a).state_margin is not Annotation.state_margin
-        ]
-        self._regions: dict[int, Callable[[Any], float]] = {}  # region node -> its margin (regions live in the tree)
-        self.max_steps = _time_limit(first)
         self.episodes = 0
         """Episodes run so far."""
 
@@ -141,7 +129,6 @@ class EpisodeRunner:
         starts = [self.starts.values(p) for p in points]
         obs = [env.reset(seed=0, options={START_OPTION: v})[0] for env, v in zip(envs, starts, strict=True)]
         steps = [0] * len(envs)
-        closest: list[dict[str, float]] = [{} for _ in envs]  # per env, each graded key's smallest state margin
         results: list[Outcome | None] = [None] * len(envs)
         active = list(range(len(envs)))
         while active:
@@ -150,50 +137,20 @@ class EpisodeRunner:
                 action = int(actions[j]) if self.discrete else actions[j]
                 obs[i], _, terminated, truncated, info = envs[i].step(action)
                 steps[i] += 1
-                if self.graded:
-                    self._grade(envs[i].evaluator.state, closest[i])
                 if terminated or truncated:
-                    results[i] = self._outcome(envs[i], starts[i], info, steps[i], bool(terminated), closest[i])
+                    results[i] = self._outcome(envs[i], starts[i], info, steps[i], bool(terminated))
             active = [i for i in active if results[i] is None]
         self.episodes += len(envs)
         return [r for r in results if r is not None]
 
-    def _region(self, node: Any) -> Callable[[Any], float]:
-        fn = self._regions.get(id(node))
-        if fn is None:
-            fn = self._regions[id(node)] = region_margin_fn(node, self.scales)
-        return fn
-
-    def _grade(self, s: Any, closest: dict[str, float]) -> None:
-        for key, annotation in self.graded:
-            m = annotation.state_margin(s, lambda node: self._region(node)(s))
-            if m is None:
-                continue
-            if not isinstance(m, (int, float, np.floating, np.integer)) or isinstance(m, bool):
-                raise TypeError(
-                    f"{type(annotation).__qualname__}.state_margin of {key!r} returned {m!r}: expected a number or None"
-                )
-            closest[key] = min(closest.get(key, math.inf), float(m))
-
     def _outcome(
-        self,
-        env: Any,
-        start: dict[str, float],
-        info: dict[str, Any],
-        steps: int,
-        terminated: bool,
-        closest: dict[str, float],
+        self, env: Any, start: dict[str, float], info: dict[str, Any], steps: int, terminated: bool
     ) -> Outcome:
         ev = env.evaluator
         s = ev.state
-        own = own_states(ev.slots, ev.own_state)
-        judgement = judge_end(self.tree, self.keys, s, own, info["goals"], info["safe"], self.scales, closest)
-        root = self.tree.name
-        if terminated and self.max_steps and root in judgement.margins and root not in judgement.missed:
-            # Reaching the root goal ends the episode, so every success ends just inside it: its end margin says
-            # nothing. Graded instead by how early it was reached (an "eventually" robustness in time).
-            margins = {**judgement.margins, root: max(0.0, 1.0 - steps / self.max_steps)}
-            judgement = Judgement(judgement.missed, min(margins.values()), margins)
+        judgement = judge_end(
+            self.tree, self.keys, s, own_states(ev.slots, ev.own_state), info["goals"], info["safe"], self.scales
+        )
         last = {f: float(v) for f, v in zip(s._fields, s, strict=True)}
         return Outcome(start, judgement, steps, "terminated" if terminated else "truncated", last)
 
@@ -261,16 +218,6 @@ class Falsification:
                 f"({self.uniform_failures}/{self.uniform_episodes} uniform draws), interval [{lo:.1%}, {hi:.1%}]"
             )
         return "\n".join([*lines, *self.notes])
-
-
-def _time_limit(env: Any) -> int | None:
-    """The episode's step limit: the outermost ``TimeLimit``'s among ``env``'s wrappers, else ``None``."""
-    while env is not None:
-        limit = getattr(env, "_max_episode_steps", None)
-        if isinstance(limit, int) and not isinstance(limit, bool) and limit > 0:
-            return limit
-        env = getattr(env, "env", None)
-    return None
 
 
 class _Failed(Exception):
@@ -391,8 +338,6 @@ def falsify(
             point = _to_point(starts, u)
             outcome = runner.run(point[None, :])[0]
             target(-outcome.judgement.score, label="robustness")
-            for key, margin in outcome.judgement.margins.items():  # each key apart: the smallest hides the others
-                target(-margin, label=key)
             if outcome.failed:
                 if result.first is None:
                     result.first, result.episodes_to_first = outcome, runner.episodes - start_count
