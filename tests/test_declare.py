@@ -20,6 +20,15 @@ def test_marks_and_uses_the_goal_fixture():
     assert marks["goal_spec"].kwargs == {"expect": {"a": 0.5}, "xfail": {"a": "expected to miss its threshold"}}
 
 
+def test_falsify_puts_its_check_on_the_mark():
+    @sg.goal_spec(expect={"a": 0.5}, falsify={"x": (-1.0, 1.0)})
+    def test_x():
+        pass
+
+    (mark,) = [m for m in test_x.pytestmark if m.name == "goal_spec"]
+    assert mark.kwargs["falsify"] == sg.Falsify({"x": (-1.0, 1.0)})
+
+
 def test_a_number_means_the_root():
     @sg.goal_spec(0.7)
     def test_x():

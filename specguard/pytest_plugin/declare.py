@@ -67,7 +67,8 @@ def goal_spec(
             marked = pytest.mark.usefixtures(GOAL_FIXTURE)(fn)
             return pytest.mark.goal_spec(expect=None, xfail={}, error=str(e))(marked)  # type: ignore[no-any-return]
         marked = pytest.mark.usefixtures(GOAL_FIXTURE)(fn)
-        return pytest.mark.goal_spec(expect=thresholds, xfail=reasons, falsify=check)(marked)  # type: ignore[no-any-return]
+        extra = {"falsify": check} if check is not None else {}  # the [falsify] item's check
+        return pytest.mark.goal_spec(expect=thresholds, xfail=reasons, **extra)(marked)  # type: ignore[no-any-return]
 
     return apply
 
