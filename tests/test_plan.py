@@ -63,7 +63,7 @@ def test_specguard_plan_works_on_every_example_spec(name, capsys):
 def test_specguard_plan_options(capsys):
     assert main(["plan", f"{EXAMPLES / 'pendulum.py'}::w", "--spread", "0.15", "--comparisons", "1"]) == 0
     out = capsys.readouterr().out
-    assert "each judged at 0.05 (5% over 1 comparisons" in out and "spread 0.15 (assumed)" in out
+    assert "each judged at 0.05 (5% over 1 comparison, Holm" in out and "spread 0.15 (assumed)" in out
     with pytest.raises(SystemExit):
         main(["plan", str(EXAMPLES / "pendulum.py"), "--spread", "0.7"])
     assert "expected a standard deviation of success below 0.5, got '0.7'" in capsys.readouterr().err

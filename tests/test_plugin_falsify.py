@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import textwrap
 
 import pytest
@@ -187,3 +188,23 @@ def test_goal_specs_refuse_falsify_for_a_spec_they_do_not_have():
     spec = sg.Spec(pendulum, sg.Goal("up", x=(0.9, 1.0)), budget=sg.Budget(timesteps=128), expect={"up": 0.5})
     with pytest.raises(sg.InvalidSpec, match=r"goal_specs\(falsify=...\).*names specs \['down'\]"):
         sg.goal_specs({"up": spec}, falsify={"down": True})
+
+
+def test_the_report_gets_a_gif_replaying_each_counterexample(pytester):
+    result = run(
+        pytester,
+        """
+        @sg.goal_spec(expect={"slow": 0.0}, falsify=sg.Falsify({"theta": (-1.0, 1.0)}, **SEARCH))
+        def test_up():
+            return tiny(UPRIGHT)
+        """,
+        "--goal-specs",
+        "--goal-specs-report=report",
+    )
+    result.assert_outcomes(passed=1, failed=1)
+    out = result.stdout.str()
+    gif = pytester.path / "report" / "test_specs.py__test_up-falsify-seed0.gif"
+    assert gif.exists() and f"seed 0: counterexample episode: {gif.relative_to(pytester.path)}" in out
+    # The GIF replays the counterexample's episode: as many steps as the falsifier's report says it ran.
+    steps = re.search(r"episode: (\d+) steps, ", out).group(1)
+    assert re.search(rf"falsify-seed0\.gif \(up, {steps} steps; goals met at the end: .*missed: up", out)

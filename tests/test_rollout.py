@@ -65,6 +65,22 @@ def test_gif_has_the_episode_and_a_caption_naming_the_goals(trained, tmp_path):
     assert all(path in gif.text for path in goals)
 
 
+def test_a_gif_from_a_start_replays_the_falsifiers_episode_from_it(trained, tmp_path):
+    from specguard.engine.falsification import batch_policy, property_keys
+    from specguard.engine.rollout import spec_env
+    from specguard.falsify.search import EpisodeRunner
+
+    spec, _, model = trained
+    space = sg.StartSpace({"theta": (-0.2, 0.2), "omega": (-1.0, 1.0)})
+    runner = EpisodeRunner(lambda: spec_env(spec), batch_policy(model, None, True), space, property_keys(spec))
+    points = np.array([[0.0, 0.0, 0.19, 0.9], [0.0, 0.0, -0.19, -0.9], [0.0, 0.0, 0.0, 0.0]])
+    outcomes = runner.run(points)
+    assert len({o.steps for o in outcomes}) > 1  # the starts make different episodes
+    for k, outcome in enumerate(outcomes):
+        gif = write_gif(model, spec, tmp_path / f"start{k}.gif", start=outcome.start, starts=space)
+        assert gif.written and f"{outcome.steps} steps;" in gif.text
+
+
 def test_long_episodes_are_subsampled(trained, tmp_path):
     spec, _, model = trained
     gif = write_gif(model, spec, tmp_path / "few.gif", max_frames=5)

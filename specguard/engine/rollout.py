@@ -51,10 +51,15 @@ def policy(model: Any, normalizer: Any, deterministic: bool) -> Callable[[Any], 
 
 
 def episode(
-    env: Any, act: Callable[[Any], Any], seed: int, on_step: Callable[[int], None] | None = None
+    env: Any,
+    act: Callable[[Any], Any],
+    seed: int,
+    on_step: Callable[[int], None] | None = None,
+    options: dict[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
-    """One episode of ``act`` on ``env`` from ``reset(seed=seed)``; ``on_step(n)`` after each of its ``n`` steps."""
-    obs, info = env.reset(seed=seed)
+    """One episode of ``act`` on ``env`` from ``reset(seed=seed, options=options)``; ``on_step(n)`` after each of
+    its ``n`` steps."""
+    obs, info = env.reset(seed=seed, options=options)
     if on_step is not None:
         on_step(0)
     steps: list[dict[str, Any]] = []

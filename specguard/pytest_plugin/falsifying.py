@@ -17,7 +17,7 @@ from typing import Any
 
 import pytest
 
-from specguard.pytest_plugin.items import GoalMissed, one_line_errors, spec_of
+from specguard.pytest_plugin.items import GoalMissed, group_of, one_line_errors, spec_of
 from specguard.pytest_plugin.session import Session, run, scaled
 
 __all__ = ["falsify_lines", "run_falsify_item"]
@@ -45,7 +45,12 @@ def run_falsify_item(item: pytest.Function, state: Session, check: Any) -> None:
         result = run(state, trained)
         found = result.falsify(check.starts, **check.kwargs())
     verdicts = {seed: falsify_verdict(f, check.max_rate, trained.confidence) for seed, f in found.items()}
-    text = "\n".join(falsify_lines(found, verdicts, check.max_rate))
+    lines = falsify_lines(found, verdicts, check.max_rate)
+    if state.options.report_dir is not None:  # the counterexamples' episodes, replayed as GIFs
+        from specguard.report.gifs import counterexample_gifs
+
+        lines += counterexample_gifs(state.options.report_dir, group_of(item), result, found, check.starts)
+    text = "\n".join(lines)
     item.user_properties.append(("specguard.falsify", text))
     states = set(verdicts.values())
     if RunVerdict.MISSED in states or (RunVerdict.UNDECIDED in states and trained.undecided == "fail"):

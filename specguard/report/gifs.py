@@ -20,8 +20,9 @@ from specguard.engine.models import load_model
 from specguard.engine.rollout import episode, policy, spec_env
 from specguard.engine.spec import Spec
 from specguard.engine.train import EVAL_SEED_BASE
+from specguard.falsify.starts import START_OPTION, StartSpace
 
-__all__ = ["MAX_FRAMES", "Gif", "report_gifs", "write_gif"]
+__all__ = ["MAX_FRAMES", "Gif", "counterexample_gifs", "report_gifs", "write_gif"]
 
 MAX_FRAMES = 100  # frames a GIF keeps at most (an episode's frames are subsampled evenly)
 LAST_FRAME_MS = 2000  # how long the captioned last frame stays
@@ -93,12 +94,18 @@ def write_gif(
     seed: int = EVAL_SEED_BASE,
     normalizer: Any = None,
     max_frames: int = MAX_FRAMES,
+    start: Mapping[str, float] | None = None,
+    starts: StartSpace | None = None,
 ) -> Gif:
     """Render one deterministic episode of ``model`` on ``spec``'s env into an animated GIF at ``path``.
 
     The env is made with ``render_mode="rgb_array"``; frames are subsampled
     evenly to at most ``max_frames``; the last frame carries the caption: the
     goals met (and missed) when the episode ended (``info["goals"]``).
+
+    ``start`` (with the space it was drawn from, ``starts``; ``None``: the env's
+    own) puts the env in that start first, as the falsifier's episodes begin:
+    the episode of a counterexample, replayed.
 
     Returns:
         The GIF's path and caption; or no path and a note when the env cannot
@@ -114,6 +121,10 @@ def write_gif(
         # Frames are drawn off-screen: SDL needs no display (and prints no complaint about a missing one).
         os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
         env = spec_env(spec, render_mode="rgb_array")
+        options = None
+        if start is not None:  # as the falsifier's runner: the start wrapper under the spec's env, reset seed 0
+            env.env = (starts or StartSpace()).resolve(env.env).wrap(env.env)
+            options, seed = {START_OPTION: dict(start)}, 0
     except Exception as e:
         return Gif(None, f"no GIF of spec {spec.label!r}: its env cannot be made to render rgb_array frames ({e})")
     act = policy(model, normalizer, deterministic=True)
@@ -137,7 +148,7 @@ def write_gif(
 
     try:
         try:
-            steps = episode(env, act, seed, capture)
+            steps = episode(env, act, seed, capture, options)
             if last != len(steps):  # the final state, whatever the stride
                 frame = env.render()
                 if isinstance(frame, np.ndarray):
@@ -206,3 +217,28 @@ def report_gifs(
             except Exception as e:  # a report must not fail the session
                 gifs[group] = Gif(None, f"no rollout GIF: {type(e).__name__}: {e}")
     return gifs
+
+
+def counterexample_gifs(
+    directory: Path, group: str, result: Any, found: Mapping[int, Any], starts: StartSpace | None
+) -> list[str]:
+    """A GIF of each run's counterexample episode (``found``: per seed, its falsification), in ``directory``.
+
+    Returns:
+        A line per counterexample: the GIF written, or why there is none; never raises for a missing renderer.
+    """
+    lines = []
+    for seed, falsification in sorted(found.items()):
+        if falsification.counterexample is None:
+            continue
+        if result.cache_dir is None or result.trained is None:
+            lines.append(f"seed {seed}: no GIF: the run cache is off, no model to load")
+            continue
+        model, normalizer = load_model(result.trained, seed, result.cache_dir)
+        path = directory / f"{_slug(group)}-falsify-seed{seed}.gif"
+        start = falsification.counterexample.start
+        gif = write_gif(model, result.trained, path, normalizer=normalizer, start=start, starts=starts)
+        lines.append(
+            f"seed {seed}: counterexample episode: {gif.path} ({gif.text})" if gif.path else f"seed {seed}: {gif.text}"
+        )
+    return lines

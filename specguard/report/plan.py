@@ -41,8 +41,9 @@ def plan_lines(plan: SpecPlan) -> list[str]:
     offsets = [("t" if not d else f"t{d:+.2f}") for d in OFFSETS]
     rows = [[label(g.path), f">= {g.threshold:g}", *_met_cells(g)] for g in plan.goals]
     lines += ["  " + line for line in render_table(["goal", "threshold", *offsets], rows)]
+    family = f"{plan.family} comparison{'s' if plan.family != 1 else ''}"
     lines.append(
-        f"comparison with a baseline: each judged at {plan.level:.2g} (5% over {plan.family} comparisons, Holm's "
+        f"comparison with a baseline: each judged at {plan.level:.2g} (5% over {family}, Holm's "
         f"first step); {plan.start} seed{'s' if plan.start != 1 else ''}, up to {plan.ceiling} while a "
         "comparison is open"
     )
