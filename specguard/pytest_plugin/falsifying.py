@@ -33,14 +33,13 @@ def falsify_lines(found: dict[int, Any], verdicts: dict[int, Any], max_rate: flo
     return lines
 
 
-def run_falsify_item(item: pytest.Function, state: Session, check: Any) -> None:
+def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: Any) -> None:
     """Train (or read back) the item's spec, falsify every run, and pass, fail or xfail the item."""
     from specguard.falsify.check import falsify_verdict
     from specguard.stats.intervals import RunVerdict
 
-    marker = item.get_closest_marker("goal_spec")
     with one_line_errors(item):
-        spec, _ = spec_of(item, marker.kwargs.get("expect") if marker is not None else None)
+        spec, _ = spec_of(item, expect)
         trained = scaled(state, spec)
         result = run(state, trained)
         found = result.falsify(check.starts, **check.kwargs())

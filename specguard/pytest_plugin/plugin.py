@@ -145,7 +145,7 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     if check is not None:
         from specguard.pytest_plugin.falsifying import run_falsify_item
 
-        run_falsify_item(pyfuncitem, state, check)
+        run_falsify_item(pyfuncitem, state, check, marker.kwargs.get("expect"))
         return True
     with one_line_errors(pyfuncitem):
         spec, paths = spec_of(pyfuncitem, marker.kwargs.get("expect"))

@@ -134,7 +134,7 @@ def apply_family(rows: list[dict[str, Any]]) -> bool:
     steps can flag more. Those rows are marked failed, with the step in their comparison,
     and the session fails. Every compared row gets ``gate["holm"]``: the step that flags it, or None.
     """
-    from specguard.stats.family import holm
+    from specguard.stats.family import holm, step_level
     from specguard.stats.sequential import DEFAULT_ALPHA
 
     compared = {f"{r['group']}::{r['goal']}": r for r in rows if r.get("gate")}
@@ -145,7 +145,7 @@ def apply_family(rows: list[dict[str, Any]]) -> bool:
     for key, row in compared.items():
         step = row["gate"]["holm"] = steps[key]
         if step is not None and row["gate"]["state"] != "dropped":
-            level = DEFAULT_ALPHA / (len(compared) - step + 1)
+            level = step_level(DEFAULT_ALPHA, len(compared), step)
             row["comparison"] = (
                 f"dropped by Holm's step {step} (p = {row['gate']['p_drop']:.2g} <= {level:.2g}): "
                 + str(row.get("comparison") or "")

@@ -29,7 +29,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-__all__ = ["PROCEDURE", "first_level", "holm", "holm_rejections", "procedure_text"]
+__all__ = ["PROCEDURE", "first_level", "holm", "holm_rejections", "procedure_text", "step_level"]
 
 PROCEDURE = "Holm's step-down procedure"
 
@@ -40,11 +40,22 @@ def first_level(alpha: float, comparisons: int) -> float:
     Raises:
         ValueError: no comparisons, or ``alpha`` outside (0, 1).
     """
+    return step_level(alpha, comparisons, 1)
+
+
+def step_level(alpha: float, comparisons: int, step: int) -> float:
+    """The level of Holm's step ``step`` (1: the smallest p-value) over ``comparisons``: ``alpha / (G - step + 1)``.
+
+    Raises:
+        ValueError: no comparisons, a step outside ``1..comparisons``, or ``alpha`` outside (0, 1).
+    """
     if comparisons < 1:
         raise ValueError(f"expected at least one comparison, got {comparisons}")
+    if not 1 <= step <= comparisons:
+        raise ValueError(f"expected a step in 1..{comparisons}, got {step}")
     if not 0.0 < alpha < 1.0:
         raise ValueError(f"expected a family-wise level in (0, 1), got {alpha!r}")
-    return alpha / comparisons
+    return alpha / (comparisons - step + 1)
 
 
 def holm_rejections(p_values: np.ndarray, alpha: float) -> np.ndarray:
@@ -54,7 +65,7 @@ def holm_rejections(p_values: np.ndarray, alpha: float) -> np.ndarray:
     first_level(alpha, size)
     order = np.argsort(p, axis=-1, kind="stable")
     ranked = np.take_along_axis(p, order, axis=-1)
-    levels = alpha / (size - np.arange(size))
+    levels = np.array([step_level(alpha, size, step) for step in range(1, size + 1)])
     passed = np.cumprod(ranked <= levels, axis=-1).astype(bool)
     out = np.zeros_like(passed)
     np.put_along_axis(out, order, passed, axis=-1)
