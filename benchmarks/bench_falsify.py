@@ -1,13 +1,15 @@
 """Episodes to the first counterexample: the guided falsifier against uniform random starts, measured in one run.
 
 For each case (a cached spec's run and a start space), ``--searches`` guided
-searches (Hypothesis seeds 0, 1, ...; no shrinking: they stop at the first
-failing start) and as many uniform random searches of the same space (numpy
-seeds 0, 1, ...) each run at most ``--budget`` episodes; a search that finds no
+searches (seeds 0, 1, ...; no shrinking: they stop at the first failing
+start), as many searches by Hypothesis's own generation steered by
+``hypothesis.target`` on the same robustness score (the falsifier's earlier
+design), and as many uniform random searches of the same space (numpy seeds
+0, 1, ...) each run at most ``--budget`` episodes; a search that finds no
 failure counts as ``budget`` episodes (a lower bound, marked ``>``). Cases:
 the CartPole "lean and catch" agents at the env's default starts and on a
-wider space, and Pendulum (w) from any angle (no failure known: "none found
-within budget" is the expected answer).
+wider space, Acrobot (c) at its default starts, and Pendulum (w) from any
+angle (no failure known: "none found within budget" is the expected answer).
 
 Target: where failures are rarer than 1 in 20 episodes, the median
 episodes to the first failure of the guided search <= 1/3 of random's. Also
@@ -18,12 +20,13 @@ whatever the figures (targets are reported, not asserted). The models are
 trained (or found in ``--cache-dir``) by ``run_spec``.
 
 Usage:
-    python benchmarks/bench_falsify.py [--searches 20] [--budget 300] [--cache-dir /tmp/fz-bench] [--case wide]
+    python benchmarks/bench_falsify.py [--searches 20] [--budget 600] [--cache-dir /tmp/fz-bench] [--case wide]
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import platform
 import statistics
 import sys
@@ -46,12 +49,13 @@ ANY_ANGLE = StartSpace({"theta": (-3.14159, 3.14159), "omega": (-1.0, 1.0)})
 
 
 def cases() -> list[tuple[str, sg.Spec, StartSpace]]:
-    from example_specs import cartpole, pendulum
+    from example_specs import acrobot, cartpole, pendulum
 
     lean = cartpole.specs["lean_and_catch"]
     return [
         ("CartPole default starts", lean, StartSpace()),
         ("CartPole wide", lean, WIDE),
+        ("Acrobot (c) default starts", acrobot.specs["c"], StartSpace()),
         ("Pendulum (w) any angle", pendulum.specs["w"], ANY_ANGLE),
     ]
 
@@ -65,6 +69,44 @@ def random_search(runner: EpisodeRunner, seed: int, budget: int) -> int | None:
             if outcome.failed:
                 return i + j + 1
     return None
+
+
+def hypothesis_search(runner: EpisodeRunner, seed: int, budget: int) -> int | None:
+    """Episodes up to the first failure of Hypothesis's generation, steered by ``target`` on the robustness score.
+
+    Each variable is drawn as an offset from the middle of its range; ``None``: no failure in ``budget`` episodes.
+    """
+    from hypothesis import HealthCheck, Phase, given, settings, target
+    from hypothesis import seed as hypothesis_seed
+    from hypothesis import strategies as st
+
+    s = runner.starts
+    half = (s.high - s.low) / 2.0
+    first: list[int] = []
+    before = runner.episodes
+
+    class Failed(Exception):
+        pass
+
+    @settings(
+        max_examples=budget,
+        database=None,
+        deadline=None,
+        phases=[Phase.generate, Phase.target],
+        suppress_health_check=list(HealthCheck),
+    )
+    @given(st.tuples(*(st.floats(-1.0, 1.0) for _ in s.names)))
+    def test(u: tuple[float, ...]) -> None:
+        point = np.clip(s.center + np.asarray(u) * half, s.low, s.high)
+        outcome = runner.run(point[None, :])[0]
+        target(-outcome.judgement.score, label="robustness")
+        if outcome.failed:
+            first.append(runner.episodes - before)
+            raise Failed
+
+    with contextlib.suppress(Failed):
+        hypothesis_seed(seed)(test)()
+    return first[0] if first else None
 
 
 def median_text(found: list[int | None], budget: int) -> tuple[float, str]:
@@ -97,23 +139,24 @@ def episode_cost(spec: sg.Spec, model: Any, normalizer: Any, runner: EpisodeRunn
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--searches", type=int, default=20)
-    parser.add_argument("--budget", type=int, default=300)
+    parser.add_argument("--budget", type=int, default=600)
     parser.add_argument("--cache-dir", default="/tmp/fz-bench")
+    parser.add_argument("--rate-draws", type=int, default=2000, help="uniform draws for each case's failure rate")
     parser.add_argument("--case", default="", help="only cases whose name contains this")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1], help="the runs (training seeds)")
     args = parser.parse_args()
     machine = platform.processor() or platform.machine()
     print(f"machine: {machine}, {platform.system()}, Python {platform.python_version()}")
     print(f"{args.searches} searches per method, at most {args.budget} episodes each\n")
-    header = f"{'case':26s} {'run':>3s} {'rate':>6s} {'guided median':>20s} {'random median':>20s} {'ratio':>6s}"
-    print(header + f" {'shrunk/first':>13s} {'cost/ep':>8s}")
+    header = f"{'case':26s} {'run':>3s} {'rate':>6s} {'guided median':>20s} {'Hypothesis median':>20s}"
+    print(header + f" {'random median':>20s} {'ratio':>6s} {'shrunk/first':>13s} {'cost/ep':>8s}", flush=True)
     verdicts = []
     for name, spec, space in cases():
         if args.case and args.case not in name:
             continue
         result = sg.run_spec(spec, cache_dir=args.cache_dir, progress=None, workers=2)
         for seed in args.seeds:
-            model, normalizer = result.model(seed), None
+            model, normalizer = result.model(seed), result.normalizer(seed)
             runner = EpisodeRunner(
                 lambda spec=spec: spec_env(spec),
                 batch_policy(model, normalizer, spec.deterministic),
@@ -126,9 +169,11 @@ def main() -> int:
                 f = falsify(runner, examples=args.budget, uniform=0, seed=k, shrink=False)
                 guided.append(f.episodes_to_first if f.found else None)
                 assert runner.episodes - before <= args.budget + 1
+            hypo = [hypothesis_search(runner, k, args.budget) for k in range(args.searches)]
             randoms = [random_search(runner, k, args.budget) for k in range(args.searches)]
-            rate_run = falsify(runner, examples=1, uniform=300, seed=0, shrink=False)
+            rate_run = falsify(runner, examples=1, uniform=args.rate_draws, seed=0, shrink=False)
             g_med, g_text = median_text(guided, args.budget)
+            _, h_text = median_text(hypo, args.budget)
             r_med, r_text = median_text(randoms, args.budget)
             ratio = g_med / r_med if r_med else float("nan")
             shrunk = falsify(runner, examples=args.budget, uniform=0, seed=0, shrink=True)
@@ -138,7 +183,11 @@ def main() -> int:
                 size = "-"
             cost = episode_cost(spec, model, normalizer, runner)
             rate = rate_run.failure_rate
-            print(f"{name:26s} {seed:3d} {rate:6.1%} {g_text:>20s} {r_text:>20s} {ratio:6.2f} {size:>13s} {cost:7.2f}x")
+            print(
+                f"{name:26s} {seed:3d} {rate:6.1%} {g_text:>20s} {h_text:>20s} {r_text:>20s} {ratio:6.2f}"
+                f" {size:>13s} {cost:7.2f}x",
+                flush=True,
+            )
             if all(g is None for g in guided) and all(r is None for r in randoms):
                 verdicts.append(f"{name} run {seed}: none found within budget")
             elif rate < 1 / 20:

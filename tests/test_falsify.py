@@ -50,6 +50,34 @@ def clean(obs):
     return np.zeros(len(obs), dtype=int)
 
 
+class Drift(gym.Env):
+    """A point that moves right by the action (0 to 1) each step; the policy's speed is the only thing that varies."""
+
+    observation_space = gym.spaces.Box(-10.0, 10.0, (2,), np.float32)
+    action_space = gym.spaces.Box(0.0, 1.0, (1,), np.float32)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.state = np.zeros(2)
+        return self.state.astype(np.float32), {}
+
+    def step(self, action):
+        self.state = self.state + np.array([float(action[0]), 0.0])
+        return self.state.astype(np.float32), 0.0, False, False, {}
+
+
+def drift():
+    return gym.wrappers.TimeLimit(Drift(), max_episode_steps=40)
+
+
+def slower_near_the_corner(obs):
+    """Half the distance to the corner (1, 1) per step: home (x >= 3) in time from all but 1 start in 20,000."""
+    return np.clip(0.5 * np.hypot(1.0 - obs[:, 0], 1.0 - obs[:, 1]), 0.0, 1.0)[:, None]
+
+
+DRIFT_SPACE = StartSpace({"x": (-1.0, 1.0), "y": (-1.0, 1.0)}, set_state=set_line)
+
+
 def runner(policy, **kwargs):
     return EpisodeRunner(lambda: sg.make_env(LINE, TREE), policy, SPACE, ["home"], **kwargs)
 
@@ -64,6 +92,19 @@ def test_a_planted_failure_region_is_found_and_shrunk_to_its_boundary():
     # The region is 15% x 60% of the space: 9%.
     assert 0.05 < found.failure_rate < 0.14 and found.interval[0] < 0.09 < found.interval[1]
     assert "counterexample (found after" in found.report() and "missed: home" in found.report()
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_the_guided_search_follows_slower_episodes_to_a_failure_uniform_draws_would_miss(seed):
+    # Reaching home sooner scores higher (1 - steps / 40), so the search steps towards the corner where the policy
+    # crawls, and it times out within 0.01 of the corner: 1 start in 20,000, where 100 uniform draws find it 0.5% of
+    # the time. With uniform draws instead of steps from the lowest scores, this fails.
+    env = sg.InitialEnv(drift, features=("x", "y"))
+    slow = EpisodeRunner(lambda: sg.make_env(env, TREE), slower_near_the_corner, DRIFT_SPACE, ["home"])
+    assert slow.max_steps == 40
+    found = falsify(slow, examples=100, uniform=0, seed=seed)
+    assert found.found and found.episodes_to_first <= 100
+    assert found.counterexample.start["y"] > 0.99 and found.counterexample.judgement.missed == ("home",)
 
 
 def test_a_failing_uniform_draw_is_the_counterexample_when_the_guided_search_found_none():

@@ -113,6 +113,16 @@ class SpecResult:
         """
         return self._load(seed)[0]
 
+    def normalizer(self, seed: int) -> Any:
+        """Run ``seed``'s ``VecNormalize`` statistics (``None`` where the run did not normalise observations).
+
+        A policy outside specguard must normalise observations with these before asking the model.
+
+        Raises:
+            SpecError: the run was not cached (``cache_dir=None``) or is gone.
+        """
+        return self._load(seed)[1]
+
     def rollout(self, seed: int, episodes: int = 1, *, deterministic: bool = True) -> list[list[dict[str, Any]]]:
         """Episodes of run ``seed``'s policy on its env, seeded as evaluation episodes are.
 

@@ -12,7 +12,11 @@ steered by a *robustness score*, the smallest margin over those keys:
   its children's; the default signs the children's smallest margin by
   membership, so a new operator has one without writing anything;
 * a safety annotation says its own (:meth:`specguard.extend.Annotation.margin`),
-  by default ``1`` without a violation and minus the violations with.
+  by default ``1`` without a violation and minus the violations with;
+* the root goal, where reaching it ended the episode, has how early it was
+  reached instead (:func:`reached_early`): every such episode ends just inside
+  it, so its margin there says nothing, while an episode that needed most of
+  its steps was close to running out of them.
 
 Example:
     >>> import specguard as sg
@@ -35,7 +39,7 @@ import numpy as np
 from specguard.extend import SAFETY, Box, Context, Node, annotation_key
 from specguard.validation import child_path
 
-__all__ = ["Judgement", "box_margin", "feature_scales", "judge_end", "margins", "own_states"]
+__all__ = ["Judgement", "box_margin", "feature_scales", "judge_end", "margins", "own_states", "reached_early"]
 
 SCORE_LIMIT = 1e6
 """Margins are clipped to ``+-SCORE_LIMIT`` (an open box is infinitely far inside)."""
@@ -134,3 +138,23 @@ def judge_end(
     missed = tuple(k for k in keys if not (goals[k] if k in goals else safe[k]))
     asserted = {k: every[k] for k in keys}
     return Judgement(missed, min(asserted.values()), asserted)
+
+
+def reached_early(judgement: Judgement, root: str, steps: int, limit: int) -> Judgement:
+    """``judgement`` with the root goal's margin replaced by how early it was reached: ``1 - steps / limit``.
+
+    For an episode that ended because it reached the root goal (it ends just
+    inside it, whatever the start): a time robustness, in the spirit of signal
+    temporal logic's. Unchanged where the root is not asserted or was missed.
+
+    Example:
+        >>> j = Judgement((), 0.01, {"home": 0.01, "home:safe": 1.0})
+        >>> reached_early(j, "home", 150, 200).margins["home"]
+        0.25
+        >>> reached_early(j, "home", 150, 200).score
+        0.25
+    """
+    if root not in judgement.margins or root in judgement.missed:
+        return judgement
+    margins = {**judgement.margins, root: max(0.0, 1.0 - steps / limit)}
+    return Judgement(judgement.missed, min(margins.values()), margins)
