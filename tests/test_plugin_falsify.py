@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 import textwrap
 
@@ -208,3 +209,10 @@ def test_the_report_gets_a_gif_replaying_each_counterexample(pytester):
     # The GIF replays the counterexample's episode: as many steps as the falsifier's report says it ran.
     steps = re.search(r"episode: (\d+) steps, ", out).group(1)
     assert re.search(rf"falsify-seed0\.gif \(up, {steps} steps; goals met at the end: .*missed: up", out)
+    # The Markdown report shows the counterexample with its GIF; the JSON keeps its exact start.
+    markdown = (pytester.path / "report" / "goal-specs.md").read_text()
+    assert "### Counterexamples" in markdown and f"]({gif.name})" in markdown
+    assert "**`test_specs.py::test_up`**, seed 0: missed (no counterexample): `theta=" in markdown
+    data = json.loads((pytester.path / "report" / "goal-specs.json").read_text())
+    (found,) = data["counterexamples"]
+    assert found["gif"] == gif.name and found["missed"] and f"theta={found['start']['theta']:.6g}" in out

@@ -219,6 +219,28 @@ class Falsification:
     def failure_rate(self) -> float:
         return self.uniform_failures / self.uniform_episodes if self.uniform_episodes else 0.0
 
+    @property
+    def origin(self) -> str:
+        """How the counterexample was found, in words (``""``: none was)."""
+        if self.counterexample is None:
+            return ""
+        if self.replayed:
+            return "replayed from the database"
+        if self.from_uniform:
+            return f"found by the uniform draws, none in {self.guided} guided episodes"
+        return f"found after {self.episodes_to_first} episodes"
+
+    @property
+    def rate_text(self) -> str:
+        """The failure rate over the start space with its draws and interval (``""``: no uniform draws)."""
+        if not self.uniform_episodes:
+            return ""
+        lo, hi = self.interval
+        return (
+            f"{self.failure_rate:.1%} ({self.uniform_failures}/{self.uniform_episodes} uniform draws), "
+            f"interval [{lo:.1%}, {hi:.1%}]"
+        )
+
     def report(self) -> str:
         """A few lines: the counterexample (or none), what it missed, its episode, and the failure rate."""
         lines = [self.starts.note]
@@ -227,23 +249,28 @@ class Falsification:
         else:
             c = self.counterexample
             start = ", ".join(f"{k}={v:.6g}" for k, v in c.start.items())
-            origin = (
-                "replayed from the database"
-                if self.replayed
-                else f"found by the uniform draws, none in {self.guided} guided episodes"
-                if self.from_uniform
-                else f"found after {self.episodes_to_first} episodes"
-            )
-            lines.append(f"counterexample ({origin}): {start}")
+            lines.append(f"counterexample ({self.origin}): {start}")
             lines.append(f"  missed: {', '.join(c.judgement.missed)}")
             lines.append(f"  episode: {c.summary()}")
         if self.uniform_episodes:
-            lo, hi = self.interval
-            lines.append(
-                f"failure rate over the start space: {self.failure_rate:.1%} "
-                f"({self.uniform_failures}/{self.uniform_episodes} uniform draws), interval [{lo:.1%}, {hi:.1%}]"
-            )
+            lines.append(f"failure rate over the start space: {self.rate_text}")
         return "\n".join([*lines, *self.notes])
+
+    def to_dict(self) -> dict[str, Any]:
+        """The findings as plain JSON-ready values (the counterexample's start exact, as stored)."""
+        c = self.counterexample
+        return {
+            "starts": self.starts.note,
+            "start": dict(c.start) if c is not None else None,
+            "missed": list(c.judgement.missed) if c is not None else [],
+            "origin": self.origin,
+            "episode": c.summary() if c is not None else "",
+            "guided": self.guided,
+            "uniform_failures": self.uniform_failures,
+            "uniform_episodes": self.uniform_episodes,
+            "interval": list(self.interval),
+            "rate": self.rate_text,
+        }
 
 
 def _time_limit(env: Any) -> int | None:

@@ -12,6 +12,7 @@ undecided goal does.
 
 from __future__ import annotations
 
+import json
 import warnings
 from typing import Any
 
@@ -20,7 +21,10 @@ import pytest
 from specguard.pytest_plugin.items import GoalMissed, group_of, one_line_errors, spec_of
 from specguard.pytest_plugin.session import Session, run, scaled
 
-__all__ = ["falsify_lines", "run_falsify_item"]
+__all__ = ["COUNTEREXAMPLES", "falsify_lines", "run_falsify_item"]
+
+COUNTEREXAMPLES = "specguard.counterexamples"
+"""The user property carrying a falsify item's runs (JSON) to the reports, on the xdist controller too."""
 
 
 def falsify_lines(found: dict[int, Any], verdicts: dict[int, Any], max_rate: float | None) -> list[str]:
@@ -45,12 +49,30 @@ def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: 
         found = result.falsify(check.starts, **check.kwargs())
     verdicts = {seed: falsify_verdict(f, check.max_rate, trained.confidence) for seed, f in found.items()}
     lines = falsify_lines(found, verdicts, check.max_rate)
+    gifs: dict[int, Any] = {}
     if state.options.report_dir is not None:  # the counterexamples' episodes, replayed as GIFs
         from specguard.report.gifs import counterexample_gifs
 
-        lines += counterexample_gifs(state.options.report_dir, group_of(item), result, found, check.starts)
+        gifs = counterexample_gifs(state.options.report_dir, group_of(item), result, found, check.starts)
+        lines += [
+            f"seed {seed}: counterexample episode: {gif.path} ({gif.text})" if gif.path else f"seed {seed}: {gif.text}"
+            for seed, gif in gifs.items()
+        ]
     text = "\n".join(lines)
     item.user_properties.append(("specguard.falsify", text))
+    runs = [
+        {
+            "group": group_of(item),
+            "seed": seed,
+            "verdict": verdicts[seed].value,
+            "max_rate": check.max_rate,
+            **f.to_dict(),
+            "gif": gifs[seed].path.name if seed in gifs and gifs[seed].path is not None else None,
+            "gif_text": gifs[seed].text if seed in gifs else "",
+        }
+        for seed, f in sorted(found.items())
+    ]
+    item.user_properties.append((COUNTEREXAMPLES, json.dumps(runs)))
     states = set(verdicts.values())
     if RunVerdict.MISSED in states or (RunVerdict.UNDECIDED in states and trained.undecided == "fail"):
         raise GoalMissed(f"falsified:\n{text}")

@@ -15,6 +15,7 @@ from typing import Any
 
 import pytest
 
+from specguard.pytest_plugin.falsifying import COUNTEREXAMPLES
 from specguard.pytest_plugin.session import Session
 
 __all__ = ["PROPERTY", "Recorder", "apply_family", "unsigned_cache_note", "write_outputs"]
@@ -39,6 +40,8 @@ class Recorder:
         if report.when != "call":
             return
         for key, value in report.user_properties:
+            if key == COUNTEREXAMPLES:
+                self.state.counterexamples.extend(json.loads(str(value)))
             if key != PROPERTY:
                 continue
             row = json.loads(str(value))
@@ -54,12 +57,12 @@ class Recorder:
             session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
     def pytest_terminal_summary(self, terminalreporter: Any) -> None:
-        if not self.state.rows:
+        if not self.state.rows and not self.state.counterexamples:
             return
         from specguard.report.session import family_lines, table_lines
 
         terminalreporter.write_sep("=", "specguard goal specs")
-        for line in table_lines(self.state.rows):
+        for line in table_lines(self.state.rows) if self.state.rows else []:
             terminalreporter.write_line(line)
         for line in family_lines(self.state.rows):
             terminalreporter.write_line(f"specguard: {line}")
@@ -104,7 +107,7 @@ def write_outputs(config: pytest.Config, state: Session) -> list[Path]:
         from specguard.report.session import write_reports
 
         gifs = report_gifs(state.options.report_dir, state.rows, state.specs, state.options.cache_dir)
-        written += write_reports(state.options.report_dir, state.rows, gifs=gifs)
+        written += write_reports(state.options.report_dir, state.rows, gifs=gifs, counterexamples=state.counterexamples)
         written += [gif.path for gif in gifs.values() if gif.path is not None]
         terminal = config.pluginmanager.get_plugin("terminalreporter")
         for group, gif in gifs.items():

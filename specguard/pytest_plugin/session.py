@@ -23,6 +23,7 @@ class Session:
     executor: Any = None  # a specguard.parallel.executors.Executor, made once per session
     memo: dict[str, Any] = dataclasses.field(default_factory=dict)
     rows: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+    counterexamples: list[dict[str, Any]] = dataclasses.field(default_factory=list)  # falsify items' runs
     specs: dict[str, Any] = dataclasses.field(default_factory=dict)  # group -> its trained Spec, for report GIFs
     progress: Callable[[Any], None] | None = None  # the run_spec sink: events to the terminal reporter
     gates: dict[str, Any] = dataclasses.field(default_factory=dict)  # spec key -> its SpecGate with the baseline

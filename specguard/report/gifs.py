@@ -221,24 +221,22 @@ def report_gifs(
 
 def counterexample_gifs(
     directory: Path, group: str, result: Any, found: Mapping[int, Any], starts: StartSpace | None
-) -> list[str]:
+) -> dict[int, Gif]:
     """A GIF of each run's counterexample episode (``found``: per seed, its falsification), in ``directory``.
 
     Returns:
-        A line per counterexample: the GIF written, or why there is none; never raises for a missing renderer.
+        Per seed with a counterexample, its GIF or the note saying why there is none; never raises for a
+        missing renderer.
     """
-    lines = []
+    gifs: dict[int, Gif] = {}
     for seed, falsification in sorted(found.items()):
         if falsification.counterexample is None:
             continue
         if result.cache_dir is None or result.trained is None:
-            lines.append(f"seed {seed}: no GIF: the run cache is off, no model to load")
+            gifs[seed] = Gif(None, "no GIF: the run cache is off, no model to load")
             continue
         model, normalizer = load_model(result.trained, seed, result.cache_dir)
         path = directory / f"{_slug(group)}-falsify-seed{seed}.gif"
         start = falsification.counterexample.start
-        gif = write_gif(model, result.trained, path, normalizer=normalizer, start=start, starts=starts)
-        lines.append(
-            f"seed {seed}: counterexample episode: {gif.path} ({gif.text})" if gif.path else f"seed {seed}: {gif.text}"
-        )
-    return lines
+        gifs[seed] = write_gif(model, result.trained, path, normalizer=normalizer, start=start, starts=starts)
+    return gifs

@@ -29,7 +29,7 @@ from specguard.report.plots import plot_curves
 from specguard.tree.keys import is_safety_key, label
 from specguard.utils.text import render_table
 
-__all__ = ["family_lines", "session_markdown", "table_lines", "write_reports"]
+__all__ = ["counterexample_lines", "family_lines", "session_markdown", "table_lines", "write_reports"]
 
 Row = dict[str, Any]
 
@@ -118,13 +118,20 @@ def _first_seed(rows: Sequence[Row], group: str) -> int | None:
     return None
 
 
-def session_markdown(rows: Sequence[Row], *, plot: str | None = None, gifs: Mapping[str, Gif] | None = None) -> str:
+def session_markdown(
+    rows: Sequence[Row],
+    *,
+    plot: str | None = None,
+    gifs: Mapping[str, Gif] | None = None,
+    counterexamples: Sequence[Row] = (),
+) -> str:
     """A Markdown summary ready to paste into a pull request.
 
     Args:
         plot: the file name of the success plot written beside the Markdown, linked as an image.
         gifs: per spec (group), its rollout GIF (linked by file name, so it must lie beside the
             Markdown) with its caption, or the note saying why there is none.
+        counterexamples: the falsify items' runs (:func:`counterexample_lines`), their GIFs beside the Markdown.
     """
     compared = any(r.get("comparison") for r in rows)
     header = HEADER + (["vs baseline"] if compared else [])
@@ -156,6 +163,8 @@ def session_markdown(rows: Sequence[Row], *, plot: str | None = None, gifs: Mapp
     if adapted:
         lines += ["", "### Adapted weights", "", 'Weights of `All(weights="auto")` nodes when training ended:', ""]
         lines += [f"- `{group}`: {text}" for group, text in adapted.items()]
+    if counterexamples:
+        lines += ["", "### Counterexamples", "", *counterexample_lines(counterexamples)]
     if plot or gifs:
         lines += ["", "### Figures", ""]
     if plot:
@@ -174,6 +183,41 @@ def session_markdown(rows: Sequence[Row], *, plot: str | None = None, gifs: Mapp
     return "\n".join(lines).rstrip("\n") + "\n"
 
 
+def counterexample_lines(runs: Sequence[Row]) -> list[str]:
+    """Markdown for the falsify items' runs: per run, its verdict, shrunk start, goals missed, episode, failure
+    rate, and its counterexample's GIF (linked by file name, beside the Markdown).
+
+    Example:
+        >>> run = {"group": "t.py::test_up", "seed": 0, "verdict": "missed", "max_rate": None, "start": {"x": 0.5},
+        ...        "missed": ["up"], "origin": "found after 3 episodes", "episode": "9 steps", "rate": "",
+        ...        "guided": 3, "gif": "t.py__test_up-falsify-seed0.gif", "gif_text": "up, 9 steps"}
+        >>> print("\\n".join(counterexample_lines([run])))
+        - **`t.py::test_up`**, seed 0: missed (no counterexample): `x=0.5`, found after 3 episodes; missed `up`; 9 steps
+        <BLANKLINE>
+          ![counterexample of t.py::test_up, seed 0](t.py__test_up-falsify-seed0.gif)
+        <BLANKLINE>
+    """
+    lines: list[str] = []
+    for run in runs:
+        rule = "no counterexample" if run["max_rate"] is None else f"failure rate at most {run['max_rate']:g}"
+        head = f"- **`{run['group']}`**, seed {run['seed']}: {run['verdict']} ({rule})"
+        if run["start"] is None:
+            head += f": no counterexample in {run['guided']} guided episodes"
+        else:
+            start = ", ".join(f"{k}={v:.6g}" for k, v in run["start"].items())
+            missed = ", ".join(f"`{m}`" for m in run["missed"])
+            head += f": `{start}`, {run['origin']}; missed {missed}; {run['episode']}"
+        if run["rate"]:
+            head += f"; failure rate over the start space {run['rate']}"
+        lines.append(head)
+        if run.get("gif"):
+            alt = f"counterexample of {run['group']}, seed {run['seed']}"
+            lines += ["", f"  ![{alt}]({quote(run['gif'])})", ""]
+        elif run["start"] is not None and run.get("gif_text"):
+            lines.append(f"  ({run['gif_text']})")
+    return lines
+
+
 def _adapted_weights(rows: Sequence[Row]) -> dict[str, str]:
     """Per spec (group) with adapted weights, each seed's, as text (:func:`~specguard.utils.text.per_seed_text`)."""
     from specguard.utils.text import per_seed_text
@@ -186,18 +230,27 @@ def _adapted_weights(rows: Sequence[Row]) -> dict[str, str]:
     return out
 
 
-def write_reports(directory: Path, rows: Sequence[Row], *, gifs: Mapping[str, Gif] | None = None) -> list[Path]:
+def write_reports(
+    directory: Path,
+    rows: Sequence[Row],
+    *,
+    gifs: Mapping[str, Gif] | None = None,
+    counterexamples: Sequence[Row] = (),
+) -> list[Path]:
     """Write ``goal-specs.json``, ``goal-specs.md`` and ``goal-specs.png`` (if there are curves).
 
     Args:
         gifs: per spec, its rollout GIF (already written into ``directory``) or a
             note (:func:`specguard.engine.rollout.report_gifs`); the Markdown links them.
+        counterexamples: the falsify items' runs; the JSON lists them and the Markdown shows them with their GIFs.
     """
     directory.mkdir(parents=True, exist_ok=True)
     data = directory / "goal-specs.json"
-    write_atomic(data, json.dumps({"goals": list(rows)}, indent=1))
+    write_atomic(data, json.dumps({"goals": list(rows), "counterexamples": list(counterexamples)}, indent=1))
     png = directory / "goal-specs.png"
     plotted = plot_curves(rows, png)
     md = directory / "goal-specs.md"
-    write_atomic(md, session_markdown(rows, plot=png.name if plotted else None, gifs=gifs))
+    write_atomic(
+        md, session_markdown(rows, plot=png.name if plotted else None, gifs=gifs, counterexamples=counterexamples)
+    )
     return [data, md] + ([png] if plotted else [])
