@@ -219,6 +219,23 @@ def test_falsify_searches_each_run_and_prints_the_failure_rate(spec_file, tmp_pa
     assert ("COUNTEREXAMPLE" in out) == (code == 1)
 
 
+def test_falsify_searches_the_spec_s_own_start_space_and_checks_it_before_training(tmp_path, capsys):
+    path = tmp_path / "own.py"
+    path.write_text(SPEC_FILE + "import dataclasses\nown = dataclasses.replace(easy, starts={'speed': (0.0, 1.0)})\n")
+    code = main(["falsify", f"{path}::own", "--cache-dir", str(tmp_path / "c")])
+    err = capsys.readouterr().err
+    assert code == 2 and "'speed', which its setter does not know" in err and not (tmp_path / "c").exists()
+    # --starts replaces the spec's own: this one is searched.
+    argv = ["falsify", f"{path}::own", "--cache-dir", str(tmp_path / "c"), "--examples", "2", "--uniform", "0"]
+    assert main([*argv, "--starts", "theta=-0.5:0.5", "--quiet"]) in (0, 1)
+
+
+def test_falsify_refuses_negative_uniform_draws(spec_file, capsys):
+    with pytest.raises(SystemExit):
+        main(["falsify", f"{spec_file}::easy", "--uniform", "-1"])
+    assert "expected an integer >= 0 (uniform draws), got '-1'" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize(
     ("starts", "message"),
     [

@@ -266,6 +266,16 @@ def test_every_spec_field_is_in_the_spec_key_and_only_run_fields_in_the_run_key(
     assert fp.run_key(0) != fp.run_key(1)
 
 
+def test_a_start_space_changes_neither_key_it_is_only_where_the_falsifier_searches():
+    base = spec(expect={"pendulum": 0.5})
+    searched = dataclasses.replace(base, starts={"theta": (-1.0, 1.0)})
+    assert searched.starts == sg.StartSpace({"theta": (-1.0, 1.0)})  # ranges read as a StartSpace
+    assert fingerprint_spec(searched).spec_key == fingerprint_spec(base).spec_key
+    assert fingerprint_spec(searched).run_key(0) == fingerprint_spec(base).run_key(0)
+    with pytest.raises(sg.InvalidSpec, match=r"Spec 'pendulum'.starts: expected starts to be a StartSpace"):
+        dataclasses.replace(base, starts=[("theta", -1.0, 1.0)])
+
+
 class Dynamics(gym.Wrapper):
     """An env whose behaviour the static part cannot see: it is made from a string id."""
 

@@ -286,13 +286,15 @@ def _add_falsify(sub: Any) -> None:
     fz.add_argument("target", metavar="PATH[::NAME]")
     fz.add_argument("--seed", type=int, default=0, help="the search's seed (default: 0)")
     fz.add_argument("--examples", type=_positive, default=200, help="guided episodes per run at most (default: 200)")
-    fz.add_argument("--uniform", type=int, default=100, help="uniform draws for the failure rate (default: 100)")
+    fz.add_argument(
+        "--uniform", type=_draws, default=100, help="uniform draws for the failure rate, 0 for none (default: 100)"
+    )
     fz.add_argument(
         "--starts",
         type=_start_range,
         nargs="+",
         metavar="NAME=LO:HI",
-        help="start ranges of the env's state variables (default: the env's own reset ranges)",
+        help="start ranges of the env's state variables (default: the spec's own, Spec.starts, else the env's)",
     )
     fz.add_argument("--cache-dir", default=".specguard/cache", help="run cache (default: .specguard/cache)")
     fz.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
@@ -319,6 +321,16 @@ def _positive(text: str) -> int:
         raise argparse.ArgumentTypeError(str(e)) from None
 
 
+def _draws(text: str) -> int:
+    """An integer >= 0: ``0``, or a count as :func:`_positive` reads one."""
+    if text.strip() == "0":
+        return 0
+    try:
+        return _positive(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0 (uniform draws), got {text!r}") from None
+
+
 def _case_scale(text: str) -> tuple[str, float]:
     name, sep, value = text.partition("=")
     if not sep or not name:
@@ -338,16 +350,16 @@ def _start_range(text: str) -> tuple[str, tuple[float, float]]:
 
 def _falsify(args: argparse.Namespace) -> int:
     """Train (or find in the cache) each spec, then search its start space for counterexamples, per run."""
+    from specguard.engine.falsification import start_space
     from specguard.engine.progress import print_event
     from specguard.engine.run import run_spec
     from specguard.falsify.starts import StartSpace
 
-    starts = StartSpace(dict(args.starts)) if args.starts else None  # checked before anything trains
+    starts = StartSpace(dict(args.starts)) if args.starts else None  # None: each spec's own, else the env's
     found_any = False
     specs = load_objects(args.target)
     for spec in specs.values():  # names and bounds checked before anything trains
-        if starts is not None:
-            starts.resolve(spec.initial_env.make())
+        start_space(spec, starts).resolve(spec.initial_env.make())
     for name, spec in specs.items():
         quiet = args.quiet
         result = run_spec(spec, cache_dir=args.cache_dir, progress=None if quiet else print_event)

@@ -23,7 +23,22 @@ from specguard.engine.spec import Spec
 from specguard.falsify.search import EpisodeRunner, Falsification, falsify
 from specguard.falsify.starts import StartSpace
 
-__all__ = ["batch_policy", "database_key", "falsify_run", "property_keys"]
+__all__ = ["batch_policy", "database_key", "falsify_run", "property_keys", "start_space"]
+
+
+def start_space(spec: Spec, starts: StartSpace | None = None) -> StartSpace:
+    """The start space searched: ``starts`` if given, else the spec's own (``Spec.starts``), else the env's.
+
+    Example:
+        >>> import specguard as sg
+        >>> cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+        >>> spec = sg.Spec(cartpole, sg.Goal("g", x=(0, 1)), budget=sg.Budget(timesteps=8), starts={"x": (-1, 1)})
+        >>> start_space(spec).ranges, start_space(spec, sg.StartSpace()).ranges
+        ((('x', -1.0, 1.0),), ())
+    """
+    if starts is not None:
+        return starts
+    return spec.starts if spec.starts is not None else StartSpace()
 
 
 def property_keys(spec: Spec) -> list[str]:
@@ -65,7 +80,7 @@ def falsify_run(
     """Search the start space of run ``seed`` of ``spec`` for a start from which its policy misses the spec.
 
     Args:
-        starts: the start space; ``None``: the env's own reset ranges.
+        starts: the start space; ``None``: :func:`start_space`'s (the spec's own, else the env's).
         database: the directory of the Hypothesis example database; ``None``: nothing stored or replayed.
         Others: as :func:`specguard.falsify.search.falsify`.
     """
@@ -79,7 +94,7 @@ def falsify_run(
             f"Spec {spec.label!r}: falsify needs a spec trained on the constructed env, not a baseline spec",
             hint="falsify the spec itself; a baseline's episodes end as the initial env says",
         )
-    space = starts if starts is not None else StartSpace()
+    space = start_space(spec, starts)
     runner = EpisodeRunner(
         lambda: spec_env(spec), batch_policy(model, normalizer, spec.deterministic), space, property_keys(spec)
     )

@@ -60,6 +60,8 @@ __all__ = [
 # Spec fields that change how many runs are trained or how they are counted, not what one run does:
 # they are part of the spec's identity (shared results, baselines) but not of a run's cache key.
 _SPEC_ONLY_FIELDS = frozenset({"quorum", "undecided", "name", "xfail"})
+# Spec fields that change neither a run nor a verdict: the falsifier's default start space.
+_NOT_IDENTITY_FIELDS = frozenset({"starts"})
 _BUDGET_SPEC_ONLY_FIELDS = frozenset({"min_seeds", "max_seeds"})
 
 
@@ -94,8 +96,8 @@ def _fields(obj: Any, exclude: frozenset[str]) -> dict[str, Any]:
 
 def _compute(spec: Any) -> SpecFingerprint:
     where = f"Spec {spec.label!r}"
-    full = _fields(spec, frozenset())
-    run = _fields(spec, _SPEC_ONLY_FIELDS)
+    full = _fields(spec, _NOT_IDENTITY_FIELDS)
+    run = _fields(spec, _SPEC_ONLY_FIELDS | _NOT_IDENTITY_FIELDS)
     run["budget"] = _fields(spec.budget, _BUDGET_SPEC_ONLY_FIELDS)
     from specguard.engine.train import env_factory
 

@@ -25,6 +25,7 @@ from specguard.build.initial_env import InitialEnv
 from specguard.engine.budget import Budget
 from specguard.engine.sb3 import ALGORITHMS
 from specguard.error import InvalidSpec
+from specguard.falsify.starts import StartSpace, as_start_space
 from specguard.stats.intervals import UNDECIDED_OUTCOMES
 from specguard.tree.keys import check_expect, check_xfail, check_xfail_thresholded, resolve_goal
 from specguard.tree.nodes import Node
@@ -67,6 +68,12 @@ class Spec:
             XFAIL (XPASS once they pass), ``specguard run`` does not count
             their miss as a failure. Under anytime verdicts their runs are
             never cut short: a goal not met keeps its run training.
+        starts: the start space the falsifier searches by default
+            (:class:`~specguard.falsify.starts.StartSpace` or its ranges
+            ``{variable: (lo, hi)}``; ``None``: the env's own reset ranges):
+            ``specguard falsify``, :meth:`SpecResult.falsify` and
+            ``falsify=True`` read it. Not part of the spec's identity: it
+            changes no run and no verdict of its goals.
     """
 
     initial_env: InitialEnv
@@ -84,6 +91,7 @@ class Spec:
     baseline: bool = False
     name: str | None = None
     xfail: Mapping[str, str] = field(default_factory=dict)
+    starts: StartSpace | None = None
 
     def __post_init__(self) -> None:
         label = f"Spec {self.label!r}"
@@ -109,6 +117,7 @@ class Spec:
             raise InvalidSpec(f"{label}.undecided", f"expected one of {UNDECIDED_OUTCOMES}, got {self.undecided!r}")
         object.__setattr__(self, "expect", self._resolve_thresholds(label))
         object.__setattr__(self, "xfail", self._resolve_xfail(label))
+        object.__setattr__(self, "starts", as_start_space(f"{label}.starts", self.starts))
 
     @property
     def label(self) -> str:

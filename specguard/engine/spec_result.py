@@ -155,7 +155,8 @@ class SpecResult:
         """Search ``starts`` for starts from which each run's cached policy misses the spec (no retraining).
 
         Args:
-            starts: the start space (:class:`~specguard.falsify.starts.StartSpace`); ``None``: the env's own.
+            starts: the start space (:class:`~specguard.falsify.starts.StartSpace`); ``None``: the spec's own
+                (``Spec.starts``), else the env's.
             seeds: the runs to falsify; ``None``: every run.
             examples: guided episodes per run at most; ``uniform``: uniform draws for the failure rate.
             database: the Hypothesis example database directory counterexamples are stored in and

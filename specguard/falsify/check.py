@@ -36,7 +36,7 @@ from typing import Any
 
 from specguard.error import InvalidSpec
 from specguard.falsify.search import Falsification
-from specguard.falsify.starts import StartSpace
+from specguard.falsify.starts import StartSpace, as_start_space
 from specguard.stats.intervals import RunVerdict, run_verdict
 from specguard.validation import check_count
 
@@ -49,7 +49,7 @@ class Falsify:
 
     Args:
         starts: the start space: a :class:`~specguard.falsify.starts.StartSpace`, or its ranges
-            ``{variable: (lo, hi)}``; ``None``: the env's own reset ranges.
+            ``{variable: (lo, hi)}``; ``None``: the spec's own (``Spec.starts``), else the env's reset ranges.
         examples: guided episodes per run at most.
         uniform: uniform draws per run for the failure rate (at least 1 with ``max_rate``).
         max_rate: the failure rate over the start space a run may have, in ``(0, 1)``: uniform
@@ -58,7 +58,7 @@ class Falsify:
         seed: the search's seed.
     """
 
-    starts: StartSpace
+    starts: StartSpace | None
     examples: int
     uniform: int
     max_rate: float | None
@@ -74,12 +74,7 @@ class Falsify:
         seed: int = 0,
     ) -> None:
         where = "Falsify"
-        if starts is None:
-            starts = StartSpace()
-        elif not isinstance(starts, StartSpace):
-            if not isinstance(starts, Mapping):
-                raise InvalidSpec(where, f"expected starts to be a StartSpace or {{name: (lo, hi)}}, got {starts!r}")
-            starts = StartSpace(dict(starts))
+        starts = as_start_space(where, starts)
         examples = check_count(where, "examples", examples, "guided episodes per run at most")
         if isinstance(uniform, bool) or not isinstance(uniform, Integral) or uniform < 0:
             raise InvalidSpec(where, f"expected uniform to be an integer >= 0 (uniform draws per run), got {uniform!r}")
@@ -113,7 +108,7 @@ def falsify_verdict(found: Falsification, max_rate: float | None, confidence: fl
     failures and so overcount them).
 
     Example:
-        >>> from specguard.falsify.starts import StartSpace
+        >>> from specguard.falsify.starts import StartSpace, as_start_space
         >>> from specguard.falsify.search import Falsification
         >>> found = Falsification(StartSpace(), uniform_failures=0, uniform_episodes=100)
         >>> falsify_verdict(found, None).value, falsify_verdict(found, 0.05).value
@@ -128,7 +123,7 @@ def falsify_verdict(found: Falsification, max_rate: float | None, confidence: fl
 
 
 def as_falsify(where: str, value: object) -> Falsify | None:
-    """``falsify=`` as declared: ``None``/``False`` (none), ``True`` (the env's own starts), a start space or its
+    """``falsify=`` as declared: ``None``/``False`` (none), ``True`` (the spec's start space), a start space or its
     ranges, or a :class:`Falsify`.
 
     Raises:

@@ -13,8 +13,9 @@ episode's end by the spec's property (:mod:`specguard.falsify.robustness`).
 2. **guided search**: the middle of the space, then ``EXPLORE`` uniform
    draws, then rounds of local search: each new start is a Gaussian step
    (``STEP`` of each range's half-width) from one of the ``ELITE`` starts
-   with the lowest robustness scores so far, or, one time in
-   ``1 / UNIFORM_SHARE``, a uniform draw; it stops at the first failing start,
+   with the lowest robustness scores so far (each stepped from ``RETIRE``
+   times at most), or, for a share ``UNIFORM_SHARE`` of them, a uniform
+   draw; it stops at the first failing start,
    which is then moved towards the middle of the space, each variable in turn
    (set to its middle if the start still fails there, else bisected), so the
    counterexample has as few variables off the middle as it can, each on the
@@ -62,6 +63,9 @@ ELITE = 4
 
 STEP = 0.1
 """A guided step's standard deviation, per variable, as a fraction of half its range."""
+
+RETIRE = 4
+"""Steps taken from one start at most before it leaves the pool, so a search does not dwell where nothing fails."""
 
 UNIFORM_SHARE = 0.25
 """The share of the guided search's later starts drawn uniformly all the same (failures elsewhere)."""
@@ -283,21 +287,41 @@ def _time_limit(env: Any) -> int | None:
     return None
 
 
-def _proposals(
-    starts: Starts, rng: np.random.Generator, n: int, scored: list[tuple[float, int, np.ndarray]]
-) -> np.ndarray:
+class _Pool:
+    """The guided search's starts so far, by robustness score; each is stepped from ``RETIRE`` times at most."""
+
+    def __init__(self) -> None:
+        self._heap: list[tuple[float, int, np.ndarray]] = []  # (score, order, point): ties go to the earlier start
+        self._uses: dict[int, int] = {}
+
+    def add(self, score: float, order: int, point: np.ndarray) -> None:
+        heapq.heappush(self._heap, (score, order, point))
+
+    def parents(self) -> list[tuple[int, np.ndarray]]:
+        """The ``ELITE`` lowest-scoring starts not yet used up, with their order of arrival."""
+        return [(order, point) for _, order, point in heapq.nsmallest(ELITE, self._heap)]
+
+    def use(self, order: int) -> None:
+        self._uses[order] = self._uses.get(order, 0) + 1
+        if self._uses[order] >= RETIRE:
+            self._heap = [t for t in self._heap if t[1] != order]
+            heapq.heapify(self._heap)
+
+
+def _proposals(starts: Starts, rng: np.random.Generator, n: int, pool: _Pool) -> np.ndarray:
     """``n`` new starts: Gaussian steps from the lowest-scoring starts so far, some uniform draws among them.
 
     A space of reset seeds has no neighbourhoods (seed 41 and seed 42 start anywhere): all its starts are uniform.
     """
     points = starts.uniform(rng, n)
-    if starts.how == "reset seeds" or not scored:
+    elite = pool.parents()
+    if starts.how == "reset seeds" or not elite:
         return points
-    elite = [p for _, _, p in heapq.nsmallest(ELITE, scored, key=lambda t: (t[0], t[1]))]
     half = (starts.high - starts.low) / 2.0
     for i in range(n):
         if rng.random() >= UNIFORM_SHARE:
-            centre = elite[int(rng.integers(len(elite)))]
+            order, centre = elite[int(rng.integers(len(elite)))]
+            pool.use(order)
             points[i] = np.clip(centre + rng.normal(0.0, STEP, len(centre)) * half, starts.low, starts.high)
     return points
 
@@ -305,18 +329,18 @@ def _proposals(
 def _guided(runner: EpisodeRunner, examples: int, rng: np.random.Generator) -> tuple[Outcome, np.ndarray, int] | None:
     """The first failing start of the guided search, its point and the episodes run up to it; ``None``: none."""
     starts = runner.starts
-    scored: list[tuple[float, int, np.ndarray]] = []  # (score, order, point): ties go to the earlier start
+    pool = _Pool()
     done = 0
     while done < examples:
         if done == 0:
             first = [starts.center[None, :]] if starts.how != "reset seeds" else []
             points = np.concatenate([*first, starts.uniform(rng, EXPLORE)])[: min(examples, EXPLORE + 1)]
         else:
-            points = _proposals(starts, rng, min(runner.batch, examples - done), scored)
+            points = _proposals(starts, rng, min(runner.batch, examples - done), pool)
         for i, (outcome, point) in enumerate(zip(runner.run(points), points, strict=True)):
             if outcome.failed:
                 return outcome, point, done + i + 1
-            scored.append((outcome.judgement.score, done + i, point))
+            pool.add(outcome.judgement.score, done + i, point)
         done += len(points)
     return None
 

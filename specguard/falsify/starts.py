@@ -47,6 +47,7 @@ __all__ = [
     "StartSpace",
     "StartWrapper",
     "Starts",
+    "as_start_space",
     "setter_for",
 ]
 
@@ -338,3 +339,16 @@ class StartWrapper(gym.Wrapper[Any, Any, Any, Any]):
         _, info = self.env.reset(seed=seed, options=options or None)
         assert self.starts.apply is not None
         return self.starts.apply(self.env, values), info
+
+
+def as_start_space(where: str, value: object) -> StartSpace | None:
+    """A declared start space: ``None``, a :class:`StartSpace` or its ranges ``{name: (lo, hi)}``.
+
+    Raises:
+        InvalidSpec: naming ``where`` and the value given.
+    """
+    if value is None or isinstance(value, StartSpace):
+        return value
+    if not isinstance(value, Mapping):
+        raise InvalidSpec(where, f"expected starts to be a StartSpace or {{name: (lo, hi)}}, got {value!r}")
+    return StartSpace(dict(value))

@@ -48,8 +48,9 @@ def goal_spec(
             XPASS once they start passing.
         falsify: add an item ``[falsify]`` that searches each trained run's start space for
             starts from which its policy misses the spec (:class:`specguard.Falsify`; a start
-            space or its ranges; ``True``: the env's own starts). It fails on a counterexample,
-            or with ``Falsify(max_rate=...)`` on a failure rate over the start space above it.
+            space or its ranges; ``True``: the spec's own, ``Spec.starts``, else the env's). It
+            fails on a counterexample, or with ``Falsify(max_rate=...)`` on a failure rate over
+            the start space above it.
 
     A malformed ``expect`` or ``xfail`` does not stop collection: the test
     becomes one item that fails with the error (naming the test and the

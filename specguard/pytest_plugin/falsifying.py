@@ -39,21 +39,24 @@ def falsify_lines(found: dict[int, Any], verdicts: dict[int, Any], max_rate: flo
 
 def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: Any) -> None:
     """Train (or read back) the item's spec, falsify every run, and pass, fail or xfail the item."""
+    from specguard.engine.falsification import start_space
     from specguard.falsify.check import falsify_verdict
     from specguard.stats.intervals import RunVerdict
 
     with one_line_errors(item):
         spec, _ = spec_of(item, expect)
         trained = scaled(state, spec)
+        space = start_space(trained, check.starts)
+        space.resolve(trained.initial_env.make())  # names and bounds checked before anything trains
         result = run(state, trained)
-        found = result.falsify(check.starts, **check.kwargs())
+        found = result.falsify(space, **check.kwargs())
     verdicts = {seed: falsify_verdict(f, check.max_rate, trained.confidence) for seed, f in found.items()}
     lines = falsify_lines(found, verdicts, check.max_rate)
     gifs: dict[int, Any] = {}
     if state.options.report_dir is not None:  # the counterexamples' episodes, replayed as GIFs
         from specguard.report.gifs import counterexample_gifs
 
-        gifs = counterexample_gifs(state.options.report_dir, group_of(item), result, found, check.starts)
+        gifs = counterexample_gifs(state.options.report_dir, group_of(item), result, found, space)
         lines += [
             f"seed {seed}: counterexample episode: {gif.path} ({gif.text})" if gif.path else f"seed {seed}: {gif.text}"
             for seed, gif in gifs.items()
