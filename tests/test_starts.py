@@ -55,6 +55,33 @@ def test_ranges_left_out_keep_the_envs_own_reset_range():
     assert points[:, 0].min() < -0.9 and points[:, 0].max() > 0.9
 
 
+@pytest.mark.parametrize(
+    ("env_id", "values", "attributes"),
+    [
+        ("CartPole-v1", {"length": 0.8, "masspole": 0.3}, {"length": 0.8, "total_mass": 1.3, "polemass_length": 0.24}),
+        ("Pendulum-v1", {"g": 3.7}, {"g": 3.7}),
+        ("Acrobot-v1", {"link_mass_2": 2.0}, {"LINK_MASS_2": 2.0}),
+        ("MountainCar-v0", {"gravity": 0.003}, {"gravity": 0.003}),
+        ("MountainCarContinuous-v0", {"power": 0.001}, {"power": 0.001}),
+    ],
+)
+def test_a_start_space_may_range_over_the_envs_physical_parameters(env_id, values, attributes):
+    space = StartSpace({n: (v, v) for n, v in values.items()})
+    starts = space.resolve(gym.make(env_id))
+    assert set(starts.names[-len(values) :]) == set(values)  # after the state variables, only those declared
+    point = starts.uniform(np.random.default_rng(0), 1)[0]
+    env, _ = start(env_id, starts.values(point), ranges={n: (v, v) for n, v in values.items()})
+    fresh = gym.make(env_id).unwrapped
+    for attribute, value in attributes.items():
+        assert getattr(env.unwrapped, attribute) == pytest.approx(value)
+        assert getattr(fresh, attribute) != pytest.approx(value)  # set on that env alone, not on its class
+
+
+def test_a_parameter_range_must_lie_above_zero():
+    with pytest.raises(InvalidSpec, match=r"the range of the parameter 'length' is \(0, 1\): expected values > 0"):
+        StartSpace({"length": (0.0, 1.0)}).resolve(gym.make("CartPole-v1"))
+
+
 def test_every_builtin_default_lies_within_its_bounds():
     for setter in BUILTIN_SETTERS.values():
         assert set(setter.default) == set(setter.bounds) == set(setter.names)
@@ -63,7 +90,8 @@ def test_every_builtin_default_lies_within_its_bounds():
 
 
 def test_an_unknown_variable_is_named_with_the_known_ones():
-    with pytest.raises(UnknownFeature, match=r"'theta_dot', which its setter does not know; known: x, v, theta, omega"):
+    known = "x, v, theta, omega, gravity, masscart, masspole, length, force_mag"
+    with pytest.raises(UnknownFeature, match=rf"'theta_dot', which its setter does not know; known: {known}"):
         StartSpace({"theta_dot": (0, 1)}).resolve(gym.make("CartPole-v1"))
 
 

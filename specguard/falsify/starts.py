@@ -7,7 +7,12 @@ starts. A :class:`StartSpace` names other starts: per state variable a range
 * the classic-control envs have built-in setters (:data:`BUILTIN_SETTERS`):
   CartPole ``x, v, theta, omega``; Pendulum ``theta, omega``; Acrobot
   ``theta1, theta2, omega1, omega2``; MountainCar and MountainCarContinuous
-  ``position, velocity``. A range left out keeps the env's own reset range;
+  ``position, velocity``. A range left out keeps the env's own reset range.
+  Their physical parameters may be searched too (:attr:`Setter.parameters`:
+  CartPole ``gravity, masscart, masspole, length, force_mag``; Pendulum
+  ``g, m, l``; Acrobot ``link_length_1, link_length_2, link_mass_1,
+  link_mass_2``; MountainCar ``force, gravity``; MountainCarContinuous
+  ``power``); one left out keeps the env's own value;
 * any env: the hook ``set_state(env, values)`` (``values`` by name; it sets
   the state of ``env.unwrapped`` and returns the observation of that state),
   or ``reset_options=True``: the values are passed as ``reset(options=values)``;
@@ -32,7 +37,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import gymnasium as gym
@@ -67,12 +72,39 @@ class Setter:
         bounds: per variable, the range any start must lie in (``+-inf`` for none).
         default: per variable, the env's own reset range (the start space's default).
         apply: ``apply(env, values) -> observation``: sets ``env.unwrapped``'s state.
+        parameters: physical parameters a start space may also range over, by
+            name: the attribute of ``env.unwrapped`` each sets (any value > 0).
+        settle: ``settle(unwrapped)`` after parameters are set: recomputes what the env derives from them.
     """
 
     names: tuple[str, ...]
     bounds: Mapping[str, Range]
     default: Mapping[str, Range]
     apply: Callable[[gym.Env, Mapping[str, float]], Any]
+    parameters: Mapping[str, str] = field(default_factory=dict)
+    settle: Callable[[Any], None] | None = None
+
+    def with_parameters(self, names: tuple[str, ...]) -> Callable[[gym.Env, Mapping[str, float]], Any]:
+        """``apply`` that also sets the parameters ``names`` from the values, before the state."""
+        if not names:
+            return self.apply
+        attributes = {n: self.parameters[n] for n in names}
+        settle, apply = self.settle, self.apply
+
+        def apply_all(env: gym.Env, values: Mapping[str, float]) -> Any:
+            u = env.unwrapped
+            for name, attribute in attributes.items():
+                setattr(u, attribute, float(values[name]))
+            if settle is not None:
+                settle(u)
+            return apply(env, values)
+
+        return apply_all
+
+
+def _settle_cartpole(u: Any) -> None:
+    u.total_mass = u.masspole + u.masscart
+    u.polemass_length = u.masspole * u.length
 
 
 def _set_cartpole(env: gym.Env, v: Mapping[str, float]) -> Any:
@@ -107,6 +139,10 @@ _MOUNTAIN_CAR = Setter(
     bounds={"position": (-1.2, 0.6), "velocity": (-0.07, 0.07)},
     default={"position": (-0.6, -0.4), "velocity": (0.0, 0.0)},
     apply=_set_mountain_car,
+    parameters={"force": "force", "gravity": "gravity"},
+)
+_MOUNTAIN_CAR_CONTINUOUS = Setter(
+    _MOUNTAIN_CAR.names, _MOUNTAIN_CAR.bounds, _MOUNTAIN_CAR.default, _set_mountain_car, parameters={"power": "power"}
 )
 BUILTIN_SETTERS: Mapping[str, Setter] = {
     "CartPoleEnv": Setter(
@@ -114,12 +150,15 @@ BUILTIN_SETTERS: Mapping[str, Setter] = {
         bounds={"x": (-4.8, 4.8), "v": (-_INF, _INF), "theta": (-0.41887903, 0.41887903), "omega": (-_INF, _INF)},
         default={name: (-0.05, 0.05) for name in ("x", "v", "theta", "omega")},
         apply=_set_cartpole,
+        parameters={n: n for n in ("gravity", "masscart", "masspole", "length", "force_mag")},
+        settle=_settle_cartpole,
     ),
     "PendulumEnv": Setter(
         names=("theta", "omega"),
         bounds={"theta": (-math.pi, math.pi), "omega": (-8.0, 8.0)},
         default={"theta": (-math.pi, math.pi), "omega": (-1.0, 1.0)},
         apply=_set_pendulum,
+        parameters={"g": "g", "m": "m", "l": "l"},
     ),
     "AcrobotEnv": Setter(
         names=("theta1", "theta2", "omega1", "omega2"),
@@ -131,9 +170,10 @@ BUILTIN_SETTERS: Mapping[str, Setter] = {
         },
         default={name: (-0.1, 0.1) for name in ("theta1", "theta2", "omega1", "omega2")},
         apply=_set_acrobot,
+        parameters={n: n.upper() for n in ("link_length_1", "link_length_2", "link_mass_1", "link_mass_2")},
     ),
     "MountainCarEnv": _MOUNTAIN_CAR,
-    "Continuous_MountainCarEnv": _MOUNTAIN_CAR,
+    "Continuous_MountainCarEnv": _MOUNTAIN_CAR_CONTINUOUS,
 }
 """The built-in setters, by the class name of the env's ``unwrapped``."""
 
@@ -170,6 +210,14 @@ def check_known(where: str, names: Mapping[str, Any], known: tuple[str, ...]) ->
             where,
             f"the start space names {', '.join(map(repr, unknown))}, which its setter does not know; "
             f"known: {', '.join(known)}",
+        )
+
+
+def check_parameter(where: str, name: str, rng: Range) -> None:
+    """A physical parameter's range lies above 0 (a mass, a length, a force)."""
+    if rng[0] <= 0:
+        raise InvalidSpec(
+            where, f"the range of the parameter {name!r} is ({rng[0]:g}, {rng[1]:g}): expected values > 0"
         )
 
 
@@ -258,13 +306,17 @@ class StartSpace:
                 )
             seeds = {"seed": SEED_RANGE}
             return Starts(where, ("seed",), _array(seeds, ("seed",), 0), _array(seeds, ("seed",), 1), "reset seeds")
-        check_known(where, declared, setter.names)
+        check_known(where, declared, (*setter.names, *setter.parameters))
+        params = tuple(n for n in setter.parameters if n in declared)
         for name, rng in declared.items():
-            check_within(where, name, rng, setter.bounds[name])
-        full = {n: declared.get(n, setter.default[n]) for n in setter.names}
-        return Starts(
-            where, setter.names, _array(full, setter.names, 0), _array(full, setter.names, 1), "state", setter.apply
-        )
+            if name in params:
+                check_parameter(where, name, rng)
+            else:
+                check_within(where, name, rng, setter.bounds[name])
+        full = {n: declared.get(n, setter.default[n]) for n in setter.names} | {n: declared[n] for n in params}
+        names = (*setter.names, *params)
+        apply = setter.with_parameters(params)
+        return Starts(where, names, _array(full, names, 0), _array(full, names, 1), "state", apply)
 
 
 def _array(ranges: Mapping[str, Range], names: tuple[str, ...], side: int) -> np.ndarray:
