@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from specguard import Goal
-from specguard.extend import Annotation, Box, ChildWeights, Context, Node, check_children
+from specguard.extend import MARGIN_FLOOR, Annotation, Box, ChildWeights, Context, Node, check_children
 from specguard.validation import check_name
 from specguard_plugins._checks import check_weights, weights_text
 
@@ -127,6 +127,15 @@ class AnyOf(Node):
 
     def contains(self, ctx: Context) -> bool:
         return any(ctx.inside)
+
+    def margin(self, ctx: Context, margins: abc.Sequence[float]) -> float:
+        """A union's robustness: its best child's margin (the deepest inside, or the nearest from outside).
+
+        The default (the smallest distance, signed by membership) would score a
+        state deep inside one child and far from the other as barely inside.
+        """
+        m = abs(max(margins, default=1.0))
+        return m if self.contains(ctx) else -max(m, MARGIN_FLOOR)
 
     def describe(self) -> str:
         return f"AnyOf {self.name!r}{weights_text(self.weights)}"

@@ -307,3 +307,18 @@ def test_constructed_envs_pass_both_checkers():
         name="cartpole",
     )
     both_checkers(tree)
+
+
+def test_a_union_s_margin_is_its_best_child_s():
+    from specguard.build.initial_env import state_type
+    from specguard.falsify.robustness import margins
+
+    union = AnyOf(sg.Goal("left", x=(-1.0, 0.7)), sg.Goal("right", x=(0.5, 1.0)), name="sides")
+    paths = ("sides", "sides/left", "sides/right")
+    # 0.22 inside "right", 0.02 past "left": the union holds with 0.22 to spare (the smallest would say 0.02).
+    got = margins(union, state_type(("x",))(0.72), {}, dict(zip(paths, (True, False, True))), {"x": 1.0})
+    assert got["sides"] == pytest.approx(0.22) and got["sides/left"] == pytest.approx(-0.02)
+    # Outside both: as far as the nearer child.
+    union = AnyOf(sg.Goal("left", x=(-1.0, -0.5)), sg.Goal("right", x=(0.1, 1.0)), name="sides")
+    got = margins(union, state_type(("x",))(0.0), {}, dict(zip(paths, (False, False, False))), {"x": 1.0})
+    assert got["sides"] == pytest.approx(-0.1)
