@@ -216,3 +216,42 @@ def test_the_report_gets_a_gif_replaying_each_counterexample(pytester):
     data = json.loads((pytester.path / "report" / "goal-specs.json").read_text())
     (found,) = data["counterexamples"]
     assert found["gif"] == gif.name and found["missed"] and f"theta={found['start']['theta']:.6g}" in out
+
+
+class _Reporter:
+    def __init__(self, isatty):
+        self.isatty, self.lines = isatty, []
+
+    def ensure_newline(self):
+        pass
+
+    def write_line(self, line):
+        self.lines.append(line)
+
+
+class _Config:
+    """What the terminal sinks read of a pytest config: verbosity, the reporter, markup."""
+
+    def __init__(self, *, isatty=True, verbosity=0):
+        self.reporter, self.verbosity = _Reporter(isatty), verbosity
+        self.pluginmanager = self
+
+    def get_plugin(self, name):
+        return self.reporter if name == "terminalreporter" else None
+
+    def get_verbosity(self):
+        return self.verbosity
+
+    def get_terminal_writer(self):
+        return type("Writer", (), {"hasmarkup": True})()
+
+
+def test_falsify_progress_lines_reach_a_live_terminal_as_training_s_do_and_never_a_log_or_quiet_run():
+    from specguard.pytest_plugin.session import terminal_lines
+
+    live = _Config()
+    terminal_lines(live)("up seed 0: guided search: up to 200 episodes")
+    assert live.reporter.lines == ["[specguard] up seed 0: guided search: up to 200 episodes"]
+    for quiet in (_Config(isatty=False), _Config(verbosity=-1)):
+        terminal_lines(quiet)("anything")
+        assert quiet.reporter.lines == []

@@ -19,7 +19,7 @@ from typing import Any
 import pytest
 
 from specguard.pytest_plugin.items import GoalMissed, group_of, one_line_errors, spec_of
-from specguard.pytest_plugin.session import Session, run, scaled
+from specguard.pytest_plugin.session import Session, run, scaled, terminal_lines
 
 __all__ = ["COUNTEREXAMPLES", "falsify_lines", "run_falsify_item"]
 
@@ -49,7 +49,7 @@ def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: 
         space = start_space(trained, check.starts)
         space.resolve(trained.initial_env.make())  # names and bounds checked before anything trains
         result = run(state, trained)
-        found = result.falsify(space, **check.kwargs())
+        found = result.falsify(space, **check.kwargs(), progress=terminal_lines(item.config))
     verdicts = {seed: falsify_verdict(f, check.max_rate, trained.confidence) for seed, f in found.items()}
     lines = falsify_lines(found, verdicts, check.max_rate)
     gifs: dict[int, Any] = {}

@@ -11,7 +11,7 @@ import pytest
 
 from specguard.pytest_plugin.options import Options
 
-__all__ = ["Session", "gate_of", "run", "saved_runs", "scaled", "terminal_progress"]
+__all__ = ["Session", "gate_of", "run", "saved_runs", "scaled", "terminal_lines", "terminal_progress"]
 
 
 @dataclasses.dataclass
@@ -46,26 +46,38 @@ def terminal_progress(config: pytest.Config) -> Callable[[Any], None]:
     """
 
     def write(event: Any) -> None:
-        from specguard.engine.progress import format_event
+        from specguard.engine.progress import format_event, print_event
 
-        if config.get_verbosity() < 0:
-            return
-        reporter = config.pluginmanager.get_plugin("terminalreporter")
-        if reporter is None:  # e.g. -p no:terminal: stderr, as `specguard run` does
-            if event.finished:
-                from specguard.engine.progress import print_event
-
-                print_event(event)
-            return
-        live = reporter.isatty and config.get_terminal_writer().hasmarkup
-        if not live and not event.finished:
-            return
-        capture = config.pluginmanager.get_plugin("capturemanager")
-        with capture.global_and_fixture_disabled() if capture is not None else contextlib.nullcontext():
-            reporter.ensure_newline()
-            reporter.write_line(format_event(event))
+        _terminal_line(config, format_event(event), final=event.finished, fallback=lambda: print_event(event))
 
     return write
+
+
+def terminal_lines(config: pytest.Config) -> Callable[[str], None]:
+    """A sink for progress lines (the falsifier's phases), shown as training's are: on a terminal only."""
+
+    def write(line: str) -> None:
+        _terminal_line(config, f"[specguard] {line}", final=False, fallback=lambda: None)
+
+    return write
+
+
+def _terminal_line(config: pytest.Config, text: str, *, final: bool, fallback: Callable[[], None]) -> None:
+    """``text`` on a line of its own, uncaptured: always if ``final``, else only on a live terminal; none under -q."""
+    if config.get_verbosity() < 0:
+        return
+    reporter = config.pluginmanager.get_plugin("terminalreporter")
+    if reporter is None:  # e.g. -p no:terminal: stderr, as `specguard run` does
+        if final:
+            fallback()
+        return
+    live = reporter.isatty and config.get_terminal_writer().hasmarkup
+    if not live and not final:
+        return
+    capture = config.pluginmanager.get_plugin("capturemanager")
+    with capture.global_and_fixture_disabled() if capture is not None else contextlib.nullcontext():
+        reporter.ensure_newline()
+        reporter.write_line(text)
 
 
 def run(state: Session, spec: Any) -> Any:
