@@ -13,10 +13,10 @@ episode's end by the spec's property (:mod:`specguard.falsify.robustness`).
 2. **guided search**: the middle of the space, then ``EXPLORE`` uniform
    draws, then rounds of local search: each new start is a Gaussian step
    (``STEP`` of each range's half-width) from one of the ``ELITE`` starts
-   with the lowest robustness scores so far (each stepped from ``RETIRE``
-   times at most), or, for a share ``UNIFORM_SHARE`` of them, a uniform
-   draw; it stops at the first failing start,
-   which is then moved towards the middle of the space, each variable in turn
+   with the lowest robustness scores so far (a start leaves them once
+   ``RETIRE`` steps were taken from it), or, for a share ``UNIFORM_SHARE``
+   of them, a uniform draw; it stops at the first failing start, which is
+   then moved towards the middle of the space, each variable in turn
    (set to its middle if the start still fails there, else bisected), so the
    counterexample has as few variables off the middle as it can, each on the
    boundary of the failure region;
@@ -67,7 +67,10 @@ STEP = 0.1
 """A guided step's standard deviation, per variable, as a fraction of half its range."""
 
 RETIRE = 4
-"""Steps taken from one start at most before it leaves the pool, so a search does not dwell where nothing fails."""
+"""Steps from one start after which it leaves the pool, so a search does not dwell where nothing fails.
+
+The parents of a round are picked when it begins: a start retired during a round may be stepped from again in it.
+"""
 
 UNIFORM_SHARE = 0.25
 """The share of the guided search's later starts drawn uniformly all the same (failures elsewhere)."""
@@ -290,7 +293,7 @@ def _time_limit(env: Any) -> int | None:
 
 
 class _Pool:
-    """The guided search's starts so far, by robustness score; each is stepped from ``RETIRE`` times at most."""
+    """The guided search's starts so far, by robustness score; one leaves once ``RETIRE`` steps were taken from it."""
 
     def __init__(self) -> None:
         self._heap: list[tuple[float, int, np.ndarray]] = []  # (score, order, point): ties go to the earlier start
