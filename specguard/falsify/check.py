@@ -40,7 +40,7 @@ from specguard.falsify.starts import StartSpace, as_start_space
 from specguard.stats.intervals import RunVerdict, run_verdict
 from specguard.validation import check_count
 
-__all__ = ["Falsify", "as_falsify", "falsify_verdict"]
+__all__ = ["Falsify", "as_falsify", "falsify_verdict", "rule_text"]
 
 
 @dataclass(frozen=True, init=False)
@@ -108,7 +108,7 @@ def falsify_verdict(found: Falsification, max_rate: float | None, confidence: fl
     failures and so overcount them).
 
     Example:
-        >>> from specguard.falsify.starts import StartSpace, as_start_space
+        >>> from specguard.falsify.starts import StartSpace
         >>> from specguard.falsify.search import Falsification
         >>> found = Falsification(StartSpace(), uniform_failures=0, uniform_episodes=100)
         >>> falsify_verdict(found, None).value, falsify_verdict(found, 0.05).value
@@ -120,6 +120,16 @@ def falsify_verdict(found: Falsification, max_rate: float | None, confidence: fl
         return RunVerdict.MISSED if found.found else RunVerdict.MET
     held = found.uniform_episodes - found.uniform_failures
     return run_verdict(held, found.uniform_episodes, 1.0 - max_rate, confidence)
+
+
+def rule_text(max_rate: float | None) -> str:
+    """What a falsify check asserts, in words (reports and failure messages say it alike).
+
+    Example:
+        >>> rule_text(None), rule_text(0.05)
+        ('no counterexample', 'a failure rate at most 0.05 over the start space')
+    """
+    return "no counterexample" if max_rate is None else f"a failure rate at most {max_rate:g} over the start space"
 
 
 def as_falsify(where: str, value: object) -> Falsify | None:

@@ -41,7 +41,8 @@ from __future__ import annotations
 
 import heapq
 import json
-from collections.abc import Callable, Sequence
+from collections import Counter
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -52,7 +53,7 @@ from specguard.falsify.robustness import Judgement, feature_scales, judge_end, o
 from specguard.falsify.starts import START_OPTION, Starts, StartSpace
 from specguard.stats.intervals import success_interval
 
-__all__ = ["EpisodeRunner", "Falsification", "Outcome", "falsify"]
+__all__ = ["EpisodeRunner", "Falsification", "Outcome", "falsify", "start_text"]
 
 BISECTIONS = 16
 """Bisection steps per variable when a counterexample is moved to the failure region's boundary."""
@@ -257,8 +258,7 @@ class Falsification:
             lines.append(f"no counterexample in {self.guided} guided episodes")
         else:
             c = self.counterexample
-            start = ", ".join(f"{k}={v:.6g}" for k, v in c.start.items())
-            lines.append(f"counterexample ({self.origin}): {start}")
+            lines.append(f"counterexample ({self.origin}): {start_text(c.start)}")
             lines.append(f"  missed: {', '.join(c.judgement.missed)}")
             lines.append(f"  episode: {c.summary()}")
         if self.uniform_episodes:
@@ -282,6 +282,11 @@ class Falsification:
         }
 
 
+def start_text(start: Mapping[str, float]) -> str:
+    """A start as reports print it: ``x=0.502075, v=0`` (6 significant digits; JSON keeps it exact)."""
+    return ", ".join(f"{k}={v:.6g}" for k, v in start.items())
+
+
 def _time_limit(env: Any) -> int | None:
     """The episode's step limit: the outermost ``TimeLimit``'s among ``env``'s wrappers, else ``None``."""
     while env is not None:
@@ -296,21 +301,19 @@ class _Pool:
     """The guided search's starts so far, by robustness score; one leaves once ``RETIRE`` steps were taken from it."""
 
     def __init__(self) -> None:
-        self._heap: list[tuple[float, int, np.ndarray]] = []  # (score, order, point): ties go to the earlier start
-        self._uses: dict[int, int] = {}
+        self._scored: list[tuple[float, int, np.ndarray]] = []  # (score, order, point): ties go to the earlier start
+        self._uses: Counter[int] = Counter()
 
     def add(self, score: float, order: int, point: np.ndarray) -> None:
-        heapq.heappush(self._heap, (score, order, point))
+        self._scored.append((score, order, point))
 
     def parents(self) -> list[tuple[int, np.ndarray]]:
         """The ``ELITE`` lowest-scoring starts not yet used up, with their order of arrival."""
-        return [(order, point) for _, order, point in heapq.nsmallest(ELITE, self._heap)]
+        kept = (t for t in self._scored if self._uses[t[1]] < RETIRE)
+        return [(order, point) for _, order, point in heapq.nsmallest(ELITE, kept)]
 
     def use(self, order: int) -> None:
-        self._uses[order] = self._uses.get(order, 0) + 1
-        if self._uses[order] >= RETIRE:
-            self._heap = [t for t in self._heap if t[1] != order]
-            heapq.heapify(self._heap)
+        self._uses[order] += 1
 
 
 def _proposals(starts: Starts, rng: np.random.Generator, n: int, pool: _Pool) -> np.ndarray:
@@ -394,6 +397,25 @@ def _to_boundary(runner: EpisodeRunner, failing: Outcome, point: np.ndarray) -> 
     return best, best_point
 
 
+def _kept(
+    runner: EpisodeRunner,
+    outcome: Outcome,
+    point: np.ndarray,
+    *,
+    shrink: str | None,
+    database: Any,
+    key: str,
+    say: Callable[[str], None],
+) -> Outcome:
+    """A failing start as the counterexample: shrunk (saying ``shrink``; ``None``: not shrunk), then stored."""
+    if shrink is not None:
+        say(shrink)
+        outcome, _ = _to_boundary(runner, outcome, point)
+    if database is not None and key:
+        database.save(key.encode(), json.dumps(outcome.start).encode())
+    return outcome
+
+
 def falsify(
     runner: EpisodeRunner,
     *,
@@ -442,12 +464,10 @@ def falsify(
         if hit is not None:
             outcome, point, result.episodes_to_first = hit
             result.first = outcome
-            if shrink:
-                say("shrinking: moving each variable towards the middle of its range while it still fails")
-                outcome, point = _to_boundary(runner, outcome, point)
-            result.counterexample = outcome
-            if database is not None and key:
-                database.save(key.encode(), json.dumps(outcome.start).encode())
+            moving = "shrinking: moving each variable towards the middle of its range while it still fails"
+            result.counterexample = _kept(
+                runner, outcome, point, shrink=moving if shrink else None, database=database, key=key, say=say
+            )
     result.guided = runner.episodes - start_count
 
     if uniform:
@@ -461,11 +481,9 @@ def falsify(
         result.interval = (1.0 - ok_hi, 1.0 - ok_lo)
         if result.counterexample is None and failures:  # a failure is a failure, whoever drew it
             i = next(i for i, o in enumerate(drawn) if o.failed)
-            outcome, point = drawn[i], points[i]
-            if shrink:
-                say("shrinking the first failing uniform draw towards the middle of the space")
-                outcome, point = _to_boundary(runner, outcome, point)
-            result.counterexample, result.from_uniform = outcome, True
-            if database is not None and key:
-                database.save(key.encode(), json.dumps(outcome.start).encode())
+            moving = "shrinking the first failing uniform draw towards the middle of the space"
+            result.counterexample = _kept(
+                runner, drawn[i], points[i], shrink=moving if shrink else None, database=database, key=key, say=say
+            )
+            result.from_uniform = True
     return result

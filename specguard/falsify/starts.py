@@ -35,6 +35,7 @@ Example:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -141,9 +142,7 @@ _MOUNTAIN_CAR = Setter(
     apply=_set_mountain_car,
     parameters={"force": "force", "gravity": "gravity"},
 )
-_MOUNTAIN_CAR_CONTINUOUS = Setter(
-    _MOUNTAIN_CAR.names, _MOUNTAIN_CAR.bounds, _MOUNTAIN_CAR.default, _set_mountain_car, parameters={"power": "power"}
-)
+_MOUNTAIN_CAR_CONTINUOUS = dataclasses.replace(_MOUNTAIN_CAR, parameters={"power": "power"})
 BUILTIN_SETTERS: Mapping[str, Setter] = {
     "CartPoleEnv": Setter(
         names=("x", "v", "theta", "omega"),

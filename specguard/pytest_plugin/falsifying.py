@@ -29,7 +29,9 @@ COUNTEREXAMPLES = "specguard.counterexamples"
 
 def falsify_lines(found: dict[int, Any], verdicts: dict[int, Any], max_rate: float | None) -> list[str]:
     """Per run, its verdict and the falsifier's report, indented."""
-    rule = "no counterexample" if max_rate is None else f"a failure rate at most {max_rate:g} over the start space"
+    from specguard.falsify.check import rule_text
+
+    rule = rule_text(max_rate)
     lines = []
     for seed, falsification in sorted(found.items()):
         lines.append(f"seed {seed}: {verdicts[seed].value} ({rule})")

@@ -19,6 +19,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 from urllib.parse import quote
 
+from specguard.falsify.check import rule_text
+from specguard.falsify.search import start_text
 from specguard.utils.files import write_atomic
 from specguard.utils.text import interval_text, markdown_table
 
@@ -199,14 +201,12 @@ def counterexample_lines(runs: Sequence[Row]) -> list[str]:
     """
     lines: list[str] = []
     for run in runs:
-        rule = "no counterexample" if run["max_rate"] is None else f"failure rate at most {run['max_rate']:g}"
-        head = f"- **`{run['group']}`**, seed {run['seed']}: {run['verdict']} ({rule})"
+        head = f"- **`{run['group']}`**, seed {run['seed']}: {run['verdict']} ({rule_text(run['max_rate'])})"
         if run["start"] is None:
             head += f": no counterexample in {run['guided']} guided episodes"
         else:
-            start = ", ".join(f"{k}={v:.6g}" for k, v in run["start"].items())
             missed = ", ".join(f"`{m}`" for m in run["missed"])
-            head += f": `{start}`, {run['origin']}; missed {missed}; {run['episode']}"
+            head += f": `{start_text(run['start'])}`, {run['origin']}; missed {missed}; {run['episode']}"
         if run["rate"]:
             head += f"; failure rate over the start space {run['rate']}"
         lines.append(head)
