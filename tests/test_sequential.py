@@ -156,3 +156,26 @@ def test_a_20_point_drop_of_a_goal_near_93_percent_is_usually_flagged():
 
 def replace_alpha(alpha: float) -> Design:
     return Design(alpha=alpha, baseline_seeds=8, first=2, ceiling=8)
+
+
+@pytest.mark.parametrize(
+    ("before", "after"),
+    [
+        ([(30, 30), (30, 30)], [(0, 30), (30, 30)]),  # 2 seeds a side, one never learns: 266 points before the fix
+        ([(30, 30)], [(30, 30), (0, 30)]),  # 1 against 2: 1151 points
+        ([(0, 30)], [(30, 30), (0, 30)]),  # a rise, as spread out
+    ],
+)
+def test_a_drop_in_success_is_never_bounded_beyond_100_points(before, after):
+    """A success rate moves 100 points at most: the drop's bound is clipped to the difference of two rates."""
+    look = compare_seeds(before, after, DESIGN, [len(after)])
+    assert -1.0 <= look.upper <= 1.0
+    points = int(look.describe().split("a drop of ")[1].split(" points")[0])
+    assert 0 <= points <= 100
+
+
+def test_the_drop_bound_lies_in_minus_one_to_one_for_every_outcome_of_few_seeds():
+    rng = np.random.default_rng(0)
+    kb, ka = rng.integers(0, 31, size=(2000, 2)), rng.integers(0, 31, size=(2000, 3))
+    _, _, upper = drop_bounds(kb, np.full_like(kb, 30), ka, np.full_like(ka, 30))
+    assert upper.min() >= -1.0 and upper.max() <= 1.0 and upper.max() == 1.0  # wide spread reaches the clip

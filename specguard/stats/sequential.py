@@ -336,7 +336,10 @@ def drop_bounds(
 
     The bound is a pooled two-sample t bound on per-seed rates, its variance floored at
     the binomial variance of a seed at the pooled rate (identical seeds are no evidence
-    of zero spread); with one seed a side, the binomial variance alone.
+    of zero spread); with one seed a side, the binomial variance alone. A drop is a
+    difference of two rates, so it lies in ``[-1, 1]``: the bound is clipped to that
+    range (with few seeds and a wide spread the t quantile alone would reach past it,
+    a drop of 142 points; clipping changes no verdict, as the margin is at most 1).
     """
     from scipy.special import ndtri, stdtrit
 
@@ -353,7 +356,8 @@ def drop_bounds(
     else:
         variance, quantile = floor, float(-ndtri(1.0 - confidence))
     drop = rb.mean(-1) - ra.mean(-1)
-    return rb.mean(-1), ra.mean(-1), drop + quantile * np.sqrt(variance * (1.0 / mb + 1.0 / ma))
+    upper = drop + quantile * np.sqrt(variance * (1.0 / mb + 1.0 / ma))
+    return rb.mean(-1), ra.mean(-1), np.clip(upper, -1.0, 1.0)
 
 
 def z_of(p: np.ndarray | float) -> np.ndarray:
