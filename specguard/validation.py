@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Sequence
 from numbers import Integral, Real
 from typing import Any, TypeGuard
 
@@ -29,17 +29,30 @@ __all__ = [
     "PATH_SEPARATOR",
     "check_budget",
     "check_callable",
+    "check_choice",
     "check_count",
+    "check_finite",
+    "check_flag",
     "check_name",
+    "check_natural",
+    "check_open_fraction",
     "check_positive",
+    "check_text",
     "check_truth",
+    "check_unique",
     "check_weight",
     "child_path",
     "function_text",
+    "is_choice",
     "is_count",
+    "is_finite",
+    "is_natural",
+    "is_open_fraction",
     "is_positive",
     "number_text",
+    "parse_choice",
     "parse_count",
+    "parse_natural",
     "parse_positive",
 ]
 
@@ -174,6 +187,160 @@ def parse_positive(text: object, meaning: str = "") -> float:
     if not is_positive(value):
         raise ValueError(f"expected a finite number > 0{_meaning(meaning)}, got {text!r}")
     return float(value)
+
+
+def is_natural(value: object) -> TypeGuard[Integral]:
+    """The one rule for a count from zero (a seed, draws that may be none): an integer ``>= 0``, never a bool."""
+    return isinstance(value, Integral) and not isinstance(value, bool) and int(value) >= 0
+
+
+def check_natural(where: str, argument: str, value: object, meaning: str = "") -> int:
+    """An integer ``>= 0`` (:func:`is_natural`) as an ``int``; ``meaning`` says what it counts in the message.
+
+    Raises:
+        InvalidSpec: naming ``where``, ``argument`` and the value given.
+
+    Example:
+        >>> check_natural("Falsify", "seed", 0)
+        0
+        >>> check_natural("Falsify", "seed", -1)
+        Traceback (most recent call last):
+        ...
+        specguard.error.InvalidSpec: Falsify: expected seed to be an integer >= 0, got -1...
+    """
+    if not is_natural(value):
+        raise InvalidSpec(where, f"expected {argument} to be an integer >= 0{_meaning(meaning)}, got {value!r}")
+    return int(value)
+
+
+def parse_natural(text: object, meaning: str = "") -> int:
+    """An integer ``>= 0`` (:func:`is_natural`) from an option's text: ``0``, or a count (see :func:`parse_count`).
+
+    Raises:
+        ValueError: anything else, saying what was expected; each door makes it its own usage error.
+    """
+    value = 0 if isinstance(text, str) and text.strip() == "0" else text
+    if isinstance(value, str) and _COUNT_TEXT.fullmatch(value.strip()):
+        value = int(value.strip())
+    if not is_natural(value):
+        raise ValueError(f"expected an integer >= 0{_meaning(meaning)}, got {text!r}")
+    return int(value)
+
+
+def is_open_fraction(value: object) -> TypeGuard[Real]:
+    """The one rule for a level, a confidence or a rate: a real number strictly between 0 and 1 (never a bool)."""
+    return isinstance(value, Real) and not isinstance(value, bool) and 0.0 < float(value) < 1.0
+
+
+def check_open_fraction(where: str, argument: str, value: object, meaning: str = "") -> float:
+    """A number in the open interval ``(0, 1)`` (:func:`is_open_fraction`) as a float.
+
+    Raises:
+        InvalidSpec: naming ``where``, ``argument`` and the value given (``nan`` and the ends 0 and 1 included).
+
+    Example:
+        >>> check_open_fraction("Spec 'up'", "confidence", 0.95)
+        0.95
+        >>> check_open_fraction("Spec 'up'", "confidence", 1.0)
+        Traceback (most recent call last):
+        ...
+        specguard.error.InvalidSpec: Spec 'up': expected confidence to be a number in (0, 1), got 1.0...
+    """
+    if not is_open_fraction(value):
+        raise InvalidSpec(where, f"expected {argument} to be a number in (0, 1){_meaning(meaning)}, got {value!r}")
+    return float(value)
+
+
+def is_finite(value: object) -> TypeGuard[Real]:
+    """The one rule for a bound: a finite real number (numpy numbers too), never a bool or a numeric string."""
+    return isinstance(value, Real) and not isinstance(value, (bool, np.bool_)) and math.isfinite(value)
+
+
+def check_finite(where: str, argument: str, value: object) -> float:
+    """A finite real number (:func:`is_finite`) as a float; ``"0"`` and ``True`` are not numbers here.
+
+    Raises:
+        InvalidSpec: naming ``where``, ``argument`` and the value given.
+    """
+    if not is_finite(value):
+        raise InvalidSpec(where, f"expected {argument} to be a finite number, got {value!r}")
+    return float(value)
+
+
+def check_flag(where: str, argument: str, value: object) -> bool:
+    """``True`` or ``False`` (a ``bool`` or ``numpy.bool_``): ``"no"`` would be true, and ``1`` reads as a count.
+
+    Raises:
+        InvalidSpec: naming ``where``, ``argument`` and the value given.
+    """
+    if not isinstance(value, (bool, np.bool_)):
+        raise InvalidSpec(where, f"expected {argument} to be True or False, got {value!r}")
+    return bool(value)
+
+
+def check_text(where: str, argument: str, value: object) -> str:
+    """A non-empty (not blank) string, as a plain ``str``: a name of a variable, an option's key.
+
+    Unlike :func:`check_name` it allows the path separators: it names no node.
+
+    Raises:
+        InvalidSpec: naming ``where``, ``argument`` and the value given.
+    """
+    if not isinstance(value, str) or not value.strip():
+        raise InvalidSpec(where, f"expected {argument} to be a non-empty string, got {value!r}")
+    return str.__str__(value)
+
+
+def is_choice(value: object, choices: Sequence[str]) -> bool:
+    """The one rule for a choice: a string among ``choices``, exactly as written there."""
+    return isinstance(value, str) and value in choices
+
+
+def check_choice(where: str, argument: str, value: object, choices: Sequence[str]) -> str:
+    """``value`` if it is one of ``choices`` (:func:`is_choice`).
+
+    Raises:
+        InvalidSpec: naming ``where``, ``argument``, the choices and the value given.
+
+    Example:
+        >>> check_choice("Spec 'up'", "undecided", "xfail", ("fail", "xfail", "pass"))
+        'xfail'
+    """
+    if not is_choice(value, choices):
+        raise InvalidSpec(where, f"expected {argument} to be one of {', '.join(choices)}, got {value!r}")
+    return str(value)
+
+
+def parse_choice(text: object, choices: Sequence[str]) -> str:
+    """One of ``choices`` (:func:`is_choice`) from an option's text; blanks around it are ignored.
+
+    Raises:
+        ValueError: anything else, saying what was expected; each door makes it its own usage error.
+    """
+    value = text.strip() if isinstance(text, str) else text
+    if not is_choice(value, choices):
+        raise ValueError(f"expected one of {', '.join(choices)}, got {text!r}")
+    return str(value)
+
+
+def check_unique(where: str, pairs: Iterable[tuple[str, Any]]) -> dict[str, Any]:
+    """``pairs`` as a dict, each name given once: a repeated name would let its last value win in silence.
+
+    Raises:
+        InvalidSpec: naming ``where``, the repeated name and both of its values.
+
+    Example:
+        >>> check_unique("--starts", [("x", (0.0, 1.0)), ("v", (0.0, 1.0))])
+        {'x': (0.0, 1.0), 'v': (0.0, 1.0)}
+    """
+    out: dict[str, Any] = {}
+    for name, value in pairs:
+        if name in out:
+            raise InvalidSpec(
+                where, f"{name!r} is given twice: {out[name]!r}, then {value!r}", hint="give each name once"
+            )
+        out[name] = value
+    return out
 
 
 def check_budget(where: str, budget: object) -> int:

@@ -9,6 +9,7 @@ from hypothesis.database import InMemoryExampleDatabase
 
 import specguard as sg
 from specguard.build.initial_env import state_type
+from specguard.cli.main import main
 from specguard.falsify.robustness import box_margin, feature_scales, margins
 from specguard.falsify.search import EpisodeRunner, falsify
 from specguard.falsify.starts import StartSpace
@@ -172,3 +173,65 @@ def test_an_operator_without_a_box_gets_a_margin_signed_by_membership():
     assert out == {"e/a": 0.25, "e/b": -1.75, "e": 0.25}
     out = margins(tree, s(1.5), {}, {"e": False, "e/a": False, "e/b": False}, {"x": 1.0})
     assert out["e"] == -0.5
+
+
+# -- bad input: one line naming the culprit -----------------------------------------------------------------------
+
+PENDULUM_FILE = """
+import specguard as sg
+
+pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
+budget = sg.Budget(timesteps=64, min_seeds=1, eval_episodes=1, checkpoints=1)
+up = sg.Spec(pendulum, sg.Goal("still", omega=(-0.25, 0.25)), budget=budget, expect={"still": 0.0},
+             hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1})
+"""
+
+
+@pytest.fixture
+def pendulum_file(tmp_path):
+    path = tmp_path / "pendulum_specs.py"
+    path.write_text(PENDULUM_FILE)
+    return path
+
+
+@pytest.mark.parametrize("seed", [-1, True, 1.5, "0"])
+def test_a_falsification_s_seed_is_an_integer_from_zero(seed):
+    with pytest.raises(sg.InvalidSpec, match=rf"^Falsify: expected seed to be an integer >= 0 .*got {seed!r}\n"):
+        sg.Falsify(seed=seed)
+    with pytest.raises(sg.InvalidSpec, match=rf"^falsify: expected seed to be an integer >= 0 .*got {seed!r}\n"):
+        falsify(runner(clean), examples=1, uniform=0, seed=seed)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"examples": 0}, r"^falsify: expected examples to be an integer >= 1 .*got 0\n"),
+        ({"uniform": -1}, r"^falsify: expected uniform to be an integer >= 0 .*got -1\n"),
+        ({"uniform": 2.0}, r"^falsify: expected uniform to be an integer >= 0 .*got 2.0\n"),
+        ({"confidence": 1.0}, r"^falsify: expected confidence to be a number in \(0, 1\).*got 1.0\n"),
+        ({"shrink": "no"}, r"^falsify: expected shrink to be True or False, got 'no'\n"),
+    ],
+)
+def test_the_search_refuses_bad_arguments_naming_them(kwargs, message):
+    with pytest.raises(sg.InvalidSpec, match=message):
+        falsify(runner(clean), **{"examples": 1, "uniform": 0, **kwargs})
+
+
+def test_the_command_line_refuses_a_negative_seed_in_one_line(pendulum_file, tmp_path, capsys):
+    cache = tmp_path / "c"
+    with pytest.raises(SystemExit) as exit_info:
+        main(["falsify", str(pendulum_file), "--cache-dir", str(cache), "--seed", "-1", "--quiet"])
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2 and "Traceback" not in err and not cache.exists()
+    assert err.splitlines()[-1] == (
+        "specguard falsify: error: argument --seed: expected an integer >= 0 (the search's seed), got '-1'"
+    )
+
+
+def test_the_command_line_refuses_a_variable_given_twice(pendulum_file, tmp_path, capsys):
+    cache = tmp_path / "c"
+    argv = ["falsify", str(pendulum_file), "--cache-dir", str(cache), "--examples", "1", "--uniform", "0", "--quiet"]
+    code = main([*argv, "--starts", "theta=0:1", "omega=0:1", "theta=-1:0"])
+    err = capsys.readouterr().err
+    assert code == 2 and not cache.exists()
+    assert err.splitlines()[0] == "specguard: error: --starts: 'theta' is given twice: (0.0, 1.0), then (-1.0, 0.0)"

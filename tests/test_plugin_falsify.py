@@ -156,7 +156,7 @@ def test_as_falsify_reads_every_declared_form():
         ({"examples": 0}, "examples to be an integer >= 1"),
         ({"uniform": -1}, "uniform to be an integer >= 0"),
         ({"max_rate": 1.0}, r"max_rate to be a number in \(0, 1\)"),
-        ({"max_rate": 0.0}, r"max_rate to be a number in \(0, 1\), or None for no failing start"),
+        ({"max_rate": 0.0}, r"max_rate to be a number in \(0, 1\) \(.*; None for no failing start\), got 0.0"),
         ({"max_rate": float("nan")}, r"max_rate to be a number in \(0, 1\)"),
         ({"max_rate": True}, r"max_rate to be a number in \(0, 1\)"),
         ({"max_rate": 0.1, "uniform": 0}, "needs uniform draws"),

@@ -33,7 +33,7 @@ def test_a_design_looks_every_step_up_to_its_ceiling():
     fractions = DESIGN.fractions(DESIGN.looks)
     assert fractions[-1] == 1.0 and all(a < b for a, b in itertools.pairwise(fractions))
     assert math.isclose(fractions[0], (1 / 8 + 1 / 8) / (1 / 8 + 1 / 2))
-    with pytest.raises(ValueError, match="alpha in"):
+    with pytest.raises(ValueError, match=r"Design: expected alpha to be a number in \(0, 1\) .*got 0.0"):
         Design(alpha=0.0, baseline_seeds=8, first=2, ceiling=8)
 
 

@@ -107,7 +107,7 @@ def test_a_range_outside_the_bounds_names_both():
     ("ranges", "message"),
     [
         ({"x": (1.0, -1.0)}, r"finite with lo <= hi, got \(1.0, -1.0\)"),
-        ({"x": (0.0, math.inf)}, r"finite with lo <= hi, got \(0.0, inf\)"),
+        ({"x": (0.0, math.inf)}, r"expected the high end of 'x' to be a finite number, got inf"),
         ({"x": "wide"}, r"a pair \(lo, hi\) of numbers, got 'wide'"),
     ],
 )
@@ -142,3 +142,36 @@ def test_the_set_state_hook_and_reset_options_start_any_env():
         StartSpace({"a": (0, 1)}, set_state=set_state, reset_options=True)
     with pytest.raises(InvalidSpec, match="needs the ranges of its variables"):
         StartSpace(set_state=set_state).resolve(gym.make("Pendulum-v1"))
+
+
+@pytest.mark.parametrize(
+    ("ranges", "message"),
+    [
+        ({"x": ("0", "1")}, r"StartSpace: expected the low end of 'x' to be a finite number, got '0'"),
+        ({"x": (0.0, "1")}, r"StartSpace: expected the high end of 'x' to be a finite number, got '1'"),
+        ({"x": (False, True)}, r"StartSpace: expected the low end of 'x' to be a finite number, got False"),
+        ({"x": (0, np.bool_(True))}, r"expected the high end of 'x' to be a finite number, got np.True_"),
+        ({"x": "01"}, r"StartSpace: the range of 'x' must be a pair \(lo, hi\) of numbers, got '01'"),
+        ({"x": (0, 1, 2)}, r"the range of 'x' must be a pair \(lo, hi\) of numbers, got \(0, 1, 2\)"),
+        ({"x": {0: 1, 1: 2}}, r"the range of 'x' must be a pair \(lo, hi\) of numbers, got \{0: 1, 1: 2\}"),
+        ({5: (0, 1)}, r"StartSpace: expected a variable's name to be a non-empty string, got 5"),
+        ({None: (0, 1)}, r"StartSpace: expected a variable's name to be a non-empty string, got None"),
+        ({"": (0, 1)}, r"StartSpace: expected a variable's name to be a non-empty string, got ''"),
+        ({1: (0, 1), "1": (2, 3)}, r"StartSpace: expected a variable's name to be a non-empty string, got 1"),
+    ],
+)
+def test_bounds_and_names_are_never_coerced(ranges, message):
+    with pytest.raises(InvalidSpec, match=message):
+        StartSpace(ranges)
+
+
+@pytest.mark.parametrize("value", ["no", 1, None, "False"])
+def test_reset_options_is_a_bool(value):
+    with pytest.raises(InvalidSpec, match=rf"StartSpace: expected reset_options to be True or False, got {value!r}"):
+        StartSpace({"a": (0, 1)}, reset_options=value)
+
+
+def test_a_range_may_be_any_pair_of_real_numbers():
+    space = StartSpace({"x": [np.float32(-0.5), 1], "y": np.array([0.0, 0.25])})
+    assert space.ranges == (("x", -0.5, 1.0), ("y", 0.0, 0.25))
+    assert all(type(v) is float for _, lo, hi in space.ranges for v in (lo, hi))

@@ -71,7 +71,7 @@ def test_quorum(runs, required, max_runs, expected):
     [
         (lambda: success_interval(3, 0), "at least one episode"),
         (lambda: success_interval(4, 3), "0 <= successes <= episodes"),
-        (lambda: success_interval(1, 3, confidence=1.0), r"confidence in \(0, 1\)"),
+        (lambda: success_interval(1, 3, confidence=1.0), r"confidence to be a number in \(0, 1\), got 1.0"),
         (lambda: quorum_verdict([M], required=3, max_runs=2), "1 <= required <= max_runs"),
         (lambda: quorum_verdict([M, M, M], required=1, max_runs=2), "more than max_runs"),
     ],

@@ -17,14 +17,23 @@ import specguard as sg
 from specguard.validation import (
     check_budget,
     check_callable,
+    check_choice,
     check_count,
+    check_finite,
+    check_flag,
     check_name,
+    check_natural,
+    check_open_fraction,
     check_positive,
+    check_text,
+    check_unique,
     check_weight,
     child_path,
     function_text,
     number_text,
+    parse_choice,
     parse_count,
+    parse_natural,
     parse_positive,
 )
 
@@ -224,3 +233,114 @@ def test_every_child_path_is_built_by_child_path(path):
     # tree walks, compiled envs, reference rewards, contract checks, auto weights, formulas and the gate's hints
     # each built parent/child themselves; validation.child_path is the one place now
     assert hand_built_paths(path.read_text()) == [], f"{path}: build node paths with validation.child_path"
+
+
+# -- open fractions, choices, counts from zero, finite numbers, flags, texts, unique names -------------------------
+
+
+@pytest.mark.parametrize("value", [0.5, 1e-9, 0.999, np.float64(0.05), Fraction(1, 3)])
+def test_open_fractions_lie_strictly_between_zero_and_one(value):
+    assert check_open_fraction("Here", "p", value) == float(value)
+
+
+@pytest.mark.parametrize("value", [0, 0.0, 1, 1.0, -0.1, 2, math.nan, math.inf, True, "0.5", None, np.bool_(True)])
+def test_an_open_fraction_is_never_an_end_nan_a_bool_or_text(value):
+    message = rf"Here: expected p to be a number in \(0, 1\) \(a level\), got {re.escape(repr(value))}\n"
+    with pytest.raises(sg.InvalidSpec, match=message):
+        check_open_fraction("Here", "p", value, "a level")
+
+
+def test_choices_are_checked_in_specs_and_read_from_option_text():
+    assert check_choice("Spec 's'", "undecided", "xfail", ("fail", "xfail")) == "xfail"
+    with pytest.raises(sg.InvalidSpec, match=r"Spec 's': expected undecided to be one of fail, xfail, got 'maybe'\n"):
+        check_choice("Spec 's'", "undecided", "maybe", ("fail", "xfail"))
+    with pytest.raises(sg.InvalidSpec, match=r"got \['fail'\]"):  # unhashable: refused, not a TypeError
+        check_choice("Spec 's'", "undecided", ["fail"], ("fail", "xfail"))
+    assert parse_choice(" pass ", ("fail", "pass")) == "pass"
+    with pytest.raises(ValueError, match=r"^expected one of fail, pass, got 'PASS'$"):
+        parse_choice("PASS", ("fail", "pass"))
+
+
+@pytest.mark.parametrize("value", [0, 1, 7, np.int64(3), 2**40])
+def test_natural_numbers_start_at_zero(value):
+    assert check_natural("Here", "seed", value) == value and type(check_natural("Here", "seed", value)) is int
+
+
+@pytest.mark.parametrize("value", [-1, np.int64(-1), True, 1.0, "3", None])
+def test_a_natural_number_is_never_negative_a_bool_a_float_or_text(value):
+    message = rf"Here: expected seed to be an integer >= 0 \(a seed\), got {re.escape(repr(value))}\n"
+    with pytest.raises(sg.InvalidSpec, match=message):
+        check_natural("Here", "seed", value, "a seed")
+
+
+@pytest.mark.parametrize(("text", "value"), [("0", 0), (" 12 ", 12)])
+def test_natural_numbers_from_option_text(text, value):
+    assert parse_natural(text) == value
+
+
+@pytest.mark.parametrize("text", ["-1", "00", "+1", "1.0", "", "x"])
+def test_natural_option_text_is_plain_digits(text):
+    with pytest.raises(ValueError, match=rf"^expected an integer >= 0 \(a seed\), got {re.escape(repr(text))}$"):
+        parse_natural(text, "a seed")
+
+
+@pytest.mark.parametrize("value", [0, -2.5, np.float32(1.5), Fraction(1, 2)])
+def test_finite_numbers(value):
+    assert check_finite("Here", "lo", value) == float(value)
+
+
+@pytest.mark.parametrize("value", ["0", True, np.bool_(False), math.nan, -math.inf, None, 1j])
+def test_a_finite_number_is_never_text_a_bool_or_infinite(value):
+    with pytest.raises(sg.InvalidSpec, match=rf"Here: expected lo to be a finite number, got {re.escape(repr(value))}"):
+        check_finite("Here", "lo", value)
+
+
+def test_flags_are_bools_only():
+    assert check_flag("Here", "on", np.bool_(True)) is True and check_flag("Here", "on", False) is False
+    for value in ("no", 1, 0, None):
+        with pytest.raises(sg.InvalidSpec, match=rf"Here: expected on to be True or False, got {value!r}"):
+            check_flag("Here", "on", value)
+
+
+def test_texts_are_non_empty_strings():
+    assert type(check_text("Here", "a name", type("S", (str,), {})("x"))) is str
+    for value in (5, None, "", " ", b"x"):
+        with pytest.raises(sg.InvalidSpec, match=rf"Here: expected a name to be a non-empty string, got {value!r}"):
+            check_text("Here", "a name", value)
+
+
+def test_names_given_twice_are_named_with_both_values():
+    assert check_unique("--starts", [("x", 1), ("y", 2)]) == {"x": 1, "y": 2}
+    with pytest.raises(sg.InvalidSpec, match=r"^--starts: 'x' is given twice: \(0, 1\), then \(2, 3\)\n"):
+        check_unique("--starts", [("x", (0, 1)), ("y", (0, 1)), ("x", (2, 3))])
+
+
+# -- one voice: each rule is written in validation.py only -------------------------------------------------------
+
+
+def _open_unit_checks(source: str) -> list[int]:
+    """Lines of ``source`` that compare a value strictly between the literals 0 and 1 (``0 < x < 1``)."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Compare) and len(node.ops) == 2 and all(isinstance(o, ast.Lt) for o in node.ops):
+            ends = (node.left, node.comparators[1])
+            if all(isinstance(e, ast.Constant) for e in ends) and [e.value for e in ends] == [0, 1]:  # type: ignore
+                found.append(node.lineno)
+    return sorted(found)
+
+
+def test_the_open_interval_finder_finds_them():
+    assert _open_unit_checks("if not 0.0 < a < 1.0:\n    pass\nb = 0 < c < 1\nd = 0 <= e < 1\n") == [1, 3]
+
+
+@pytest.mark.parametrize("path", SOURCES, ids=lambda p: str(p.relative_to(ROOT_DIR)))
+def test_every_open_interval_check_is_check_open_fraction(path):
+    if path.name == "validation.py" and path.parent.name == "specguard":
+        return
+    assert _open_unit_checks(path.read_text()) == [], "use specguard.validation.check_open_fraction"
+
+
+def test_the_default_cache_dir_is_written_once():
+    package = Path(sg.__file__).parent
+    writers = [p.relative_to(package) for p in sorted(package.rglob("*.py")) if '".specguard/cache"' in p.read_text()]
+    assert writers == [Path("utils/files.py")]

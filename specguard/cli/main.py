@@ -24,7 +24,7 @@ import argparse
 import json
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +34,8 @@ from specguard.error import InvalidSpec, SpecError
 from specguard.stats.intervals import UNDECIDED_OUTCOMES
 from specguard.tree.keys import require_thresholds
 from specguard.tree.nodes import Node
-from specguard.utils.files import write_atomic
+from specguard.utils.files import DEFAULT_CACHE_DIR, write_atomic
+from specguard.validation import check_unique, parse_choice, parse_natural
 
 __all__ = ["main"]
 
@@ -157,9 +158,10 @@ def _checkpoints(text: str) -> int:
 
 
 def _undecided(text: str) -> str:
-    if text not in UNDECIDED_OUTCOMES:
-        raise argparse.ArgumentTypeError(f"expected one of {', '.join(UNDECIDED_OUTCOMES)}, got {text!r}")
-    return text
+    try:
+        return parse_choice(text, UNDECIDED_OUTCOMES)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
 
 
 def _scale(text: str) -> float:
@@ -221,7 +223,7 @@ def build_parser() -> argparse.ArgumentParser:
         default="auto",
         help="parallel training processes (default: auto, one per usable core)",
     )
-    run.add_argument("--cache-dir", default=".specguard/cache", help="run cache (default: .specguard/cache)")
+    run.add_argument("--cache-dir", default=DEFAULT_CACHE_DIR, help=f"run cache (default: {DEFAULT_CACHE_DIR})")
     run.add_argument("--no-cache", action="store_true", help="neither read nor write the cache")
     run.add_argument("--budget-scale", type=_scale, default=1.0, help="multiply training timesteps, e.g. 0.25")
     run.add_argument(
@@ -272,7 +274,9 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument(
         "--workers", type=_workers, default="auto", help="specs trained at once, one process each (default: auto)"
     )
-    rep.add_argument("--cache-dir", default=".specguard/cache", help="run cache, to resume (default: .specguard/cache)")
+    rep.add_argument(
+        "--cache-dir", default=DEFAULT_CACHE_DIR, help=f"run cache, to resume (default: {DEFAULT_CACHE_DIR})"
+    )
     rep.add_argument("--out", default="docs/reproduction.md", help="the Markdown file; plots go to images/ beside it")
     rep.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     _add_falsify(sub)
@@ -284,10 +288,13 @@ def _add_falsify(sub: Any) -> None:
         "falsify", help="search a trained spec's start space for starts from which its agents miss the spec"
     )
     fz.add_argument("target", metavar="PATH[::NAME]")
-    fz.add_argument("--seed", type=int, default=0, help="the search's seed (default: 0)")
+    fz.add_argument("--seed", type=_natural("the search's seed"), default=0, help="the search's seed (default: 0)")
     fz.add_argument("--examples", type=_positive, default=200, help="guided episodes per run at most (default: 200)")
     fz.add_argument(
-        "--uniform", type=_draws, default=100, help="uniform draws for the failure rate, 0 for none (default: 100)"
+        "--uniform",
+        type=_natural("uniform draws"),
+        default=100,
+        help="uniform draws for the failure rate, 0 for none (default: 100)",
     )
     fz.add_argument(
         "--starts",
@@ -296,7 +303,7 @@ def _add_falsify(sub: Any) -> None:
         metavar="NAME=LO:HI",
         help="start ranges of the env's state variables (default: the spec's own, Spec.starts, else the env's)",
     )
-    fz.add_argument("--cache-dir", default=".specguard/cache", help="run cache (default: .specguard/cache)")
+    fz.add_argument("--cache-dir", default=DEFAULT_CACHE_DIR, help=f"run cache (default: {DEFAULT_CACHE_DIR})")
     fz.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
 
 
@@ -321,14 +328,16 @@ def _positive(text: str) -> int:
         raise argparse.ArgumentTypeError(str(e)) from None
 
 
-def _draws(text: str) -> int:
-    """An integer >= 0: ``0``, or a count as :func:`_positive` reads one."""
-    if text.strip() == "0":
-        return 0
-    try:
-        return _positive(text)
-    except argparse.ArgumentTypeError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0 (uniform draws), got {text!r}") from None
+def _natural(meaning: str) -> Callable[[str], int]:
+    """An option's type: an integer >= 0 (:func:`specguard.validation.parse_natural`); ``meaning`` names it."""
+
+    def natural(text: str) -> int:
+        try:
+            return parse_natural(text, meaning)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+
+    return natural
 
 
 def _case_scale(text: str) -> tuple[str, float]:
@@ -355,7 +364,7 @@ def _falsify(args: argparse.Namespace) -> int:
     from specguard.engine.run import run_spec
     from specguard.falsify.starts import StartSpace
 
-    starts = StartSpace(dict(args.starts)) if args.starts else None  # None: each spec's own, else the env's
+    starts = StartSpace(check_unique("--starts", args.starts)) if args.starts else None  # None: the spec's own
     found_any = False
     specs = load_objects(args.target)
     for spec in specs.values():  # names and bounds checked before anything trains

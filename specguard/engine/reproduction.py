@@ -35,6 +35,7 @@ from specguard.engine.specfiles import import_file, load_objects
 from specguard.error import SpecError
 from specguard.parallel.signals import STOP_POLL_S, stopping_all_tasks
 from specguard.parallel.workers import resolve_workers
+from specguard.utils.files import DEFAULT_CACHE_DIR
 
 __all__ = ["CaseStudy", "Reproduction", "load_case", "machine", "reproduce", "sized"]
 
@@ -91,7 +92,7 @@ def reproduce(
     budget_scale: float = 1.0,
     case_scales: Mapping[str, float] | None = None,
     workers: int | str = 2,
-    cache_dir: str | Path | None = ".specguard/cache",
+    cache_dir: str | Path | None = DEFAULT_CACHE_DIR,
     progress: Callable[[ProgressEvent], None] | None = None,
     command: str = "",
 ) -> Reproduction:

@@ -31,6 +31,7 @@ from specguard.engine.spec_result import GoalVerdict, SpecResult
 from specguard.error import SpecError
 from specguard.parallel.executors import LOCAL, Executor, make_executor
 from specguard.parallel.workers import resolve_workers
+from specguard.utils.files import DEFAULT_CACHE_DIR
 
 __all__ = ["GoalVerdict", "SpecResult", "resolve_workers", "run_spec", "train_seeds"]
 
@@ -58,7 +59,7 @@ def run_spec(
     spec: Spec,
     *,
     workers: int | str = "auto",
-    cache_dir: str | Path | None = ".specguard/cache",
+    cache_dir: str | Path | None = DEFAULT_CACHE_DIR,
     progress: Progress | None = print_event,
     lock_timeout: float = 3600.0,
     executor: str | Executor = LOCAL,
@@ -112,7 +113,7 @@ def train_seeds(
     seeds: Sequence[int],
     *,
     workers: int | str = "auto",
-    cache_dir: str | Path | None = ".specguard/cache",
+    cache_dir: str | Path | None = DEFAULT_CACHE_DIR,
     progress: Progress | None = print_event,
     lock_timeout: float = 3600.0,
     executor: str | Executor = LOCAL,

@@ -18,7 +18,6 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from numbers import Real
 from typing import Any
 
 from specguard.build.initial_env import InitialEnv
@@ -29,7 +28,7 @@ from specguard.falsify.starts import StartSpace, as_start_space
 from specguard.stats.intervals import UNDECIDED_OUTCOMES
 from specguard.tree.keys import check_expect, check_xfail, check_xfail_thresholded, resolve_goal
 from specguard.tree.nodes import Node
-from specguard.validation import check_count
+from specguard.validation import check_choice, check_count, check_open_fraction
 
 __all__ = ["Spec"]
 
@@ -111,10 +110,8 @@ class Spec:
         object.__setattr__(self, "n_envs", check_count(label, "n_envs", self.n_envs, "parallel environments per run"))
         if self.quorum is not None:
             object.__setattr__(self, "quorum", self._checked_quorum(label))
-        if not (isinstance(self.confidence, Real) and 0.0 < self.confidence < 1.0):
-            raise InvalidSpec(f"{label}.confidence", f"expected a number in (0, 1), got {self.confidence!r}")
-        if self.undecided not in UNDECIDED_OUTCOMES:
-            raise InvalidSpec(f"{label}.undecided", f"expected one of {UNDECIDED_OUTCOMES}, got {self.undecided!r}")
+        check_open_fraction(label, "confidence", self.confidence)
+        check_choice(label, "undecided", self.undecided, UNDECIDED_OUTCOMES)
         object.__setattr__(self, "expect", self._resolve_thresholds(label))
         object.__setattr__(self, "xfail", self._resolve_xfail(label))
         object.__setattr__(self, "starts", as_start_space(f"{label}.starts", self.starts))

@@ -31,14 +31,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from numbers import Integral, Real
 from typing import Any
 
 from specguard.error import InvalidSpec
 from specguard.falsify.search import Falsification
 from specguard.falsify.starts import StartSpace, as_start_space
 from specguard.stats.intervals import RunVerdict, run_verdict
-from specguard.validation import check_count
+from specguard.validation import check_count, check_natural, check_open_fraction
 
 __all__ = ["Falsify", "as_falsify", "falsify_verdict", "rule_text"]
 
@@ -55,7 +54,7 @@ class Falsify:
         max_rate: the failure rate over the start space a run may have, in ``(0, 1)``: uniform
             draws can bound a rate away from a positive number, never from 0; ``None``: no failing
             start at all (any counterexample fails).
-        seed: the search's seed.
+        seed: the search's seed, an integer >= 0.
     """
 
     starts: StartSpace | None
@@ -76,23 +75,18 @@ class Falsify:
         where = "Falsify"
         starts = as_start_space(where, starts)
         examples = check_count(where, "examples", examples, "guided episodes per run at most")
-        if isinstance(uniform, bool) or not isinstance(uniform, Integral) or uniform < 0:
-            raise InvalidSpec(where, f"expected uniform to be an integer >= 0 (uniform draws per run), got {uniform!r}")
+        uniform = check_natural(where, "uniform", uniform, "uniform draws per run")
         if max_rate is not None:
-            if isinstance(max_rate, bool) or not isinstance(max_rate, Real) or not 0 < max_rate < 1:
-                raise InvalidSpec(
-                    where,
-                    f"expected max_rate to be a number in (0, 1), or None for no failing start, got {max_rate!r}",
-                )
+            meaning = "the failure rate a run may have; None for no failing start"
+            max_rate = check_open_fraction(where, "max_rate", max_rate, meaning)
             if uniform < 1:
                 raise InvalidSpec(where, f"max_rate={max_rate!r} needs uniform draws: expected uniform >= 1, got 0")
-        if isinstance(seed, bool) or not isinstance(seed, Integral):
-            raise InvalidSpec(where, f"expected seed to be an integer, got {seed!r}")
+        seed = check_natural(where, "seed", seed, "the search's seed")
         object.__setattr__(self, "starts", starts)
         object.__setattr__(self, "examples", examples)
-        object.__setattr__(self, "uniform", int(uniform))
-        object.__setattr__(self, "max_rate", None if max_rate is None else float(max_rate))
-        object.__setattr__(self, "seed", int(seed))
+        object.__setattr__(self, "uniform", uniform)
+        object.__setattr__(self, "max_rate", max_rate)
+        object.__setattr__(self, "seed", seed)
 
     def kwargs(self) -> dict[str, Any]:
         """The keyword arguments of :meth:`specguard.SpecResult.falsify` this check runs with."""

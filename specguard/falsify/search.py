@@ -52,6 +52,7 @@ import numpy as np
 from specguard.falsify.robustness import Judgement, feature_scales, judge_end, own_states, reached_early
 from specguard.falsify.starts import START_OPTION, Starts, StartSpace
 from specguard.stats.intervals import success_interval
+from specguard.validation import check_count, check_flag, check_natural, check_open_fraction
 
 __all__ = ["EpisodeRunner", "Falsification", "Outcome", "falsify", "start_text"]
 
@@ -439,7 +440,16 @@ def falsify(
         key: the spec's identity, under which the counterexample is stored.
         shrink: shrink the first failing start (else stop at it: the benchmark's episodes to a first failure).
         progress: called with a line at each phase.
+
+    Raises:
+        InvalidSpec: an argument of the wrong type or out of range, naming it and its value.
     """
+    where = "falsify"
+    examples = check_count(where, "examples", examples, "guided episodes at most")
+    uniform = check_natural(where, "uniform", uniform, "uniform draws")
+    seed = check_natural(where, "seed", seed, "the search's seed")
+    confidence = check_open_fraction(where, "confidence", confidence)
+    shrink = check_flag(where, "shrink", shrink)
     say = progress or (lambda line: None)
     starts = runner.starts
     result = Falsification(starts=starts, key=key)

@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -45,6 +45,7 @@ import gymnasium as gym
 import numpy as np
 
 from specguard.error import InvalidSpec, UnknownFeature
+from specguard.validation import check_finite, check_flag, check_text
 
 __all__ = [
     "BUILTIN_SETTERS",
@@ -191,12 +192,15 @@ def _env_label(env: gym.Env) -> str:
 
 
 def check_range(where: str, name: str, value: object) -> Range:
-    """A range ``(lo, hi)`` of finite numbers with ``lo <= hi``."""
-    try:
-        lo, hi = (float(v) for v in value)  # type: ignore[attr-defined]
-    except (TypeError, ValueError):
-        raise InvalidSpec(where, f"the range of {name!r} must be a pair (lo, hi) of numbers, got {value!r}") from None
-    if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
+    """A range ``(lo, hi)``: a pair (tuple, list or array) of finite numbers with ``lo <= hi``.
+
+    Never coerced: ``("0", "1")``, ``(False, True)`` and the string ``"01"`` are refused, naming the value.
+    """
+    if isinstance(value, (str, bytes)) or not isinstance(value, (Sequence, np.ndarray)) or len(value) != 2:
+        raise InvalidSpec(where, f"the range of {name!r} must be a pair (lo, hi) of numbers, got {value!r}")
+    lo = check_finite(where, f"the low end of {name!r}", value[0])
+    hi = check_finite(where, f"the high end of {name!r}", value[1])
+    if lo > hi:
         raise InvalidSpec(where, f"the range of {name!r} must be finite with lo <= hi, got ({lo!r}, {hi!r})")
     return lo, hi
 
@@ -245,7 +249,9 @@ class StartSpace:
         reset_options: pass the values as ``env.reset(options=values)`` instead.
 
     Raises:
-        InvalidSpec: a range that is not a finite ``(lo, hi)``, or both hooks given.
+        InvalidSpec: a name that is not a non-empty string, a range that is not a pair
+            of finite numbers ``lo <= hi`` (text and bools are refused, never coerced),
+            ``reset_options`` that is not a bool, or both hooks given.
     """
 
     ranges: tuple[tuple[str, float, float], ...]
@@ -264,12 +270,14 @@ class StartSpace:
             raise InvalidSpec(where, f"expected ranges as {{variable: (lo, hi)}}, got {ranges!r}")
         if set_state is not None and not callable(set_state):
             raise InvalidSpec(where, f"expected set_state to be callable (env, values) -> obs, got {set_state!r}")
+        reset_options = check_flag(where, "reset_options", reset_options)
         if set_state is not None and reset_options:
             raise InvalidSpec(where, "give set_state or reset_options=True, not both")
-        parsed = tuple((str(n), *check_range(where, str(n), r)) for n, r in (ranges or {}).items())
+        names = [check_text(where, "a variable's name", n) for n in (ranges or {})]
+        parsed = tuple((n, *check_range(where, n, r)) for n, r in zip(names, (ranges or {}).values(), strict=True))
         object.__setattr__(self, "ranges", parsed)
         object.__setattr__(self, "set_state", set_state)
-        object.__setattr__(self, "reset_options", bool(reset_options))
+        object.__setattr__(self, "reset_options", reset_options)
 
     def describe(self) -> str:
         """Exact text of the space (part of the key its counterexamples are stored under)."""

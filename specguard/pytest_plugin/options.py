@@ -14,6 +14,7 @@ from typing import Any
 import pytest
 
 from specguard.stats.sequential import DEFAULT_COMPARE_SEEDS
+from specguard.utils.files import DEFAULT_CACHE_DIR
 
 __all__ = ["Options", "add_options", "baseline_path", "parse_options"]
 
@@ -61,7 +62,7 @@ _SETTINGS: list[tuple[str, str, str, Any, str]] = [
         "auto",
         "parallel training processes per pytest process: N, or auto = the usable cores (shared among xdist workers)",
     ),
-    ("--goal-specs-cache-dir", "goal_specs_cache_dir", "string", ".specguard/cache", "where trained runs are cached"),
+    ("--goal-specs-cache-dir", "goal_specs_cache_dir", "string", DEFAULT_CACHE_DIR, "where trained runs are cached"),
     (
         "--goal-specs-undecided",
         "goal_specs_undecided",
@@ -157,7 +158,7 @@ def parse_options(config: pytest.Config) -> Options:
         ini = next(i for o, i, *_ in _SETTINGS if o == option)
         return _setting(config, option, ini)
 
-    from specguard.validation import parse_count, parse_positive
+    from specguard.validation import parse_choice, parse_count, parse_positive
 
     try:
         scale = parse_positive(get("--goal-specs-budget-scale"))
@@ -180,10 +181,10 @@ def parse_options(config: pytest.Config) -> Options:
     except InvalidSpec as e:
         raise pytest.UsageError(f"--goal-specs-workers: {e.message}") from None
     undecided = get("--goal-specs-undecided") or None  # None: each spec's own Spec.undecided
-    if undecided is not None and undecided not in UNDECIDED_OUTCOMES:
-        raise pytest.UsageError(
-            f"--goal-specs-undecided: expected one of {', '.join(UNDECIDED_OUTCOMES)}, got {undecided!r}"
-        )
+    try:
+        undecided = None if undecided is None else parse_choice(undecided, UNDECIDED_OUTCOMES)
+    except ValueError as e:
+        raise pytest.UsageError(f"--goal-specs-undecided: {e}") from None
     try:
         compare_seeds = parse_count(get("--goal-specs-compare-seeds"))
     except ValueError as e:

@@ -29,6 +29,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from specguard.validation import check_open_fraction
+
 __all__ = ["PROCEDURE", "first_level", "holm", "holm_rejections", "procedure_text", "step_level"]
 
 PROCEDURE = "Holm's step-down procedure"
@@ -53,8 +55,7 @@ def step_level(alpha: float, comparisons: int, step: int) -> float:
         raise ValueError(f"expected at least one comparison, got {comparisons}")
     if not 1 <= step <= comparisons:
         raise ValueError(f"expected a step in 1..{comparisons}, got {step}")
-    if not 0.0 < alpha < 1.0:
-        raise ValueError(f"expected a family-wise level in (0, 1), got {alpha!r}")
+    check_open_fraction("step_level", "alpha", alpha, "the family-wise level")
     return alpha / (comparisons - step + 1)
 
 

@@ -33,6 +33,8 @@ import enum
 import functools
 from collections.abc import Sequence
 
+from specguard.validation import check_open_fraction
+
 __all__ = [
     "UNDECIDED_OUTCOMES",
     "GoalOutcome",
@@ -89,8 +91,7 @@ def success_interval(successes: int, episodes: int, confidence: float = 0.95) ->
         ValueError: counts out of range, or ``confidence`` outside (0, 1).
     """
     _check_counts(successes, episodes)
-    if not 0.0 < confidence < 1.0:
-        raise ValueError(f"expected a confidence in (0, 1), got {confidence!r}")
+    check_open_fraction("success_interval", "confidence", confidence)
     from scipy.stats import binomtest  # scipy.stats takes ~1 s to import: only when needed
 
     ci = binomtest(int(successes), int(episodes)).proportion_ci(confidence_level=confidence, method="exact")

@@ -72,6 +72,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from specguard.validation import check_open_fraction
+
 __all__ = [
     "DEFAULT_ALPHA",
     "DEFAULT_COMPARE_SEEDS",
@@ -151,8 +153,7 @@ class Design:
     margin: float = DEFAULT_MARGIN
 
     def __post_init__(self) -> None:
-        if not 0.0 < self.alpha < 1.0:
-            raise ValueError(f"expected alpha in (0, 1), got {self.alpha!r}")
+        check_open_fraction("Design", "alpha", self.alpha, "the comparison's own level")
         for name in ("baseline_seeds", "first", "step"):
             if getattr(self, name) < 1:
                 raise ValueError(f"expected {name} >= 1, got {getattr(self, name)!r}")

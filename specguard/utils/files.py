@@ -23,7 +23,10 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["staged", "write_atomic"]
+__all__ = ["DEFAULT_CACHE_DIR", "staged", "write_atomic"]
+
+DEFAULT_CACHE_DIR = ".specguard/cache"
+"""Where every door caches trained runs unless told otherwise (relative to the working directory)."""
 
 
 @contextlib.contextmanager
