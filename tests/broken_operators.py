@@ -107,6 +107,41 @@ class ClassStateSequence(ModuleStateSequence):
         type(self).stages[self.name] = stage
 
 
+_PROGRESS: dict[str, int] = {}  # SlotlessSequence's stage, by node name, written by its state methods
+
+
+class SlotlessSequence(_Combiner):
+    """A sequence that keeps its stage in a module-level dict from ``initial_state``/``next_state``, with no slots.
+
+    Written as an outside author might who overrides the state methods but forgets
+    ``state_slots``: no evaluator calls the state methods of a node without slots, so
+    nothing writes the stage, and ``contains`` answers from a dict nobody writes. The
+    node is a constant "never reached" goal: Markov, and alike in every evaluator.
+    """
+
+    kind = "SlotlessSequence"
+
+    def child_weights(self) -> tuple[ChildWeights, ...]:
+        return (ChildWeights(core=0.0, shaping=0.0, safety=1.0),) * len(self.nodes)
+
+    def _advance(self, stage: int, inside: tuple[bool, ...]) -> int:
+        while stage < len(self.nodes) and inside[stage]:
+            stage += 1
+        _PROGRESS[self.name] = stage
+        return stage
+
+    def initial_state(self, ctx: Context) -> tuple[float, ...]:
+        self._advance(0, ctx.inside)
+        return ()
+
+    def next_state(self, before: Context, action: Any, s2: Any, inside2: tuple[bool, ...]) -> tuple[float, ...]:
+        self._advance(_PROGRESS.get(self.name, 0), inside2)
+        return ()
+
+    def contains(self, ctx: Context) -> bool:
+        return _PROGRESS.get(self.name, 0) == len(self.nodes)
+
+
 class DropsTermination(_Combiner):
     """Never terminates, even when a child's subtree ended (a constraint below it ran out of budget)."""
 
@@ -208,6 +243,7 @@ CAUGHT_BY = {
     HiddenSequence: "check_markov",
     ModuleStateSequence: "check_markov",
     ClassStateSequence: "check_markov",
+    SlotlessSequence: "check_state_methods_have_slots",
     DropsTermination: "check_termination_includes_children",
     AddressInDescribe: "check_description_is_exact",
     UnorderedDescribe: "check_description_is_exact",
