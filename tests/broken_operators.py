@@ -10,7 +10,7 @@ import math
 from typing import Any, ClassVar
 
 import specguard as sg
-from specguard.extend import ChildWeights, Context, Node, Slot, check_children
+from specguard.extend import ChildWeights, Context, Node, Slot
 
 
 class _Combiner(Node):
@@ -19,13 +19,7 @@ class _Combiner(Node):
     kind = "Combiner"
 
     def __init__(self, *children: Node, name: str) -> None:
-        self.nodes = check_children(self.kind, name, children)
-        self.name = name
-        self.annotations = ()
-
-    @property
-    def children(self) -> tuple[Node, ...]:
-        return self.nodes
+        self.init_node(name, children)
 
     def child_weights(self) -> tuple[ChildWeights, ...]:
         return (ChildWeights(core=0.0, shaping=1.0, safety=1.0),) * len(self.nodes)

@@ -106,12 +106,8 @@ def test_operator_author_example_from_extend_passes():
         kind = "AtLeast"
 
         def __init__(self, *children, name, k=1):
-            self.k, self.nodes = k, children
-            self.name, self.annotations = name, ()
-
-        @property
-        def children(self):
-            return self.nodes
+            self.init_node(name, children)
+            self.k = k
 
         def child_weights(self):
             return (ChildWeights(core=0.0, shaping=1.0, safety=1.0),) * len(self.nodes)
