@@ -30,8 +30,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from specguard.error import InvalidSpec
-from specguard.extend import Annotation, ChildWeights, Context, Node, check_children
-from specguard.validation import check_name
+from specguard.extend import Annotation, ChildWeights, Context, Node, set_fields
 
 if TYPE_CHECKING:
     from hypothesis.strategies import SearchStrategy
@@ -55,18 +54,10 @@ class AtLeast(Node):
     annotations: tuple[Annotation, ...]
 
     def __init__(self, k: int, *children: Node, name: str) -> None:
-        name = check_name("AtLeast", name)
-        children = check_children("AtLeast", name, children)
-        if isinstance(k, bool) or not isinstance(k, int) or not 1 <= k <= len(children):
-            raise InvalidSpec(f"AtLeast {name!r}", f"expected k to be an integer in [1, {len(children)}], got {k!r}")
-        object.__setattr__(self, "k", k)
-        object.__setattr__(self, "nodes", children)
-        object.__setattr__(self, "name", name)
-        object.__setattr__(self, "annotations", ())
-
-    @property
-    def children(self) -> tuple[Node, ...]:
-        return self.nodes
+        name, kids = self.init_node(name, children)  # checked; kept as `nodes`, which `children` returns
+        if isinstance(k, bool) or not isinstance(k, int) or not 1 <= k <= len(kids):
+            raise InvalidSpec(f"AtLeast {name!r}", f"expected k to be an integer in [1, {len(kids)}], got {k!r}")
+        set_fields(self, k=k)  # also on a frozen dataclass
 
     def child_weights(self) -> tuple[ChildWeights, ...]:
         # Pay once for the node's goal; the children keep their distances and penalties.

@@ -44,9 +44,7 @@ _EXPORTS = {
     "Falsify": "specguard.falsify.check",
     "FingerprintError": "specguard.error",
     "Goal": "specguard.tree.nodes",
-    "GoalEnv": "specguard.build.env",  # deprecated name of SpecEnv (warns)
     "SpecEnv": "specguard.build.env",
-    "GoalInfo": "specguard.build.env",  # deprecated name of BaselineEnv (warns)
     "BaselineEnv": "specguard.build.env",
     "GoalVerdict": "specguard.engine.spec_result",
     "InitialEnv": "specguard.build.initial_env",
@@ -86,8 +84,7 @@ def __getattr__(name: str) -> Any:
                 return found
         raise AttributeError(f"module 'specguard' has no attribute {name!r}")
     value = getattr(importlib.import_module(module), name)
-    if name not in ("GoalEnv", "GoalInfo"):  # the deprecated names warn on every use
-        globals()[name] = value
+    globals()[name] = value
     return value
 
 

@@ -28,11 +28,8 @@ Example: an "at least k of the children" operator.
     >>> class AtLeast(Node):
     ...     kind = "AtLeast"
     ...     def __init__(self, k, *children, name):
-    ...         self.k, self.nodes = k, children
-    ...         self.name, self.annotations = name, ()
-    ...     @property
-    ...     def children(self):
-    ...         return self.nodes
+    ...         self.init_node(name, children)  # checked; children() returns them
+    ...         self.k = k
     ...     def child_weights(self):  # pay once for the goal (own term), pass only the children's annotations
     ...         return (ChildWeights(core=0.0, shaping=1.0, safety=1.0),) * len(self.nodes)
     ...     def contains(self, ctx: Context) -> bool:
@@ -56,7 +53,7 @@ from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 from specguard.error import InvalidSpec
-from specguard.validation import ANNOTATION_SEPARATOR, child_path
+from specguard.validation import ANNOTATION_SEPARATOR, check_name, check_weight, child_path, number_text
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterator
@@ -77,9 +74,11 @@ __all__ = [
     "Slot",
     "adapted_annotations",
     "annotation_key",
+    "check_child_weights",
     "check_children",
     "component_weights",
     "goal_test",
+    "set_fields",
 ]
 
 Box = Mapping[str, tuple[float, float]]
@@ -260,9 +259,30 @@ class Node:
 
     # -- structure -----------------------------------------------------------
 
+    def init_node(self, name: object, children: Sequence[object] | None = None) -> tuple[str, tuple[Node, ...]]:
+        """A constructor's first step: check and set the node's name and children, with no annotations.
+
+        The name is checked as ``check_name(self.kind, name)``; the children, if
+        given (a leaf gives none), by :func:`check_children` and kept as ``nodes``,
+        which :attr:`children` returns. Works on frozen dataclasses; set the other
+        fields with :func:`set_fields`.
+
+        Returns:
+            The checked name and children, for the constructor's further checks.
+
+        Raises:
+            InvalidSpec: a bad name or children, naming the node.
+        """
+        name = check_name(self.kind, name)
+        kids = () if children is None else check_children(self.kind, name, children)
+        set_fields(self, name=name, **({} if children is None else {"nodes": kids}), annotations=())
+        return name, kids
+
     @property
     def children(self) -> tuple[Node, ...]:
-        return ()
+        """The child nodes, in order: the ``nodes`` that :meth:`init_node` keeps (``()`` for a leaf)."""
+        nodes: tuple[Node, ...] = getattr(self, "nodes", ())
+        return nodes
 
     def child_weights(self) -> tuple[ChildWeights, ...]:
         """How each child's components enter this node's reward: ``1/N`` each by default."""
@@ -437,6 +457,67 @@ def check_children(kind: str, name: str, children: Sequence[object]) -> tuple[No
             )
         seen.add(c.name)
     return tuple(children)  # type: ignore[arg-type]
+
+
+def set_fields(obj: object, **fields: object) -> None:
+    """Set ``obj``'s attributes from a constructor, also on a frozen dataclass (as ``object.__setattr__``)."""
+    for field, value in fields.items():
+        object.__setattr__(obj, field, value)
+
+
+def check_child_weights(
+    where: str,
+    children: Sequence[Node],
+    weights: object,
+    *,
+    scales: str,
+    default: str,
+    accepted: str = "a sequence of numbers (one per child)",
+    hint: str | None = None,
+) -> tuple[float, ...] | None:
+    """An operator's per-child weights: ``None``, or one finite weight ``>= 0`` per child, at least one ``> 0``.
+
+    Args:
+        where: the node at fault, as errors name it (``"AnyOf 'reach'"``).
+        children: the node's checked children.
+        weights: what the user passed.
+        scales: what a weight scales, for the message (``"a child's distances and penalties"``).
+        default: what omitting ``weights=`` gives (``"1/N each"``).
+        accepted: what ``weights`` may be, for the message when it is not a sequence.
+        hint: the hint when it is not a sequence.
+
+    Raises:
+        InvalidSpec: ``weights`` is not a sequence, has the wrong length, holds
+            something other than a finite number ``>= 0``, or is all zeros.
+
+    Example:
+        >>> import specguard as sg
+        >>> kids = (sg.Goal("a", x=1), sg.Goal("b", x=2))
+        >>> check_child_weights("AnyOf 'r'", kids, (0.5, 1), scales="a child's distances", default="1 each")
+        (0.5, 1.0)
+    """
+    if weights is None:
+        return None
+    if isinstance(weights, (str, bytes)) or not isinstance(weights, Sequence):
+        raise InvalidSpec(where, f"expected weights to be {accepted}, got {weights!r}", hint=hint)
+    if len(weights) != len(children):
+        raise InvalidSpec(
+            where, f"expected {len(children)} weights (one per child), got {len(weights)}: {tuple(weights)!r}"
+        )
+    parsed = []
+    for child, w in zip(children, weights):
+        checked = check_weight(f"{where}, weight of {child.name!r}", w)
+        if checked is None:
+            raise InvalidSpec(where, f"expected a number for every weight, got {tuple(weights)!r}")
+        parsed.append(checked)
+    if not any(w > 0 for w in parsed):
+        raise InvalidSpec(
+            where,
+            f"expected at least one weight > 0, got weights=({', '.join(number_text(w) for w in parsed)}); "
+            f"a weight scales {scales}, and all-zero weights make them identically 0",
+            hint=f"weights need not sum to 1; omit weights= for {default}",
+        )
+    return tuple(parsed)
 
 
 def component_weights(node: Node) -> tuple[float, tuple[float, ...]]:

@@ -376,14 +376,18 @@ def function_text(fn: Callable[..., Any]) -> str:
     return name.rsplit("<locals>.", 1)[-1]
 
 
-def check_truth(where: str, value: object) -> bool:
+def check_truth(where: str | None, value: object) -> bool:
     """A constraint function's result: ``True`` or ``False`` (a ``bool`` or ``numpy.bool_``), nothing else.
 
     ``None`` (a ``def`` that forgot to ``return``) would never count a
-    violation, and a string would always count one: both are errors.
+    violation, and a string would always count one: both are errors, as are
+    ``0``/``1``, NaN and ``numpy.float64``. Both evaluators apply it to every
+    step's result, so a bad value is the same error in either.
 
     Raises:
-        EvaluationError: naming ``where`` (the constraint's key) and the value returned.
+        EvaluationError: naming ``where`` (the constraint's key; ``None`` for a
+            message without it, which the evaluator that called the
+            constraint prefixes with the key) and the value returned.
 
     Example:
         >>> check_truth("pendulum:fast", False)
@@ -395,8 +399,9 @@ def check_truth(where: str, value: object) -> bool:
     """
     if isinstance(value, (bool, np.bool_)):
         return bool(value)
+    prefix = "" if where is None else f"{where}: "
     raise EvaluationError(
-        f"{where}: the constraint function returned {value!r} ({type(value).__name__}); expected True or False "
+        f"{prefix}the constraint function returned {value!r} ({type(value).__name__}); expected True or False "
         "(a bool or numpy.bool_)",
         hint="return the comparison itself, e.g. `return abs(s.x) > 1`; a def without return gives None",
     )

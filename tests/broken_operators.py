@@ -10,7 +10,7 @@ import math
 from typing import Any, ClassVar
 
 import specguard as sg
-from specguard.extend import ChildWeights, Context, Node, Slot, check_children
+from specguard.extend import ChildWeights, Context, Node, Slot
 
 
 class _Combiner(Node):
@@ -19,13 +19,7 @@ class _Combiner(Node):
     kind = "Combiner"
 
     def __init__(self, *children: Node, name: str) -> None:
-        self.nodes = check_children(self.kind, name, children)
-        self.name = name
-        self.annotations = ()
-
-    @property
-    def children(self) -> tuple[Node, ...]:
-        return self.nodes
+        self.init_node(name, children)
 
     def child_weights(self) -> tuple[ChildWeights, ...]:
         return (ChildWeights(core=0.0, shaping=1.0, safety=1.0),) * len(self.nodes)
@@ -105,6 +99,41 @@ class ClassStateSequence(ModuleStateSequence):
 
     def _set_stage(self, stage: int) -> None:
         type(self).stages[self.name] = stage
+
+
+_PROGRESS: dict[str, int] = {}  # SlotlessSequence's stage, by node name, written by its state methods
+
+
+class SlotlessSequence(_Combiner):
+    """A sequence that keeps its stage in a module-level dict from ``initial_state``/``next_state``, with no slots.
+
+    Written as an outside author might who overrides the state methods but forgets
+    ``state_slots``: no evaluator calls the state methods of a node without slots, so
+    nothing writes the stage, and ``contains`` answers from a dict nobody writes. The
+    node is a constant "never reached" goal: Markov, and alike in every evaluator.
+    """
+
+    kind = "SlotlessSequence"
+
+    def child_weights(self) -> tuple[ChildWeights, ...]:
+        return (ChildWeights(core=0.0, shaping=0.0, safety=1.0),) * len(self.nodes)
+
+    def _advance(self, stage: int, inside: tuple[bool, ...]) -> int:
+        while stage < len(self.nodes) and inside[stage]:
+            stage += 1
+        _PROGRESS[self.name] = stage
+        return stage
+
+    def initial_state(self, ctx: Context) -> tuple[float, ...]:
+        self._advance(0, ctx.inside)
+        return ()
+
+    def next_state(self, before: Context, action: Any, s2: Any, inside2: tuple[bool, ...]) -> tuple[float, ...]:
+        self._advance(_PROGRESS.get(self.name, 0), inside2)
+        return ()
+
+    def contains(self, ctx: Context) -> bool:
+        return _PROGRESS.get(self.name, 0) == len(self.nodes)
 
 
 class DropsTermination(_Combiner):
@@ -208,6 +237,7 @@ CAUGHT_BY = {
     HiddenSequence: "check_markov",
     ModuleStateSequence: "check_markov",
     ClassStateSequence: "check_markov",
+    SlotlessSequence: "check_state_methods_have_slots",
     DropsTermination: "check_termination_includes_children",
     AddressInDescribe: "check_description_is_exact",
     UnorderedDescribe: "check_description_is_exact",

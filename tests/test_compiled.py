@@ -310,3 +310,38 @@ def test_a_compiled_tree_shares_its_generated_code_and_pickles_without_it():
         first.reset([2.0, 0.0, 0.0])
         ev.reset([2.0, 0.0, 0.0])
         assert ev.step(0, [0.5, 0.0, 0.0]) == first.step(0, [0.5, 0.0, 0.0])
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [None, "no", math.nan, 0, 1, np.float64(1.0), np.float64(0.0)],
+    ids=["None", "a string", "NaN", "0", "1", "np.float64 1", "np.float64 0"],
+)
+def test_a_constraint_result_is_checked_on_every_step_in_both_evaluators_with_one_error(bad):
+    # True on the first steps (the old flat evaluator checked only the first call), then ``bad``.
+    def evaluate(evaluator):
+        results = iter([False, True, bad])
+        tree = sg.Goal("far", a=(10.0, None)).annotate(sg.Constraint(lambda s, a: next(results), budget=5, name="hot"))
+        ev = compile_tree(tree, FEATURES).evaluator() if evaluator == "flat" else ReferenceEvaluator(tree, FEATURES)
+        ev.reset([0.0, 0.0, 0.0])
+        ev.step(0, [1.0, 0.0, 0.0])
+        ev.step(0, [2.0, 0.0, 0.0])
+        own = list(ev.own_state)
+        with pytest.raises(sg.EvaluationError) as caught:
+            ev.step(0, [3.0, 0.0, 0.0])
+        assert ev.own_state == own  # the failed step changed no episode state
+        return caught.value
+
+    flat, ref = evaluate("flat"), evaluate("reference")
+    assert flat.message.startswith(f"far:hot: the constraint function returned {bad!r} ({type(bad).__name__})")
+    assert (flat.message, flat.hint) == (ref.message, ref.hint)
+
+
+def test_a_constraint_returning_bools_of_either_kind_counts_each_true_as_one_violation():
+    results = iter([np.True_, False, True, np.bool_(False), np.bool_(True)])
+    tree = sg.Goal("far", a=(10.0, None)).annotate(sg.Constraint(lambda s, a: next(results), budget=9, name="c"))
+    ev = compile_tree(tree, FEATURES).evaluator()
+    ev.reset([0.0, 0.0, 0.0])
+    for x in range(1, 6):
+        ev.step(0, [float(x), 0.0, 0.0])
+    assert ev.own_state == [6.0]

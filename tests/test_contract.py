@@ -32,7 +32,7 @@ def test_broken_operator_is_caught_by_the_right_check(cls, check_name):
     root = tree.splitlines()[1 if check_name == "check_refinement_preserves_root_goal" else 0].strip()
     assert root.startswith(cls.kind) or f"{cls.__name__} object at 0x" in root
     assert re.search(r"^    [└├]── \w+ '\w+'", tree, re.MULTILINE)
-    if check_name != "check_description_is_exact":  # the others show the states the failure needs
+    if check_name not in ("check_description_is_exact", "check_state_methods_have_slots"):  # tree-only checks
         assert re.search(r"^    s0 = \(-?\d", message, re.MULTILINE)
     assert "\nWhat breaks it: " in message
 
@@ -73,6 +73,22 @@ def test_checks_blame_only_what_is_broken(cls, check):
     check(cls, max_examples=20)
 
 
+def test_a_slotless_operator_with_state_methods_is_caught_by_both_hidden_state_checks():
+    # Its state methods run in no evaluator, so every env check passes; two named checks say why it is broken.
+    with pytest.raises(AssertionError, match="declares no own-state slots") as caught:
+        contract.check_state_methods_have_slots(broken.SlotlessSequence, max_examples=10)
+    assert "overrides initial_state, next_state" in str(caught.value)
+    with pytest.raises(AssertionError, match=r"contains\(ctx\) of node 'root' \(SlotlessSequence\) in s\d+ was"):
+        contract.check_contains_depends_on_ctx_alone(broken.SlotlessSequence)
+    for check in (contract.check_markov, contract.check_flat_matches_reference):  # blind to it, as the issue says
+        check(broken.SlotlessSequence, max_examples=20)
+
+
+def test_a_contains_that_reads_what_other_methods_left_is_caught():
+    with pytest.raises(AssertionError, match="check_contains_depends_on_ctx_alone failed for HiddenSequence"):
+        contract.check_contains_depends_on_ctx_alone(broken.HiddenSequence)
+
+
 def test_check_operator_runs_every_applicable_check_and_reports_each_failure():
     check_operator(sg.Distance, max_examples=5)
     with pytest.raises(AssertionError) as caught:
@@ -90,12 +106,8 @@ def test_operator_author_example_from_extend_passes():
         kind = "AtLeast"
 
         def __init__(self, *children, name, k=1):
-            self.k, self.nodes = k, children
-            self.name, self.annotations = name, ()
-
-        @property
-        def children(self):
-            return self.nodes
+            self.init_node(name, children)
+            self.k = k
 
         def child_weights(self):
             return (ChildWeights(core=0.0, shaping=1.0, safety=1.0),) * len(self.nodes)
@@ -130,6 +142,8 @@ def test_parametrize_with_checks_makes_one_readable_item_per_check(pytester):
             "All-check_rewards_are_finite_sums_of_terms",
             "All-check_core_reward_telescopes",
             "All-check_markov",
+            "All-check_state_methods_have_slots",
+            "All-check_contains_depends_on_ctx_alone",
             "All-check_reset_restores_own_state",
             "All-check_termination_includes_children",
             "All-check_flat_matches_reference",
@@ -139,13 +153,14 @@ def test_parametrize_with_checks_makes_one_readable_item_per_check(pytester):
             "Constraint-check_rewards_are_finite_sums_of_terms",
             "Constraint-check_core_reward_telescopes",
             "Constraint-check_markov",
+            "Constraint-check_state_methods_have_slots",
             "Constraint-check_reset_restores_own_state",
             "Constraint-check_flat_matches_reference",
             "Constraint-check_description_is_exact",
         ]
     ]
     result = pytester.runpytest("-q", "-p", "no:cacheprovider", "-k", "Constraint-check_markov")
-    result.assert_outcomes(passed=1, deselected=15)
+    result.assert_outcomes(passed=1, deselected=18)
 
 
 @pytest.mark.parametrize(

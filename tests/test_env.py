@@ -392,14 +392,6 @@ def test_baseline_env_rejects_non_finite_rewards():
         env.step(np.zeros(1, dtype=np.float32))
 
 
-def test_goal_env_is_a_deprecated_name_of_spec_env():
-    with pytest.warns(DeprecationWarning, match="GoalEnv is renamed SpecEnv"):
-        assert sg.GoalEnv is sg.SpecEnv
-    with pytest.warns(DeprecationWarning):
-        from specguard.build.env import GoalEnv
-    assert GoalEnv is sg.SpecEnv
-
-
 def _replay_auto_env(**kwargs):
     initial = sg.InitialEnv(lambda: ReplayEnv([[0.0], [1.0], [0.0], [1.0]]), features=("x",))
     tree = sg.All(sg.Goal("up", x=(0.5, None)), sg.Goal("low", x=(None, 0.7)), name="p", weights="auto")
@@ -423,12 +415,6 @@ def test_adapted_weights_apply_from_the_next_episode_on():
 def test_the_reference_evaluator_keeps_the_trees_weights():
     with pytest.raises(sg.InvalidSpec, match=r"evaluator: adapted weights need the 'flat' evaluator"):
         _replay_auto_env(evaluator="reference").set_weights({"p": (0.9, 0.1)})
-
-
-def test_goal_info_is_the_deprecated_name_of_the_baseline_env():
-    with pytest.warns(DeprecationWarning, match="GoalInfo is renamed BaselineEnv"):
-        assert sg.GoalInfo is sg.BaselineEnv
-    assert isinstance(sg.make_baseline_env(pendulum.initial_env, pendulum.trees["w"]), sg.BaselineEnv)
 
 
 @pytest.mark.parametrize(

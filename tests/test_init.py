@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import subprocess
 import sys
 
@@ -28,6 +29,21 @@ def test_import_is_light():
     assert out.strip() == "[]"
 
 
+def test_star_import_is_silent_under_warnings_as_errors():
+    # A fresh interpreter: every public name is imported for the first time, and any warning fails the import.
+    code = "from specguard import *; print(len([n for n in dir() if not n.startswith('_')]))"
+    run = subprocess.run([sys.executable, "-W", "error", "-c", code], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert int(run.stdout) == len(sg.__all__) - 1  # every name but __version__
+
+
+def test_the_names_no_release_had_are_gone():
+    for name in ("GoalEnv", "GoalInfo"):
+        assert name not in sg.__all__
+        assert not hasattr(sg, name)
+        assert not hasattr(importlib.import_module("specguard.build.env"), name)
+
+
 def test_the_type_checking_imports_are_the_public_names_from_their_modules():
     # Type checkers read the TYPE_CHECKING block; the runtime reads _EXPORTS: one must say what the other does.
     import ast
@@ -38,9 +54,7 @@ def test_the_type_checking_imports_are_the_public_names_from_their_modules():
     imported = {
         alias.name: node.module for node in block.body if isinstance(node, ast.ImportFrom) for alias in node.names
     }
-    assert imported == {
-        name: module for name, module in sg._EXPORTS.items() if name not in ("GoalEnv", "GoalInfo")
-    }  # deprecated: untyped
+    assert imported == sg._EXPORTS
 
 
 def test_the_public_paths_import():

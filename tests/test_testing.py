@@ -49,6 +49,8 @@ def test_checks_lists_every_check_and_each_states_one_invariant():
         "check_rewards_are_finite_sums_of_terms",
         "check_core_reward_telescopes",
         "check_markov",
+        "check_state_methods_have_slots",
+        "check_contains_depends_on_ctx_alone",
         "check_reset_restores_own_state",
         "check_termination_includes_children",
         "check_flat_matches_reference",
@@ -67,7 +69,10 @@ def test_checks_for_picks_what_applies():
     for cls in (sg.Goal, sg.Distance):  # a leaf and an annotation: no children to end, nothing to refine
         assert "check_termination_includes_children" not in names[cls]
         assert "check_refinement_preserves_root_goal" not in names[cls]
-    assert len(names[sg.Goal]) == len(names[sg.Distance]) == 7
+    assert "check_contains_depends_on_ctx_alone" in names[sg.Goal]  # a node's goal; an annotation has none
+    assert "check_contains_depends_on_ctx_alone" not in names[sg.Distance]
+    assert len(names[sg.Goal]) == 9
+    assert len(names[sg.Distance]) == 8
 
 
 @pytest.mark.parametrize("bad", [object, sg.Goal("g", x=(0, 1)), "All", int])

@@ -29,9 +29,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from specguard import Goal
-from specguard.extend import MARGIN_FLOOR, Annotation, Box, ChildWeights, Context, Node, check_children
-from specguard.validation import check_name
-from specguard_plugins._checks import check_weights, weights_text
+from specguard.extend import MARGIN_FLOOR, Annotation, Box, ChildWeights, Context, Node, check_child_weights, set_fields
+from specguard_plugins._checks import weights_text
 
 if TYPE_CHECKING:
     from hypothesis.strategies import DrawFn, SearchStrategy
@@ -102,17 +101,11 @@ class AnyOf(Node):
     annotations: tuple[Annotation, ...]
 
     def __init__(self, *children: Node, name: str, weights: abc.Sequence[float] | None = None) -> None:
-        name = check_name("AnyOf", name)
-        kids = check_children("AnyOf", name, children)
-        parsed = check_weights(f"AnyOf {name!r}", kids, weights, "a child's distances and penalties")
-        object.__setattr__(self, "name", name)
-        object.__setattr__(self, "nodes", kids)
-        object.__setattr__(self, "weights", parsed)
-        object.__setattr__(self, "annotations", ())
-
-    @property
-    def children(self) -> tuple[Node, ...]:
-        return self.nodes
+        name, kids = self.init_node(name, children)
+        parsed = check_child_weights(
+            f"AnyOf {name!r}", kids, weights, scales="a child's distances and penalties", default="the default"
+        )
+        set_fields(self, weights=parsed)
 
     # -- the extension protocol ------------------------------------------------
 

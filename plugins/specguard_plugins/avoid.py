@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from specguard import Goal
 from specguard.error import InvalidSpec
-from specguard.extend import SAFETY, Annotation, CounterForm, Node, Slot, goal_test
+from specguard.extend import SAFETY, Annotation, CounterForm, Node, Slot, goal_test, set_fields
 from specguard.validation import check_budget, check_name, check_weight, number_text
 
 if TYPE_CHECKING:
@@ -120,20 +120,22 @@ class Avoid(Annotation):
                 f"the region {e.where!r} is not a set of states: {e.message}",
                 hint="give a box {feature: (lo, hi)} or a node without own state (Goal, All, AnyOf)",
             ) from e
-        object.__setattr__(self, "region", node)
-        object.__setattr__(self, "budget", check_budget(where, budget))
-        object.__setattr__(self, "weight", check_weight(where, weight))
-        object.__setattr__(self, "name", name)
-        object.__setattr__(self, "_test", test)
+        set_fields(
+            self,
+            region=node,
+            budget=check_budget(where, budget),
+            weight=check_weight(where, weight),
+            name=name,
+            _test=test,
+        )
 
     # The membership test is derived from ``region``: not pickled, rebuilt on load.
     def __getstate__(self) -> dict[str, Any]:
         return {k: v for k, v in vars(self).items() if k != "_test"}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
-        for k, v in state.items():
-            object.__setattr__(self, k, v)
-        object.__setattr__(self, "_test", goal_test(self.region))
+        set_fields(self, **state)
+        set_fields(self, _test=goal_test(self.region))
 
     def in_region(self, s: Any) -> bool:
         """Whether the state ``s`` (features by attribute) lies in the region."""

@@ -29,9 +29,8 @@ from itertools import accumulate
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from specguard.error import InvalidSpec
-from specguard.extend import SHAPING, Annotation, ChildWeights, Context, Node, Slot, check_children
-from specguard.validation import check_name
-from specguard_plugins._checks import check_weights, weights_text
+from specguard.extend import SHAPING, Annotation, ChildWeights, Context, Node, Slot, check_child_weights, set_fields
+from specguard_plugins._checks import weights_text
 
 if TYPE_CHECKING:
     from hypothesis.strategies import SearchStrategy
@@ -126,10 +125,9 @@ class Sequence(Node):
     annotations: tuple[Annotation, ...]
 
     def __init__(self, *children: Node, name: str, weights: abc.Sequence[float] | None = None) -> None:
-        name = check_name("Sequence", name)
+        name, kids = self.init_node(name, children)
         where = f"Sequence {name!r}"
-        kids = check_children("Sequence", name, children)
-        parsed = check_weights(where, kids, weights, "what passing a stage pays")
+        parsed = check_child_weights(where, kids, weights, scales="what passing a stage pays", default="the default")
         for child in kids:
             for a in child.annotations:
                 if a.role == SHAPING and a.state_slots():
@@ -139,13 +137,9 @@ class Sequence(Node):
                         "a sequence shapes with the active child's potentials of s alone",
                         hint="use a stateless shaping annotation (Distance) on the sequence's children",
                     )
-        object.__setattr__(self, "name", name)
-        object.__setattr__(self, "nodes", kids)
-        object.__setattr__(self, "weights", parsed)
-        object.__setattr__(self, "annotations", ())
+        set_fields(self, weights=parsed)
         # Derived once, read every step: stage(q) for q = 0..N, and each child's (annotation, weight) shapers.
         stage_weights = self.stage_weights()
-        object.__setattr__(self, "_stage", tuple(accumulate(stage_weights, initial=0.0)))
         shapers = tuple(
             tuple(
                 (a, stage_weights[i] * (1.0 if a.weight is None else a.weight))
@@ -154,11 +148,7 @@ class Sequence(Node):
             )
             for i, c in enumerate(kids)
         )
-        object.__setattr__(self, "_shapers", shapers)
-
-    @property
-    def children(self) -> tuple[Node, ...]:
-        return self.nodes
+        set_fields(self, _stage=tuple(accumulate(stage_weights, initial=0.0)), _shapers=shapers)
 
     def stage_weights(self) -> tuple[float, ...]:
         """What passing each stage pays: the user's weights, or ``1/N`` each."""

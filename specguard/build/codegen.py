@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from functools import partial
 from typing import Any, Protocol
 
 import numpy as np
@@ -187,7 +188,15 @@ def _step_source(tree: FlatTree) -> str:
             distances += 1
         elif t.kind == "counter":
             call = f"_fn{k}(s2)" if t.on_next_state else f"_fn{k}(s, a)"
-            lines += [f"    v{k} = {call}{comment}", f"    if v{k}:", f"        z[{t.slot}] -= 1.0"]
+            lines += [
+                f"    v{k} = {call}{comment}",
+                # Every step's result is a truth value: a bool passes on two identity tests, anything else
+                # (a numpy.bool_, or a bad value, which raises) through the check itself.
+                f"    if v{k} is not True and v{k} is not False:",
+                f"        v{k} = _truth{k}(v{k})",
+                f"    if v{k}:",
+                f"        z[{t.slot}] -= 1.0",
+            ]
             term = f"{number(-t.coef)} if v{k} else 0.0"
             ends.append(f"z[{t.slot}] <= 0.0")
         else:
@@ -398,23 +407,6 @@ class _GeneralAnnotation:
         return int(call_definition(self.key, "violations()", self.a.violations, tuple(z[self.start : self.stop]))) == 0
 
 
-def _checked_first(namespace: dict[str, Any], name: str, key: str, fn: Callable[..., Any]) -> Callable[..., Any]:
-    """``fn`` whose first result is checked to be a truth value; it then puts ``fn`` itself in its place.
-
-    So every evaluator checks a constraint's return type on its first step
-    (:func:`~specguard.validation.check_truth`), and later steps call the
-    user's function directly, at full speed.
-    """
-
-    def first(*args: Any) -> Any:
-        value = fn(*args)
-        check_truth(key, value)
-        namespace[name] = fn
-        return value
-
-    return first
-
-
 def build_namespace(tree: FlatTree, make: Callable[..., Any]) -> dict[str, Any]:
     """The globals the generated code runs with: user functions and general nodes by index."""
     namespace: dict[str, Any] = {"_new": tuple.__new__, "_State": make, "_float": float}
@@ -430,7 +422,9 @@ def build_namespace(tree: FlatTree, make: Callable[..., Any]) -> dict[str, Any]:
             namespace[f"_start{i}"] = general.begin
     for k, t in enumerate(tree.terms):
         if t.fn is not None:
-            namespace[f"_fn{k}"] = _checked_first(namespace, f"_fn{k}", t.key, t.fn) if t.kind == "counter" else t.fn
+            namespace[f"_fn{k}"] = t.fn
+        if t.kind == "counter":  # the one rule of both evaluators, with the error naming the term's key
+            namespace[f"_truth{k}"] = partial(check_truth, t.key)
         if t.kind == "annotation":
             assert t.annotation is not None
             size = slot_counts.get(t.key, 0) if t.slot >= 0 else 0

@@ -401,26 +401,3 @@ def make_env(initial_env: InitialEnv, tree: Node, *, evaluator: EvaluatorName = 
         SpecError: the tree or the initial env is invalid; the message names the node path.
     """
     return cast(SpecEnv, EnvFactory(initial_env, tree, evaluator=evaluator)(**make_kwargs))
-
-
-_RENAMED = {
-    # GoalEnv was SpecEnv's name until 0.1; it clashed with gymnasium-robotics' goal-conditioned GoalEnv.
-    "GoalEnv": ("SpecEnv", "GoalEnv is gymnasium-robotics' goal-conditioned env"),
-    # GoalInfo named what the wrapper adds, not what it is: the initial env, judged by the goals.
-    "GoalInfo": ("BaselineEnv", "it is the baseline env: the initial env's own reward, judged by the goals"),
-}
-
-
-def __getattr__(name: str) -> Any:
-    """The deprecated names, each with a ``DeprecationWarning`` on every use; they go in the next release."""
-    if name in _RENAMED:
-        import warnings
-
-        new, why = _RENAMED[name]
-        warnings.warn(
-            f"specguard.{name} is renamed {new} ({why}); the old name goes in the next release",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        return globals()[new]
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -102,7 +102,7 @@ def call_definition(key: str, what: str, fn: Callable[..., Any], *args: Any) -> 
     except EvaluationError as e:  # a definition's own diagnosis: prefix the key once
         if str(e).startswith(f"{key}: "):
             raise
-        raise EvaluationError(f"{key}: {e}") from e
+        raise EvaluationError(f"{key}: {e.message}", e.hint) from e
     except Exception as e:
         raise EvaluationError(f"{key}: {what} raised {type(e).__name__}: {e}") from e
 

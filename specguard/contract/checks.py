@@ -53,12 +53,13 @@ from specguard.contract.trees import (
     trees_with,
     value_text,
 )
-from specguard.extend import Annotation, Node, annotation_key
+from specguard.extend import Annotation, Context, Node, annotation_key
 from specguard.tree.nodes import Goal
 from specguard.validation import child_path
 
 __all__ = [
     "CHECKS",
+    "check_contains_depends_on_ctx_alone",
     "check_core_reward_telescopes",
     "check_description_is_exact",
     "check_flat_matches_reference",
@@ -67,6 +68,7 @@ __all__ = [
     "check_refinement_preserves_root_goal",
     "check_reset_restores_own_state",
     "check_rewards_are_finite_sums_of_terms",
+    "check_state_methods_have_slots",
     "check_termination_includes_children",
     "checks_for",
 ]
@@ -232,6 +234,84 @@ def _same(a: Any, b: Any, tol: float) -> bool:
 def _differences(x: dict[str, Any], y: dict[str, Any], xname: str, yname: str, tol: float) -> list[str]:
     """``key: xname X, yname Y`` for every value that differs (floats within ``tol``)."""
     return [f"{k}: {xname} {x[k]!r}, {yname} {y[k]!r}" for k in x if not _same(x[k], y[k], tol)]
+
+
+_STATE_METHODS = ("initial_state", "next_state")
+
+
+def _state_methods_overridden(obj: Node | Annotation) -> list[str]:
+    """The state methods ``obj``'s class overrides (of :class:`Node` or :class:`Annotation`)."""
+    base = Node if isinstance(obj, Node) else Annotation
+    return [m for m in _STATE_METHODS if getattr(type(obj), m) is not getattr(base, m)]
+
+
+def check_state_methods_have_slots(cls: type, max_examples: int = MAX_EXAMPLES) -> None:
+    """A node or annotation of the class that overrides initial_state or next_state declares own-state slots.
+
+    No evaluator calls the state methods of an instance without slots: the
+    state they compute is dead, and a ``contains`` that reads it (kept on the
+    node, its class or at module level) reads what nothing writes, a goal that
+    every other check sees as a constant.
+    """
+
+    def body(case: Example) -> None:
+        for path, node in case.tree.walk():
+            found: list[tuple[str, Node | Annotation]] = [(f"node {path!r} ({node.kind})", node)]
+            found += [(f"annotation {annotation_key(path, a)!r}", a) for a in node.annotations]
+            for what, obj in found:
+                overridden = _state_methods_overridden(obj) if isinstance(obj, cls) else []
+                if overridden and not obj.state_slots():
+                    raise Broken(
+                        f"{what} overrides {', '.join(overridden)} but declares no own-state slots "
+                        "(state_slots() is ()): no evaluator calls them, so the state they keep is never written; "
+                        "declare the state in state_slots() and read it from ctx.q"
+                    )
+
+    run_property(check_state_methods_have_slots, cls, max_examples, body, trees_with(cls).map(Example))
+
+
+def check_contains_depends_on_ctx_alone(cls: type, max_examples: int = MAX_EXAMPLES) -> None:
+    """contains(ctx) depends on ctx alone: a ctx gets the same answer before and after the node's other methods ran.
+
+    The contexts are a trajectory's (from the reference requirements). A fresh
+    copy of the tree answers ``contains`` for each of them first; then its
+    nodes of the class run ``initial_state``, ``next_state``, ``potential``,
+    ``reward`` and ``terminates`` along the trajectory, and after every step
+    each context must get its first answer again. A goal that reads state its
+    methods keep outside ``ctx`` (on the node, its class or at module level) changes.
+    """
+
+    def body(case: Example) -> None:
+        assert case.trajectory is not None and case.actions is not None
+        pristine = cloudpickle.dumps(case.tree)
+        req, xs = extended_states(case.tree, case.trajectory, case.actions)
+        fresh = dict(cloudpickle.loads(pristine).walk())
+        nodes = [(path, fresh[path]) for path, node in case.tree.walk() if isinstance(node, cls)]
+        ctxs = {path: [context(req, path, node, x) for x in xs] for path, node in nodes}
+        first = {path: [bool(node.contains(c)) for c in ctxs[path]] for path, node in nodes}
+        for t in range(len(xs)):
+            for path, node in nodes:
+                c = ctxs[path][t]
+                if t == 0:
+                    node.initial_state(Context(c.s, (), c.inside))
+                else:
+                    before = ctxs[path][t - 1]
+                    node.next_state(before, case.actions[t - 1], c.s, c.inside)
+                    node.reward(before, case.actions[t - 1], c)
+                node.potential(c)
+                node.terminates(c, (False,) * len(c.inside))
+            for path, node in nodes:
+                for u, c in enumerate(ctxs[path]):
+                    now = bool(node.contains(c))
+                    if now != first[path][u]:
+                        raise Broken(
+                            f"contains(ctx) of node {path!r} ({node.kind}) in s{u} was {first[path][u]} "
+                            f"first and is {now} after the node's methods ran along the trajectory up to s{t} "
+                            f"(ctx.q={c.q}, ctx.inside={c.inside}): it reads something besides ctx"
+                        )
+
+    assert issubclass(cls, Node)
+    run_property(check_contains_depends_on_ctx_alone, cls, max_examples, body)
 
 
 def check_reset_restores_own_state(cls: type, max_examples: int = MAX_EXAMPLES) -> None:
@@ -427,6 +507,8 @@ CHECKS: tuple[Check, ...] = (
     check_rewards_are_finite_sums_of_terms,
     check_core_reward_telescopes,
     check_markov,
+    check_state_methods_have_slots,
+    check_contains_depends_on_ctx_alone,
     check_reset_restores_own_state,
     check_termination_includes_children,
     check_flat_matches_reference,
@@ -447,6 +529,7 @@ def _refines(cls: type) -> bool:
 
 _APPLIES: dict[Check, Callable[[type], bool]] = {
     check_termination_includes_children: lambda cls: issubclass(cls, Node) and not issubclass(cls, Goal),
+    check_contains_depends_on_ctx_alone: lambda cls: issubclass(cls, Node),
     check_refinement_preserves_root_goal: _refines,
 }
 

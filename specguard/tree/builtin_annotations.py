@@ -151,7 +151,7 @@ class Constraint(Annotation):
         return (float(self.budget),)
 
     def next_state(self, s: Any, q: tuple[float, ...], action: Any, s2: Any) -> tuple[float, ...]:
-        violated = check_truth(f"constraint {self.name!r}", self.fn(s, action))
+        violated = check_truth(None, self.fn(s, action))  # the evaluator names the key, as the flat one does
         return (q[0] - 1.0,) if violated else q  # judged on (s, a), as R_pen is
 
     def potential(self, s: Any, q: tuple[float, ...]) -> float:

@@ -26,9 +26,18 @@ from numbers import Real
 from typing import TYPE_CHECKING, ClassVar, Literal
 
 from specguard.error import InvalidSpec
-from specguard.extend import Annotation, Box, ChildWeights, Context, Node, check_children, component_weights
+from specguard.extend import (
+    Annotation,
+    Box,
+    ChildWeights,
+    Context,
+    Node,
+    check_child_weights,
+    component_weights,
+    set_fields,
+)
 from specguard.tree.builtin_annotations import Constraint, Distance
-from specguard.validation import ANNOTATION_SEPARATOR, PATH_SEPARATOR, check_name, check_weight, number_text
+from specguard.validation import ANNOTATION_SEPARATOR, PATH_SEPARATOR, check_name, number_text
 
 if TYPE_CHECKING:
     from hypothesis.strategies import SearchStrategy
@@ -125,9 +134,8 @@ class Goal(Node):
                 f"a goal must bound at least one side of one feature, got {given}; every state would satisfy it",
                 hint=f"give lo or hi a number, e.g. {parsed[0][0]}=(0, None)",
             )
-        object.__setattr__(self, "name", name)
-        object.__setattr__(self, "bounds", parsed)
-        object.__setattr__(self, "annotations", ())
+        self.init_node(name)
+        set_fields(self, bounds=parsed)
 
     # -- the extension protocol: a box goal, membership reward (docs/semantics.md, "Leaf reward")
 
@@ -195,43 +203,19 @@ class All(Node):
     annotations: tuple[Annotation, ...]
 
     def __init__(self, *children: Node, name: str, weights: Sequence[float] | Literal["auto"] | None = None) -> None:
-        name = check_name("All", name)
-        where = f"All {name!r}"
-        children = check_children("All", name, children)
-        parsed: tuple[float, ...] | Literal["auto"] | None = None
-        if isinstance(weights, str) and weights == AUTO:
-            parsed = AUTO
-        elif weights is not None:
-            if isinstance(weights, (str, bytes)) or not isinstance(weights, Sequence):
-                raise InvalidSpec(
-                    where,
-                    f"expected weights to be a sequence of numbers, None or 'auto', got {weights!r}",
-                    hint="weights='auto' adapts them during training; omit weights= for 1/N each",
-                )
-            if len(weights) != len(children):
-                raise InvalidSpec(
-                    where,
-                    f"expected {len(children)} weights (one per child), got {len(weights)}: {tuple(weights)!r}",
-                )
-            checked = [check_weight(f"{where}, weight of {c.name!r}", w) for c, w in zip(children, weights)]
-            parsed = tuple(w for w in checked if w is not None)
-            if len(parsed) != len(children):
-                raise InvalidSpec(where, f"expected a number for every weight, got {tuple(weights)!r}")
-            if not any(w > 0 for w in parsed):
-                raise InvalidSpec(
-                    where,
-                    f"expected at least one weight > 0, got weights=({', '.join(_fmt(w) for w in parsed)}); "
-                    "all-zero weights make the node's reward identically 0",
-                    hint="weights need not sum to 1; omit weights= for 1/N each",
-                )
-        object.__setattr__(self, "name", name)
-        object.__setattr__(self, "nodes", tuple(children))
-        object.__setattr__(self, "weights", parsed)
-        object.__setattr__(self, "annotations", ())
-
-    @property
-    def children(self) -> tuple[Node, ...]:
-        return self.nodes
+        name, kids = self.init_node(name, children)
+        parsed: tuple[float, ...] | Literal["auto"] | None = AUTO
+        if not (isinstance(weights, str) and weights == AUTO):
+            parsed = check_child_weights(
+                f"All {name!r}",
+                kids,
+                weights,
+                scales="a child's rewards",
+                default="1/N each",
+                accepted="a sequence of numbers, None or 'auto'",
+                hint="weights='auto' adapts them during training; omit weights= for 1/N each",
+            )
+        set_fields(self, weights=parsed)
 
     @property
     def adapts_weights(self) -> bool:
