@@ -98,3 +98,74 @@ def test_safety_rates_round_trip_and_old_baselines_without_them_are_noted(tmp_pa
     assert safety.comparison == "not compared: baseline 'old' has no figures for it" and safety.outcome == "passed"
     _, safety = check_item(result, spec, paths, "g", baseline=(load_baseline(new), "new"))
     assert safety.comparison.startswith("unchanged within chance: 97% -> 97%")
+
+
+def test_saving_a_subset_keeps_the_other_specs_and_says_what_it_replaced(tmp_path):
+    path = tmp_path / "main.json"
+    full = {"a.py::t::up": [(3, 4)], "a.py::t::up/x": [(2, 4)], "b.py::t::up": [(4, 4)], "c.py::t[1]::up": [(1, 4)]}
+    first = save_baseline(path, full, {key: "v1" for key in full})
+    assert first.added == ["a.py::t", "b.py::t", "c.py::t[1]"] and first.replaced == [] and first.kept == []
+    # `-k b` later: only spec b ran; a and c stay as they were.
+    second = save_baseline(path, {"b.py::t::up": [(1, 4)]}, {"b.py::t::up": "v1"})
+    baseline = load_baseline(path)
+    assert baseline.runs == {**full, "b.py::t::up": [(1, 4)]}
+    assert second.replaced == ["b.py::t"] and second.added == [] and second.kept == ["a.py::t", "c.py::t[1]"]
+    assert second.text() == "replaced 1 spec (b.py::t), added none, kept 2 others"
+
+
+def test_a_goal_the_session_did_not_check_is_kept_if_its_spec_is_unchanged(tmp_path):
+    path = tmp_path / "main.json"
+    save_baseline(path, {"a::t::up": [(3, 4)], "a::t::up/x": [(2, 4)]}, {"a::t::up": "v1", "a::t::up/x": "v1"})
+    save_baseline(path, {"a::t::up": [(4, 4)]}, {"a::t::up": "v1"})  # -k up: the same spec, one goal
+    assert load_baseline(path).runs == {"a::t::up": [(4, 4)], "a::t::up/x": [(2, 4)]}
+    saved = save_baseline(path, {"a::t::up": [(1, 4)]}, {"a::t::up": "v2"})  # the spec changed: its old goal goes
+    assert load_baseline(path).runs == {"a::t::up": [(1, 4)]}
+    assert saved.dropped == ["a::t::up/x"]
+    assert saved.text() == (
+        "replaced 1 spec (a::t), added none, kept none, dropped 1 goal (a::t::up/x) of an earlier version of its spec"
+    )
+
+
+def test_a_corrupt_baseline_is_not_overwritten_by_a_save(tmp_path):
+    path = tmp_path / "main.json"
+    path.write_text("{oops")
+    with pytest.raises(BaselineError, match="is corrupt"):
+        save_baseline(path, {"a::t::up": [(1, 4)]})
+    assert path.read_text() == "{oops"
+
+
+SAVER = """
+import sys, time
+from pathlib import Path
+from specguard.stats.compare import save_baseline
+
+path, spec, ready = Path(sys.argv[1]), sys.argv[2], Path(sys.argv[3])
+ready.write_text("")
+while not (ready.parent / "go").exists():
+    time.sleep(0.001)
+for i in range(60):
+    save_baseline(path, {f"{spec}::t::up": [(i % 5, 4)], f"{spec}::t::up/x": [(1, 4)]}, {f"{spec}::t::up": "v"})
+"""
+
+
+def test_concurrent_saves_to_one_baseline_all_survive(tmp_path):
+    import os
+    import subprocess
+    import sys
+    import time
+
+    path, sync = tmp_path / "baselines" / "main.json", tmp_path / "sync"
+    sync.mkdir()
+    specs = ["a.py", "b.py", "c.py"]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    procs = [
+        subprocess.Popen([sys.executable, "-c", SAVER, str(path), spec, str(sync / spec)], env=env) for spec in specs
+    ]
+    deadline = time.monotonic() + 60
+    while len(list(sync.iterdir())) < len(specs) and time.monotonic() < deadline:  # a barrier: all ready, then go
+        time.sleep(0.01)
+    (sync / "go").write_text("")
+    assert [p.wait(timeout=120) for p in procs] == [0] * len(specs)
+    runs = load_baseline(path).runs
+    assert sorted(runs) == sorted(f"{s}::t::{goal}" for s in specs for goal in ("up", "up/x"))
+    assert all(runs[f"{s}::t::up"] == [(59 % 5, 4)] for s in specs)  # each process's last save

@@ -583,3 +583,64 @@ def test_a_spec_error_inside_the_goal_spec_function_fails_its_item_in_one_line(p
     text = out.stdout.str()
     assert "test_specs.py::test_builds_a_bad_goal[root]: Goal 'empty', feature 'x': expected lo <= hi" in text
     assert "During handling" not in text and "Traceback" not in text and "specguard/tree/" not in text
+
+
+PASSING = """
+@sg.goal_spec(expect={"stabilization": 0.0})
+def test_a(pendulum, tree):
+    return tiny(pendulum, tree)
+"""
+
+
+def test_a_report_destination_that_cannot_be_written_is_a_warning_and_the_outcome_is_kept(pytester):
+    write(pytester, PASSING)
+    afile = pytester.path / "afile"
+    afile.write_text("not a folder")
+    for destination, reason in [(afile, "File exists"), (afile / "sub", "Not a directory")]:
+        result = run(pytester, "--goal-specs", f"--goal-specs-report={destination}")
+        assert result.ret == 0, result.stdout.str()
+        result.assert_outcomes(passed=1)
+        result.stdout.fnmatch_lines(
+            [f"specguard: warning: the report was not written to '{destination}': *{reason}*", "*= 1 passed in *"]
+        )
+        assert "Traceback" not in result.stdout.str() + result.stderr.str()
+    assert afile.read_text() == "not a folder"
+
+
+def test_a_baseline_that_cannot_be_saved_is_a_warning_and_the_outcome_is_kept(pytester):
+    write(pytester, PASSING)
+    afile = pytester.path / "afile"
+    afile.write_text("not a folder")
+    report = pytester.path / "report"
+    result = run(
+        pytester,
+        "--goal-specs",
+        "--goal-specs-save=main",
+        f"--goal-specs-baseline-dir={afile}",
+        "--goal-specs-compare-seeds=1",
+        f"--goal-specs-report={report}",
+    )
+    assert result.ret == 0, result.stdout.str()
+    result.assert_outcomes(passed=1)
+    result.stdout.fnmatch_lines(
+        [f"specguard: warning: baseline 'main' was not saved to '{afile / 'main.json'}': *", "*= 1 passed in *"]
+    )
+    assert (report / "goal-specs.json").is_file()  # the other output is still written
+
+
+def test_a_subset_save_keeps_the_other_specs_and_says_what_it_replaced(pytester):
+    write(pytester, PASSING + PASSING.replace("test_a", "test_b"))
+    opts = ["--goal-specs", "--goal-specs-save=main", "--goal-specs-compare-seeds=1"]
+    path = pytester.path / "baselines" / "main.json"
+    full = run(pytester, *opts)
+    full.assert_outcomes(passed=2)
+    full.stdout.fnmatch_lines(
+        [f"specguard: wrote baseline {path}: replaced none, added 2 specs (test_specs.py::test_a, *test_b), kept none"]
+    )
+    subset = run(pytester, *opts, "-k", "test_b")
+    subset.assert_outcomes(passed=1)
+    subset.stdout.fnmatch_lines(
+        [f"specguard: wrote baseline {path}: replaced 1 spec (test_specs.py::test_b), added none, kept 1 other"]
+    )
+    stored = json.loads(path.read_text())["goals"]
+    assert sorted(stored) == [f"test_specs.py::test_{x}::pendulum/stabilization" for x in "ab"]

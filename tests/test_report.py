@@ -247,3 +247,46 @@ def test_seed_labels_stack_inside_the_axes_or_are_left_out():
     fig = curves_figure([many])
     assert seed_labels(fig) == []
     assert "seeds; bold: mean while every seed trains" in [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+
+
+COLLIDING = [("t.py::a/b", "t.py::a b"), ("t.py::test_ü", "t.py::test_ö"), ("t.py::A", "t.py::a"), ("a::b", "a__b")]
+
+
+@pytest.mark.parametrize("keys", COLLIDING)
+def test_gif_names_are_unique_per_spec_and_stable(keys):
+    from specguard.report.gifs import gif_stem
+
+    one, other = (gif_stem(k) for k in keys)
+    assert one != other and one.lower() != other.lower()  # distinct on a case-insensitive disk too
+    assert gif_stem(keys[0]) == one  # stable: the same key, the same name
+    assert all(ch.isascii() and (ch.isalnum() or ch in "_.-~") for ch in one + other)
+
+
+def test_a_plain_key_keeps_its_readable_gif_name_and_a_long_one_is_bounded():
+    from specguard.report.gifs import gif_stem
+
+    assert gif_stem("t.py::test_cart") == "t.py__test_cart"
+    assert gif_stem("test_specs.py::test_up") == "test_specs.py__test_up"
+    long = gif_stem("t.py::test_" + "x" * 300)
+    assert len(long) <= 100 and long.startswith("t.py__test_xxx")
+    assert gif_stem("t.py::test_" + "x" * 300) != gif_stem("t.py::test_" + "x" * 299)
+    # A spec's GIF name is never a counterexample GIF's, whatever the key.
+    assert gif_stem("t.py::test_up-falsify-seed0") != gif_stem("t.py::test_up", falsify_seed=0)
+
+
+def test_report_gifs_link_each_spec_to_its_own_file(tmp_path, monkeypatch):
+    import specguard.report.gifs as gifs
+
+    def fake_gif(model, spec, path, **_):
+        Path(path).write_bytes(b"GIF89a")
+        return Gif(Path(path), f"{spec}, 9 steps", 2)
+
+    monkeypatch.setattr(gifs, "load_model", lambda spec, seed, cache: (None, None))
+    monkeypatch.setattr(gifs, "write_gif", fake_gif)
+    groups = ["t.py::test_[a/b]", "t.py::test_[a b]", "t.py::test_ü", "t.py::test_ö"]
+    rows = [{**ROW, "group": g, "per_seed": [{"seed": 0, "successes": 1, "episodes": 1}]} for g in groups]
+    written = gifs.report_gifs(tmp_path, rows, {g: g for g in groups}, tmp_path / "cache")
+    assert len({g.path for g in written.values()}) == 4 and len(list(tmp_path.glob("*.gif"))) == 4
+    text = markdown(rows, gifs=written)
+    links = [line for line in text.splitlines() if line.startswith("![rollout of")]
+    assert len(links) == 4 and len({line.split("](")[1] for line in links}) == 4

@@ -21,6 +21,7 @@ from specguard.pytest_plugin.session import Session
 __all__ = ["PROPERTY", "Recorder", "apply_family", "unsigned_cache_note", "write_outputs"]
 
 PROPERTY = "specguard"  # the user property that carries a goal item's row
+WARNING = "specguard: warning:"  # a line saying an output was not written
 
 
 def _verdict(report: pytest.TestReport) -> str:
@@ -66,8 +67,8 @@ class Recorder:
             terminalreporter.write_line(line)
         for line in family_lines(self.state.rows):
             terminalreporter.write_line(f"specguard: {line}")
-        for path in write_outputs(self.config, self.state):
-            terminalreporter.write_line(f"specguard: wrote {path}")
+        for line in write_outputs(self.config, self.state):
+            terminalreporter.write_line(line, yellow=line.startswith(WARNING))
         note = unsigned_cache_note(self.state.rows, os.environ)
         if note:
             terminalreporter.write_line(note)
@@ -97,36 +98,64 @@ def unsigned_cache_note(rows: list[dict[str, Any]], environ: Mapping[str, str]) 
     )
 
 
-def write_outputs(config: pytest.Config, state: Session) -> list[Path]:
-    """Write the reports and the baseline this session asked for; the paths written."""
+def write_outputs(config: pytest.Config, state: Session) -> list[str]:
+    """Write the reports and the baseline this session asked for; a line for each file written or note.
+
+    A destination that cannot be written (a file where a folder should be, no
+    permission, a corrupt or locked baseline) is a warning line naming it and the
+    reason: the session keeps its outcome and exit status, and the other outputs
+    are still written.
+    """
     if hasattr(config, "workerinput"):  # an xdist worker: the controller writes
         return []
-    written: list[Path] = []
+    lines: list[str] = []
     if state.options.report_dir is not None:
-        from specguard.report.gifs import report_gifs
-        from specguard.report.session import write_reports
-
-        gifs = report_gifs(state.options.report_dir, state.rows, state.specs, state.options.cache_dir)
-        written += write_reports(state.options.report_dir, state.rows, gifs=gifs, counterexamples=state.counterexamples)
-        written += [gif.path for gif in gifs.values() if gif.path is not None]
-        terminal = config.pluginmanager.get_plugin("terminalreporter")
-        for group, gif in gifs.items():
-            if gif.path is None and terminal is not None:
-                terminal.write_line(f"specguard: {group}: {gif.text}")
+        lines += _write_report(state, state.options.report_dir)
     if state.options.save:
-        from specguard.stats.compare import save_baseline
+        lines.append(_save_baseline(state, state.options.save))
+    return lines
 
-        path = state.options.baseline_dir / f"{state.options.save}.json"
-        rows = [r for r in state.rows if r.get("baseline_runs")]
-        key = "{0[group]}::{0[goal]}".format
-        save_baseline(
+
+def _reason(error: OSError) -> str:
+    """Why a write failed, without repeating the destination: ``NotADirectoryError: Not a directory``."""
+    return f"{type(error).__name__}: {error.strerror or error}"
+
+
+def _write_report(state: Session, directory: Path) -> list[str]:
+    """The ``--goal-specs-report`` files and GIFs: a line per file written and per spec without a GIF."""
+    from specguard.report.gifs import report_gifs
+    from specguard.report.session import write_reports
+
+    try:
+        directory.mkdir(parents=True, exist_ok=True)  # before the GIFs: one warning, not one note per spec
+        gifs = report_gifs(directory, state.rows, state.specs, state.options.cache_dir)
+        written = write_reports(directory, state.rows, gifs=gifs, counterexamples=state.counterexamples)
+    except OSError as e:
+        return [f"{WARNING} the report was not written to {str(directory)!r}: {_reason(e)}"]
+    written += [gif.path for gif in gifs.values() if gif.path is not None]
+    notes = [f"specguard: {group}: {gif.text}" for group, gif in gifs.items() if gif.path is None]
+    return [f"specguard: wrote {path}" for path in written] + notes
+
+
+def _save_baseline(state: Session, name: str) -> str:
+    """Merge the session's runs into baseline ``name``: the line saying what it replaced, or why it was not saved."""
+    from specguard.stats.compare import BaselineError, save_baseline
+
+    path = state.options.baseline_dir / f"{name}.json"
+    rows = [r for r in state.rows if r.get("baseline_runs")]
+    key = "{0[group]}::{0[goal]}".format
+    try:
+        saved = save_baseline(
             path,
             {key(r): [(k, n) for _, k, n in r["baseline_runs"]] for r in rows},
             {key(r): r["spec_key"] for r in rows if r.get("spec_key")},
             {key(r): [seed for seed, _, _ in r["baseline_runs"]] for r in rows},
         )
-        written.append(path)
-    return written
+    except BaselineError as e:
+        return f"{WARNING} baseline {name!r} was not saved: {e}"
+    except OSError as e:
+        return f"{WARNING} baseline {name!r} was not saved to {str(path)!r}: {_reason(e)}"
+    return f"specguard: wrote baseline {path}: {saved.text()}"
 
 
 def apply_family(rows: list[dict[str, Any]]) -> bool:

@@ -9,6 +9,7 @@ its first seed's cached model.
 
 from __future__ import annotations
 
+import hashlib
 import os
 import re
 from collections.abc import Mapping, Sequence
@@ -22,7 +23,7 @@ from specguard.engine.spec import Spec
 from specguard.engine.train import EVAL_SEED_BASE
 from specguard.falsify.starts import START_OPTION, StartSpace
 
-__all__ = ["MAX_FRAMES", "Gif", "counterexample_gifs", "report_gifs", "write_gif"]
+__all__ = ["MAX_FRAMES", "Gif", "counterexample_gifs", "gif_stem", "report_gifs", "write_gif"]
 
 MAX_FRAMES = 100  # frames a GIF keeps at most (an episode's frames are subsampled evenly)
 LAST_FRAME_MS = 2000  # how long the captioned last frame stays
@@ -176,8 +177,33 @@ class _NoFrames(Exception):
     pass
 
 
-def _slug(group: str) -> str:
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", group.replace("::", "__")).strip("_") or "spec"
+_PLAIN = re.compile(r"[a-z0-9.-]+(?:(?:::|_)[a-z0-9.-]+)*")  # keys whose readable name is their own, one to one
+_FALSIFY = "-falsify-seed"
+_READABLE = 60  # characters of a key kept in a hashed name
+
+
+def gif_stem(group: str, *, falsify_seed: int | None = None) -> str:
+    """The file name (without ``.gif``) of a spec's rollout GIF, or of its counterexample for ``falsify_seed``.
+
+    Unique and stable per spec key: a plain key (lower-case letters, digits,
+    ``.``, ``-``, single ``_``, ``::``) keeps its own name, ``::`` written
+    ``__``; any other (``/``, spaces, brackets, capitals, accents, a long key)
+    gets a readable part and ``~`` with a hash of the whole key, so keys that
+    read alike never share a file, on a case-insensitive disk either.
+
+    Example:
+        >>> gif_stem("t.py::test_up"), gif_stem("t.py::test_up", falsify_seed=0)
+        ('t.py__test_up', 't.py__test_up-falsify-seed0')
+        >>> gif_stem("t.py::test_[a/b]")
+        't.py__test__a_b~da266a8a3e'
+    """
+    readable = group.replace("::", "__")
+    lossless = len(group) <= _READABLE and _PLAIN.fullmatch(group) and not re.search(rf"{_FALSIFY}\d+$", group)
+    if not lossless:
+        digest = hashlib.sha256(group.encode()).hexdigest()[:10]
+        readable = re.sub(r"[^A-Za-z0-9_.-]+", "_", readable)[:_READABLE].strip("_") or "spec"
+        readable = f"{readable}~{digest}"
+    return readable if falsify_seed is None else f"{readable}{_FALSIFY}{falsify_seed}"
 
 
 def report_gifs(
@@ -212,7 +238,7 @@ def report_gifs(
         else:
             try:
                 model, normalizer = load_model(spec, seeds[0], cache_dir)
-                gif = write_gif(model, spec, directory / f"{_slug(group)}.gif", normalizer=normalizer)
+                gif = write_gif(model, spec, directory / f"{gif_stem(group)}.gif", normalizer=normalizer)
                 gifs[group] = gif
             except Exception as e:  # a report must not fail the session
                 gifs[group] = Gif(None, f"no rollout GIF: {type(e).__name__}: {e}")
@@ -236,7 +262,7 @@ def counterexample_gifs(
             gifs[seed] = Gif(None, "no GIF: the run cache is off, no model to load")
             continue
         model, normalizer = load_model(result.trained, seed, result.cache_dir)
-        path = directory / f"{_slug(group)}-falsify-seed{seed}.gif"
+        path = directory / f"{gif_stem(group, falsify_seed=seed)}.gif"
         start = falsification.counterexample.start
         gifs[seed] = write_gif(model, result.trained, path, normalizer=normalizer, start=start, starts=starts)
     return gifs

@@ -21,6 +21,14 @@ the plugin's shared results use) and its seeds, so a comparison says whether
 the spec itself changed since the baseline or only its result did, and a spec
 whose identity and runs are the baseline's own is not compared at all
 (:meth:`Baseline.same_runs`).
+
+A save merges by spec, under a lock beside the file (``NAME.json.lock``): it
+reads the stored baseline, replaces the goals of the specs the session ran,
+keeps every other spec's, and says which (:class:`Saved`). So a session that
+ran a subset (``-k``, one file) does not erase the rest, and two sessions
+saving at once both land. A goal of a spec the session ran but did not check
+(``-k`` on one goal) is kept while its spec is unchanged, and dropped, by name,
+once the spec it was measured on is gone.
 """
 
 from __future__ import annotations
@@ -34,10 +42,12 @@ from typing import Any
 from specguard.error import SpecError
 from specguard.utils.files import write_atomic
 
-__all__ = ["Baseline", "BaselineError", "load_baseline", "save_baseline"]
+__all__ = ["Baseline", "BaselineError", "Saved", "load_baseline", "save_baseline", "spec_of_key"]
 
 FORMAT = 3
 FORMATS = (1, 2, 3)  # format 1 stored runs only; 2 added the spec identity; 3 the seeds
+LOCK_TIMEOUT = 60.0  # seconds a save waits for another one to the same baseline
+LISTED = 8  # specs named at most per kind in a save's line
 
 
 class BaselineError(SpecError):
@@ -72,14 +82,50 @@ class Baseline:
         return all(stored.get(seed) == (k, n) for seed, k, n in runs)
 
 
-def save_baseline(
-    path: Path,
-    rows: Mapping[str, Runs],
-    specs: Mapping[str, str] | None = None,
-    seeds: Mapping[str, Sequence[int]] | None = None,
-) -> None:
-    """Write ``{key: [(successes, episodes), ...]}`` (each key's spec identity and seeds, when known) atomically."""
-    specs, seeds = specs or {}, seeds or {}
+def spec_of_key(key: str) -> str:
+    """The spec (the plugin's group) of a stored key ``group::goal``: goal keys never hold ``::``.
+
+    Example:
+        >>> spec_of_key("specs.py::test_swing[fast]::pendulum/up:spin")
+        'specs.py::test_swing[fast]'
+    """
+    return key.rsplit("::", 1)[0]
+
+
+@dataclass(frozen=True)
+class Saved:
+    """What a save did to the stored baseline: specs replaced, added and kept, and goals dropped.
+
+    ``dropped``: goals of a spec the session ran but did not check, stored from
+    an earlier version of that spec (another identity).
+    """
+
+    replaced: list[str]
+    added: list[str]
+    kept: list[str]
+    dropped: list[str] = field(default_factory=list)
+
+    def text(self) -> str:
+        """One line: ``replaced 1 spec (b.py::t), added none, kept 2 others``."""
+        parts = [f"replaced {_names(self.replaced, 'spec')}", f"added {_names(self.added, 'spec')}"]
+        parts.append(f"kept {len(self.kept)} other{'s' if len(self.kept) != 1 else ''}" if self.kept else "kept none")
+        if self.dropped:
+            parts.append(f"dropped {_names(self.dropped, 'goal')} of an earlier version of its spec")
+        return ", ".join(parts)
+
+
+def _names(names: Sequence[str], noun: str) -> str:
+    """``2 specs (a, b)``; ``none``; at most :data:`LISTED` named."""
+    if not names:
+        return "none"
+    shown = ", ".join(names[:LISTED]) + (f", and {len(names) - LISTED} more" if len(names) > LISTED else "")
+    return f"{len(names)} {noun}{'s' if len(names) != 1 else ''} ({shown})"
+
+
+def _entries(
+    rows: Mapping[str, Runs], specs: Mapping[str, str], seeds: Mapping[str, Sequence[int]]
+) -> dict[str, dict[str, Any]]:
+    """The stored form of each goal: its runs, its spec identity (or None), and its seeds when known."""
     goals: dict[str, Any] = {}
     for key, runs in rows.items():
         goals[key] = {"runs": [list(r) for r in runs], "spec": specs.get(key)}
@@ -87,8 +133,71 @@ def save_baseline(
             if len(seeds[key]) != len(runs):
                 raise ValueError(f"{key!r}: {len(seeds[key])} seeds for {len(runs)} runs")
             goals[key]["seeds"] = [int(s) for s in seeds[key]]
-    data = {"format": FORMAT, "goals": goals}
-    write_atomic(path, json.dumps(data, indent=1, sort_keys=True))
+    return goals
+
+
+def _stored(baseline: Baseline) -> dict[str, dict[str, Any]]:
+    """A loaded baseline back in its stored form."""
+    return _entries(baseline.runs, baseline.specs, baseline.seeds)
+
+
+def _merge(old: dict[str, dict[str, Any]], new: dict[str, dict[str, Any]]) -> tuple[dict[str, Any], Saved]:
+    """``old`` with the specs of ``new`` replaced by theirs, and what that did.
+
+    A goal of a replaced spec that ``new`` lacks stays if it was measured on the
+    spec ``new`` stores (the same identity, or none known), else it is dropped.
+    """
+    ran = {spec_of_key(key) for key in new}
+    identity = {spec_of_key(key): entry["spec"] for key, entry in new.items() if entry["spec"] is not None}
+    merged, dropped = dict(new), []
+    for key, entry in old.items():
+        spec = spec_of_key(key)
+        if key in new:
+            continue
+        if spec in ran and entry["spec"] is not None and identity.get(spec) not in (None, entry["spec"]):
+            dropped.append(key)
+        else:
+            merged[key] = entry
+    before = {spec_of_key(key) for key in old}
+    saved = Saved(
+        replaced=sorted(ran & before), added=sorted(ran - before), kept=sorted(before - ran), dropped=sorted(dropped)
+    )
+    return dict(sorted(merged.items())), saved
+
+
+def save_baseline(
+    path: Path,
+    rows: Mapping[str, Runs],
+    specs: Mapping[str, str] | None = None,
+    seeds: Mapping[str, Sequence[int]] | None = None,
+) -> Saved:
+    """Merge ``{key: [(successes, episodes), ...]}`` (each key's spec identity and seeds, when known) into the
+    baseline at ``path`` by spec, under its lock, and write it atomically.
+
+    Returns:
+        What the save replaced, added, kept and dropped, per spec.
+
+    Raises:
+        BaselineError: the stored baseline is corrupt (it is left as it is), or another save held its lock
+            for :data:`LOCK_TIMEOUT` seconds.
+        OSError: the file cannot be written.
+    """
+    from filelock import FileLock, Timeout
+
+    new = _entries(rows, specs or {}, seeds or {})
+    path.parent.mkdir(parents=True, exist_ok=True)
+    lock = FileLock(str(path.with_name(f"{path.name}.lock")), timeout=LOCK_TIMEOUT, thread_local=False)
+    try:
+        with lock:
+            old = _stored(load_baseline(path)) if path.exists() else {}
+            goals, saved = _merge(old, new)
+            write_atomic(path, json.dumps({"format": FORMAT, "goals": goals}, indent=1, sort_keys=True))
+    except Timeout:
+        raise BaselineError(
+            f"baseline {str(path)!r}: another save has held its lock {lock.lock_file!r} for over "
+            f"{LOCK_TIMEOUT:g} s; nothing was saved"
+        ) from None
+    return saved
 
 
 def load_baseline(path: Path) -> Baseline:

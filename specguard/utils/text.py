@@ -5,7 +5,9 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping, Sequence
 
 __all__ = [
+    "MAX_CELL",
     "bounds_text",
+    "elide",
     "interval_text",
     "markdown_cell",
     "markdown_table",
@@ -15,8 +17,28 @@ __all__ = [
 ]
 
 
+MAX_CELL = 60  # the widest a table cell is drawn, but in the last column (never padded)
+
+
+def elide(text: str, width: int) -> str:
+    """``text`` cut to ``width`` characters by an ellipsis in the middle, so both of its ends stay readable.
+
+    Example:
+        >>> elide("tests/specs/test_pendulum.py::test_swing_up", 24)
+        'tests/specs/…st_swing_up'
+    """
+    if len(text) <= width:
+        return text
+    head = width // 2
+    return text[:head] + "…" + text[len(text) - (width - 1 - head) :]
+
+
 def render_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
     """Left-aligned columns two spaces apart, a rule of dashes under the header, no trailing spaces.
+
+    A cell longer than :data:`MAX_CELL` is elided in the middle (:func:`elide`),
+    so one long spec key does not pad every line; the last column, which pads
+    nothing, is written whole.
 
     Example:
         >>> print("\\n".join(render_table(["goal", "success"], [["pendulum", "91%"]])))
@@ -24,12 +46,14 @@ def render_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[s
         --------  -------
         pendulum  91%
     """
-    widths = [max(len(str(r[i])) for r in [header, *rows]) for i in range(len(header))]
+    last = len(header) - 1
+    cells = [[str(c) if i == last else elide(str(c), MAX_CELL) for i, c in enumerate(r)] for r in [header, *rows]]
+    widths = [max(len(r[i]) for r in cells) for i in range(len(header))]
 
     def line(cells: Sequence[str]) -> str:
-        return "  ".join(str(c).ljust(w) for c, w in zip(cells, widths)).rstrip()
+        return "  ".join(c.ljust(w) for c, w in zip(cells, widths)).rstrip()
 
-    return [line(header), "  ".join("-" * w for w in widths), *(line(r) for r in rows)]
+    return [line(cells[0]), "  ".join("-" * w for w in widths), *(line(r) for r in cells[1:])]
 
 
 def weights_text(weights: Mapping[str, Sequence[float]]) -> str:
