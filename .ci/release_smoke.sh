@@ -2,22 +2,42 @@
 # The release, as someone installing from an index gets it: build the sdist and the wheel of both
 # distributions (specguard and plugins/' specguard-plugins), check their metadata (`twine check --strict`)
 # and that each archive ships LICENSE, then install the wheels (not editable) in a fresh venv on the oldest
-# and the newest supported Python and, from a directory outside the checkout, run `pytest --help` and one
-# tiny spec under `pytest --goal-specs` (128 training steps).
+# and the newest supported Python and, from a directory outside the checkout, run `pytest --help`,
+# `specguard --help` and one tiny spec under `pytest --goal-specs` (128 training steps).
 #
 # Usage: .ci/release_smoke.sh [PYTHON ...]   (default: python3.11 python3.13, the oldest and the newest)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
-PYTHONS=("$@")
-[ ${#PYTHONS[@]} -gt 0 ] || PYTHONS=(python3.11 python3.13)
+NAMES=("$@")
+[ ${#NAMES[@]} -gt 0 ] || NAMES=(python3.11 python3.13)
+
+# The interpreter a name runs: on PATH, or else pyenv's installed version of it when pyenv has not selected
+# that version (its shim then refuses to run); none is an error, never a Python skipped in silence.
+interpreter() {
+    if "$1" -c "" 2>/dev/null; then
+        command -v "$1"
+        return
+    fi
+    local found
+    found=$(find "${PYENV_ROOT:-$HOME/.pyenv}/versions" -maxdepth 3 -path "*/bin/$1" 2>/dev/null | sort -V | tail -1)
+    if [ -z "$found" ]; then
+        echo "release smoke: no $1 on PATH nor under pyenv" >&2
+        exit 2
+    fi
+    echo "$found"
+}
+PYTHONS=()
+for name in "${NAMES[@]}"; do
+    PYTHONS+=("$(interpreter "$name")")
+done
 
 # Nothing of the checkout may be importable from the smoke venvs.
 unset PYTHONPATH
 WORK=$(mktemp -d)
 trap 'rm -rf "$WORK"' EXIT
 
-echo "release smoke: build and check (${PYTHONS[0]})"
+echo "release smoke: build and check (${PYTHONS[0]}; then installs on ${PYTHONS[*]})"
 start=$SECONDS
 "${PYTHONS[0]}" -m venv "$WORK/tools"
 "$WORK/tools/bin/pip" install -q -c constraints.txt build twine
@@ -70,7 +90,7 @@ printf '[pytest]\ngoal_specs_workers = 1\n' >"$WORK/project/pytest.ini"
 
 for python in "${PYTHONS[@]}"; do
     start=$SECONDS
-    venv="$WORK/venv-$python"
+    venv="$WORK/venv-$(basename "$python")"
     "$python" -m venv "$venv"
     "$venv/bin/pip" install -q -c "$ROOT/constraints.txt" "$WORK"/dist/*.whl
     installed=$((SECONDS - start))
@@ -78,6 +98,7 @@ for python in "${PYTHONS[@]}"; do
         cd "$WORK/project"
         "$venv/bin/python" -c "import specguard, specguard_plugins, sys; sys.exit(0 if 'site-packages' in specguard.__file__ and 'site-packages' in specguard_plugins.__file__ else f'imported from the checkout: {specguard.__file__}')"
         "$venv/bin/pytest" --help >/dev/null
+        "$venv/bin/specguard" --help >/dev/null
         "$venv/bin/pytest" -p no:cacheprovider --goal-specs test_release_smoke.py | tee "$WORK/out.txt"
         grep -q "1 passed" "$WORK/out.txt" || { echo "release smoke ($python): the tiny spec did not pass"; exit 1; }
     )
