@@ -1,0 +1,92 @@
+"""What an index shows of the two distributions (specguard, plugins/' specguard-plugins): license, Python, description.
+
+Building and installing them is `.ci/release_smoke.sh`'s part; these read the metadata the build reads.
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from pathlib import Path
+
+import pytest
+from markdown_pages import ROOT, python_blocks
+
+from specguard.version import __version__
+
+PROJECTS = [ROOT, ROOT / "plugins"]
+
+TARGET = re.compile(
+    r"""\]\(\s*<?([^)\s>]+)"""  # [text](target), ![alt](target)
+    r"""|^\s*\[[^\]]+\]:\s*<?(\S+?)>?\s*$"""  # [label]: target
+    r"""|\b(?:href|src)\s*=\s*["']([^"']+)""",  # <a href="target">, <img src="target">
+    flags=re.M,
+)
+"""A link's or an image's target in Markdown (inline or by reference) or in its HTML; one group holds it."""
+
+
+def metadata(project: Path) -> dict[str, object]:
+    return tomllib.loads((project / "pyproject.toml").read_text(encoding="utf-8"))["project"]
+
+
+def long_description(project: Path) -> Path:
+    readme = metadata(project)["readme"]
+    return project / (readme if isinstance(readme, str) else readme["file"])
+
+
+def relative_targets(markdown: str) -> list[str]:
+    """The targets that are not absolute URLs (``scheme:``), outside code blocks: an index page shows the text alone."""
+    prose = re.sub(r"^```.*?^```", "", markdown, flags=re.S | re.M)
+    targets = [next(g for g in m.groups() if g) for m in TARGET.finditer(prose)]
+    return [t for t in targets if not re.match(r"[a-zA-Z][a-zA-Z0-9+.-]*:", t)]
+
+
+def test_relative_targets_finds_every_form_of_link():
+    text = "[a](docs/x.md) ![b](img.png) [c](#c) [d](https://x.org)\n[e]: ../f.md\n<img src='g.png'>\n```\n[h](i)\n```"
+    assert relative_targets(text) == ["docs/x.md", "img.png", "#c", "../f.md", "g.png"]
+
+
+@pytest.mark.parametrize("project", PROJECTS, ids=lambda p: p.relative_to(ROOT).as_posix() or ".")
+def test_the_long_description_has_no_relative_link(project):
+    page = long_description(project)
+    assert relative_targets(page.read_text(encoding="utf-8")) == [], f"{page.relative_to(ROOT)} links relatively"
+
+
+@pytest.mark.parametrize("project", PROJECTS, ids=lambda p: p.relative_to(ROOT).as_posix() or ".")
+def test_the_distribution_ships_the_mit_license(project):
+    meta = metadata(project)
+    assert (meta["license"], meta["license-files"]) == ("MIT", ["LICENSE"])
+    text = (project / "LICENSE").read_text(encoding="utf-8")
+    assert text.startswith("MIT License\n\nCopyright (c) 2026 the specguard authors\n")
+    assert text == (ROOT / "LICENSE").read_text(encoding="utf-8")
+
+
+@pytest.mark.parametrize("project", PROJECTS, ids=lambda p: p.relative_to(ROOT).as_posix() or ".")
+def test_the_classifiers_name_exactly_the_supported_pythons(project):
+    meta = metadata(project)
+    assert meta["requires-python"] == ">=3.11"
+    listed = sorted(c.rsplit(" ", 1)[1] for c in meta["classifiers"] if re.fullmatch(r".*Python :: 3\.\d+", c))
+    assert listed == ["3.11", "3.12", "3.13"]
+
+
+def test_hypothesis_is_a_dependency_and_no_extra():
+    meta = metadata(ROOT)
+    assert any(re.match(r"hypothesis\b", d) for d in meta["dependencies"])
+    extras = meta["optional-dependencies"]
+    assert "hypothesis" not in extras
+    assert [e for e, deps in extras.items() if any(re.match(r"hypothesis\b", d) for d in deps)] == []
+
+
+def test_the_changelog_has_a_section_for_this_version_below_unreleased():
+    headings = re.findall(r"^## (.+)$", (ROOT / "CHANGELOG.md").read_text(encoding="utf-8"), flags=re.M)
+    assert headings[0] == "Unreleased"
+    assert __version__ in headings
+    assert metadata(ROOT / "plugins")["version"] == __version__, "the two distributions are released together"
+
+
+def test_the_long_descriptions_goal_spec_collects_one_item_per_goal(pytester):
+    (example,) = python_blocks(long_description(ROOT))
+    pytester.makepyfile(test_pendulum_specs=example)
+    result = pytester.runpytest("-p", "no:cacheprovider", "--collect-only", "-q")
+    items = [line for line in result.stdout.lines if "::" in line]
+    assert items == [f"test_pendulum_specs.py::test_upright[{goal}]" for goal in ("pendulum", "stabilization")]
