@@ -37,19 +37,19 @@ _EXPORTS = {
     "Budget": "specguard.engine.budget",
     "Cache": "specguard.engine.cache",
     "CacheWarning": "specguard.error",
-    "CompiledTree": "specguard.build.compiled",
+    "CompiledTree": "specguard.construction.compiled",
     "Constraint": "specguard.tree.builtin_annotations",
     "Distance": "specguard.tree.builtin_annotations",
     "EvaluationError": "specguard.error",
     "Falsify": "specguard.falsify.check",
     "FingerprintError": "specguard.error",
     "Goal": "specguard.tree.nodes",
-    "GoalEnv": "specguard.build.env",  # deprecated name of SpecEnv (warns)
-    "SpecEnv": "specguard.build.env",
-    "GoalInfo": "specguard.build.env",  # deprecated name of BaselineEnv (warns)
-    "BaselineEnv": "specguard.build.env",
+    "GoalEnv": "specguard.construction.env",  # deprecated name of SpecEnv (warns)
+    "SpecEnv": "specguard.construction.env",
+    "GoalInfo": "specguard.construction.env",  # deprecated name of BaselineEnv (warns)
+    "BaselineEnv": "specguard.construction.env",
     "GoalVerdict": "specguard.engine.spec_result",
-    "InitialEnv": "specguard.build.initial_env",
+    "InitialEnv": "specguard.construction.initial_env",
     "InitialEnvError": "specguard.error",
     "InvalidSpec": "specguard.error",
     "Node": "specguard.extend",
@@ -61,12 +61,12 @@ _EXPORTS = {
     "UnknownFeature": "specguard.error",
     "UnreachableGoal": "specguard.error",
     "VersionMismatch": "specguard.error",
-    "compile_tree": "specguard.build.compiled",
+    "compile_tree": "specguard.construction.compiled",
     "formula": "specguard.tree.formula",
     "goal_spec": "specguard.pytest_plugin.declare",
     "goal_specs": "specguard.pytest_plugin.declare",
-    "make_baseline_env": "specguard.build.env",
-    "make_env": "specguard.build.env",
+    "make_baseline_env": "specguard.construction.env",
+    "make_env": "specguard.construction.env",
     "run_spec": "specguard.engine.run",
 }
 
@@ -96,13 +96,13 @@ def __dir__() -> list[str]:
 
 
 if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
-    from specguard.build.compiled import CompiledTree as CompiledTree
-    from specguard.build.compiled import compile_tree as compile_tree
-    from specguard.build.env import BaselineEnv as BaselineEnv
-    from specguard.build.env import SpecEnv as SpecEnv
-    from specguard.build.env import make_baseline_env as make_baseline_env
-    from specguard.build.env import make_env as make_env
-    from specguard.build.initial_env import InitialEnv as InitialEnv
+    from specguard.construction.compiled import CompiledTree as CompiledTree
+    from specguard.construction.compiled import compile_tree as compile_tree
+    from specguard.construction.env import BaselineEnv as BaselineEnv
+    from specguard.construction.env import SpecEnv as SpecEnv
+    from specguard.construction.env import make_baseline_env as make_baseline_env
+    from specguard.construction.env import make_env as make_env
+    from specguard.construction.initial_env import InitialEnv as InitialEnv
     from specguard.engine.budget import Budget as Budget
     from specguard.engine.cache import Cache as Cache
     from specguard.engine.run import run_spec as run_spec

@@ -5,7 +5,7 @@ function (a lazy import is still a dependency) or under ``TYPE_CHECKING`` (a
 design dependency). Parts, lowest first:
 
 - base: ``error``, ``validation``, ``version``, ``utils/``;
-- ``extend`` (the operator API), then ``tree/`` (the built-in nodes), then ``build/`` (the constructed env);
+- ``extend`` (the operator API), then ``tree/`` (the built-in nodes), then ``construction/`` (the constructed env);
 - ``stats/`` (intervals, anytime looks, comparisons: numbers only);
 - ``falsify/`` (start spaces, robustness margins, the guided search for failing starts: over any policy callable);
 - ``parallel/`` (tasks in processes or on a cluster: generic, it knows nothing of specs);
@@ -29,7 +29,7 @@ import specguard
 PACKAGE = Path(specguard.__file__).parent
 
 BASE = frozenset({"error", "validation", "version", "utils"})
-CORE = BASE | {"extend", "tree", "build"}
+CORE = BASE | {"extend", "tree", "construction"}
 TOOLS = CORE | {"strategies", "registry", "contract", "testing"}
 # Per part, the parts its modules may import (its own included).
 ALLOWED: Mapping[str, frozenset[str]] = {
@@ -39,7 +39,7 @@ ALLOWED: Mapping[str, frozenset[str]] = {
     "utils": BASE,
     "extend": BASE | {"extend"},
     "tree": BASE | {"extend", "tree"},
-    "build": CORE,
+    "construction": CORE,
     "stats": BASE | {"stats"},
     "strategies": BASE | {"extend", "tree", "strategies"},
     "registry": BASE | {"extend", "tree", "registry"},
@@ -56,7 +56,7 @@ ALLOWED: Mapping[str, frozenset[str]] = {
 NO_DEEP_LEARNING = (
     "extend",
     "tree",
-    "build",
+    "construction",
     "stats",
     "falsify",
     "parallel",
@@ -264,16 +264,16 @@ def test_a_cycle_through_a_type_checking_import_is_found(tmp_path):
     package = write_package(
         tmp_path,
         {
-            "build/compiled.py": "from specguard.build.codegen import source_of\n",
-            "build/codegen.py": """
+            "construction/compiled.py": "from specguard.construction.codegen import source_of\n",
+            "construction/codegen.py": """
                 from typing import TYPE_CHECKING
                 if TYPE_CHECKING:
-                    from specguard.build.compiled import CompiledTree
+                    from specguard.construction.compiled import CompiledTree
             """,
-            "build/env.py": "from specguard.build import compiled\n",
+            "construction/env.py": "from specguard.construction import compiled\n",
         },
     )
-    assert cycles(import_graph(package)) == [["specguard.build.codegen", "specguard.build.compiled"]]
+    assert cycles(import_graph(package)) == [["specguard.construction.codegen", "specguard.construction.compiled"]]
     assert layer_violations(import_graph(package)) == []
 
 
@@ -294,9 +294,9 @@ def test_relative_imports_and_the_facade_are_resolved(tmp_path):
     ]
 
 
-def test_torch_in_the_build_is_found(tmp_path):
-    package = write_package(tmp_path, {"build/env.py": "def f():\n    import torch.nn\n"})
-    assert deep_learning_imports(package) == ["specguard.build.env imports torch"]
+def test_torch_in_the_construction_is_found(tmp_path):
+    package = write_package(tmp_path, {"construction/env.py": "def f():\n    import torch.nn\n"})
+    assert deep_learning_imports(package) == ["specguard.construction.env imports torch"]
 
 
 @pytest.mark.parametrize("module", ["specguard.tree.nodes", "specguard.engine.run", "specguard.cli.main"])

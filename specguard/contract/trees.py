@@ -18,9 +18,9 @@ from hypothesis import strategies as st
 from hypothesis.errors import FlakyFailure, HypothesisException
 
 from specguard import strategies as sgst
-from specguard.build.env import SpecEnv
-from specguard.build.initial_env import state_type
-from specguard.build.reference import ExtendedState, Requirements, process
+from specguard.construction.env import SpecEnv
+from specguard.construction.initial_env import state_type
+from specguard.construction.reference import ExtendedState, Requirements, process
 from specguard.contract.replay import ReplayEnv
 from specguard.extend import Annotation, Context, Node
 from specguard.tree._draw import values

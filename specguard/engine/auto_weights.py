@@ -35,7 +35,7 @@ to its siblings. Until :data:`MIN_EPISODES` episodes have finished, the
 node's own weights hold: ``1/N`` per child, 1 per constraint.
 
 Weights change only between episodes (the env applies new ones at its next
-``reset``, :meth:`specguard.build.env.SpecEnv.set_weights`): within an episode
+``reset``, :meth:`specguard.construction.env.SpecEnv.set_weights`): within an episode
 shaping telescopes and enter/exit rewards cancel only under constant
 weights (docs/semantics.md, "Potential-based shaping"). The env built from the tree alone keeps ``1/N``
 and is what evaluation uses; success does not depend on weights, so

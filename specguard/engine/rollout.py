@@ -19,7 +19,7 @@ __all__ = ["episode", "policy", "rollout", "spec_env"]
 
 def spec_env(spec: Spec, **make_kwargs: Any) -> Any:
     """The env ``spec`` trains on, built afresh: the constructed env, or the initial env for a baseline spec."""
-    from specguard.build.env import make_baseline_env, make_env
+    from specguard.construction.env import make_baseline_env, make_env
 
     if spec.baseline:
         return make_baseline_env(spec.initial_env, spec.tree, **make_kwargs)

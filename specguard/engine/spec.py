@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from numbers import Real
 from typing import Any
 
-from specguard.build.initial_env import InitialEnv
+from specguard.construction.initial_env import InitialEnv
 from specguard.engine.budget import Budget
 from specguard.engine.sb3 import ALGORITHMS
 from specguard.error import InvalidSpec

@@ -23,7 +23,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from specguard.build.env import EnvFactory
+from specguard.construction.env import EnvFactory
 from specguard.engine.auto_weights import WeightAdapter
 from specguard.engine.progress import ProgressEvent, decode_update, encode_update
 from specguard.engine.results import RunResult

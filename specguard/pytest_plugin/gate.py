@@ -152,7 +152,7 @@ def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[RunVerdict])
     never = [r.seed for r in runs if r.successes[path] == 0]
     shaped = any(a.role == SHAPING for _, n in _node(spec.tree, path).walk() for a in n.annotations)
     if never:
-        from specguard.build.checks import unreachable_reason
+        from specguard.construction.checks import unreachable_reason
 
         # "Impossible" is refused before training; should a result from elsewhere (an old cache) get here,
         # no Distance can help: say why, instead of "never reached".

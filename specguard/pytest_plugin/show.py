@@ -2,7 +2,7 @@
 
 :func:`render_spec` is the one rendering, used by ``specguard show`` and by
 ``pytest --goal-specs --goal-specs-show``; it builds the env (to read its
-observation space, and so runs the static checks of :mod:`specguard.build.checks`)
+observation space, and so runs the static checks of :mod:`specguard.construction.checks`)
 but trains nothing. :func:`show_goal_spec_file` shows the goal specs of a
 pytest file, whose fixtures only pytest can resolve, by running pytest on it
 in-process with ``--goal-specs-show``. :func:`plan_text` is the plan of a goal
@@ -44,7 +44,7 @@ def render_tree(tree: Node) -> list[str]:
 
 
 def _layout(spec: Spec) -> list[str]:
-    from specguard.build.env import make_baseline_env, make_env
+    from specguard.construction.env import make_baseline_env, make_env
 
     if spec.baseline:
         env: Any = make_baseline_env(spec.initial_env, spec.tree)

@@ -4,7 +4,7 @@ Like Gymnasium's ``env_checker``: each ``check_*`` function states one
 invariant, raises (or warns) with the node path when it does not hold, and
 returns nothing otherwise. :func:`check_goals` runs them all on a compiled
 tree; ``make_env`` and ``make_baseline_env`` call it (their preflight,
-:class:`specguard.build.env.EnvFactory`), so ``run_spec`` refuses an
+:class:`specguard.construction.env.EnvFactory`), so ``run_spec`` refuses an
 impossible spec before training.
 
 Nodes whose goal is a box (a ``Goal``; an ``All``'s is the intersection of
@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from specguard.build.compiled import CompiledTree, compile_tree
+from specguard.construction.compiled import CompiledTree, compile_tree
 from specguard.error import UnreachableGoal
 from specguard.tree.nodes import Node
 from specguard.utils.text import bounds_text
@@ -47,13 +47,13 @@ __all__ = [
 
 
 def _caller() -> int:
-    """The ``stacklevel`` for a warning of the calling function: the innermost frame outside ``specguard.build``.
+    """The ``stacklevel`` for a warning of the calling function: the innermost frame outside ``specguard.construction``.
 
     That is the line that built the env (the caller of ``make_env``, or of an env factory), however many of
     this package's frames lie between.
     """
     frame, level = sys._getframe(1), 1  # level 1: the function that warns
-    while frame.f_back is not None and str(frame.f_globals.get("__name__", "")).startswith("specguard.build."):
+    while frame.f_back is not None and str(frame.f_globals.get("__name__", "")).startswith("specguard.construction."):
         frame, level = frame.f_back, level + 1
     return level
 

@@ -1,6 +1,6 @@
 """The goal tree compiled once into a flat evaluator.
 
-Algorithm 1 (see :mod:`specguard.build.reference`) nests closures; evaluated per
+Algorithm 1 (see :mod:`specguard.construction.reference`) nests closures; evaluated per
 step it made Pendulum training 1.7-2x slower than on the raw env. Every
 reward component is linear in the tree's atomic terms, so the root reward is
 a plain weighted sum: one term per node that pays its own core reward, one
@@ -22,7 +22,7 @@ Two kinds of node and annotation are compiled differently:
 For the single state of an env step, numpy's per-call overhead would exceed
 the whole budget of a Pendulum step, so each tree is also turned into small
 generated Python functions (:attr:`CompiledTree.source`, see
-:mod:`specguard.build.codegen`), as dataclasses generate ``__init__``.
+:mod:`specguard.construction.codegen`), as dataclasses generate ``__init__``.
 """
 
 from __future__ import annotations
@@ -36,9 +36,9 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from specguard.build.codegen import build_namespace, source_of
-from specguard.build.initial_env import state_type
-from specguard.build.reference import FLOAT_MAX, check_distance, distance_value
+from specguard.construction.codegen import build_namespace, source_of
+from specguard.construction.initial_env import state_type
+from specguard.construction.reference import FLOAT_MAX, check_distance, distance_value
 from specguard.error import EvaluationError, InvalidSpec, UnknownFeature
 from specguard.extend import (
     Annotation,

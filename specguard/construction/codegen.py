@@ -1,4 +1,4 @@
-"""The generated per-step code of a :class:`~specguard.build.compiled.CompiledTree`.
+"""The generated per-step code of a :class:`~specguard.construction.compiled.CompiledTree`.
 
 Three functions are generated, straight-line, one line per goal and per
 reward term, with the weights folded into constants:
@@ -30,7 +30,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from specguard.build.reference import FLOAT_MAX, call_definition
+from specguard.construction.reference import FLOAT_MAX, call_definition
 from specguard.extend import Context, Node, Slot
 from specguard.validation import check_truth
 
@@ -40,7 +40,7 @@ __all__ = ["FlatTree", "build_namespace", "number", "source_of", "text"]
 class FlatTree(Protocol):
     """What the generated code is made from: the fields of a compiled tree it reads.
 
-    :class:`~specguard.build.compiled.CompiledTree` has them; this module names
+    :class:`~specguard.construction.compiled.CompiledTree` has them; this module names
     no class of that module, so the compiler depends on the code generator and
     not the other way round.
     """

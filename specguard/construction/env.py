@@ -30,10 +30,10 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.utils import RecordConstructorArgs
 
-from specguard.build.checks import check_goals
-from specguard.build.compiled import CompiledTree, compile_tree
-from specguard.build.initial_env import InitialEnv, check_identity_observation
-from specguard.build.reference import ReferenceEvaluator
+from specguard.construction.checks import check_goals
+from specguard.construction.compiled import CompiledTree, compile_tree
+from specguard.construction.initial_env import InitialEnv, check_identity_observation
+from specguard.construction.reference import ReferenceEvaluator
 from specguard.error import EvaluationError, InitialEnvError, InvalidSpec, SpecError, StateMappingError
 from specguard.tree.nodes import Node
 

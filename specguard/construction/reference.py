@@ -4,7 +4,7 @@
 of a node depth first, exactly as docs/semantics.md states them ("Reward", "The operator contract"), asking
 every node and annotation only through the extension protocol
 (:mod:`specguard.extend`). It is slow (closures calling closures) and meant to
-be read: the fast evaluator in :mod:`specguard.build.compiled` is tested against it
+be read: the fast evaluator in :mod:`specguard.construction.compiled` is tested against it
 on random trees and states.
 
 States here are *extended* states: the feature vector plus the own state of
@@ -19,7 +19,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
-from specguard.build.initial_env import state_type
+from specguard.construction.initial_env import state_type
 from specguard.error import EvaluationError
 from specguard.extend import Annotation, Context, Node, Slot, annotation_key, component_weights
 from specguard.validation import child_path
@@ -244,7 +244,7 @@ def process(node: Node, path: str | None = None, *, root: bool = True) -> Requir
 class ReferenceEvaluator:
     """Steps the requirements of :func:`process` along a trajectory of feature vectors.
 
-    Same interface as :class:`specguard.build.compiled.Evaluator`, so the constructed
+    Same interface as :class:`specguard.construction.compiled.Evaluator`, so the constructed
     env can run either (``make_env(..., evaluator="reference")``).
     """
 
