@@ -18,6 +18,9 @@ design dependency). Parts, lowest first:
 from __future__ import annotations
 
 import ast
+import re
+import subprocess
+import sys
 import textwrap
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -303,3 +306,32 @@ def test_torch_in_the_construction_is_found(tmp_path):
 def test_the_real_graph_is_read(module):
     graph = import_graph(PACKAGE)
     assert graph[module], f"{module} imports nothing of specguard? the reader is broken"
+
+
+# -- every docstring example is collected ------------------------------------------------------
+
+EXAMPLE = re.compile(r"^\s*>>> ", re.MULTILINE)
+
+
+def collected_files(root: Path, *args: str) -> set[str]:
+    """The files (relative to ``root``) holding at least one item pytest collects for ``pytest --collect-only -q``."""
+    out = subprocess.run(
+        [sys.executable, "-m", "pytest", "--collect-only", "-q", *args],
+        cwd=root,
+        capture_output=True,
+        text=True,
+        check=False,
+    ).stdout
+    return {line.split("::")[0] for line in out.splitlines() if "::" in line}
+
+
+def test_every_docstring_example_is_collected_by_the_readme_test_command():
+    """README's test command is ``pytest`` over its ``testpaths``; a folder pytest skips (``build``) hides examples."""
+    root = PACKAGE.parent
+    with_examples = {
+        path.relative_to(root).as_posix()
+        for path in modules_of(PACKAGE).values()
+        if EXAMPLE.search(path.read_text(encoding="utf-8"))
+    }
+    assert with_examples, "no module has an example? the reader is broken"
+    assert sorted(with_examples - collected_files(root, PACKAGE.name)) == []
