@@ -46,7 +46,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the case stud
 
 import specguard as sg
 from specguard.engine.falsification import batch_policy, property_keys
-from specguard.engine.rollout import episode, policy, spec_env
+from specguard.training.rollout import episode, policy, spec_env
 from specguard.falsify.search import EpisodeRunner, falsify
 from specguard.falsify.starts import StartSpace
 

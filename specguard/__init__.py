@@ -34,8 +34,8 @@ from specguard.version import __version__
 _EXPORTS = {
     "All": "specguard.tree.nodes",
     "Annotation": "specguard.extend",
-    "Budget": "specguard.engine.budget",
-    "Cache": "specguard.engine.cache",
+    "Budget": "specguard.spec.budget",
+    "Cache": "specguard.cache.store",
     "CacheWarning": "specguard.error",
     "CompiledTree": "specguard.construction.compiled",
     "Constraint": "specguard.tree.builtin_annotations",
@@ -53,7 +53,7 @@ _EXPORTS = {
     "InitialEnvError": "specguard.error",
     "InvalidSpec": "specguard.error",
     "Node": "specguard.extend",
-    "Spec": "specguard.engine.spec",
+    "Spec": "specguard.spec.spec",
     "SpecError": "specguard.error",
     "SpecResult": "specguard.engine.spec_result",
     "StartSpace": "specguard.falsify.starts",
@@ -67,7 +67,7 @@ _EXPORTS = {
     "goal_specs": "specguard.pytest_plugin.declare",
     "make_baseline_env": "specguard.construction.env",
     "make_env": "specguard.construction.env",
-    "run_spec": "specguard.engine.run",
+    "run_spec": "specguard.engine.run_spec",
 }
 
 # The one list of public names: __all__ is derived from it, and the TYPE_CHECKING imports
@@ -103,10 +103,10 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.construction.env import make_baseline_env as make_baseline_env
     from specguard.construction.env import make_env as make_env
     from specguard.construction.initial_env import InitialEnv as InitialEnv
-    from specguard.engine.budget import Budget as Budget
-    from specguard.engine.cache import Cache as Cache
-    from specguard.engine.run import run_spec as run_spec
-    from specguard.engine.spec import Spec as Spec
+    from specguard.spec.budget import Budget as Budget
+    from specguard.cache.store import Cache as Cache
+    from specguard.engine.run_spec import run_spec as run_spec
+    from specguard.spec.spec import Spec as Spec
     from specguard.engine.spec_result import GoalVerdict as GoalVerdict
     from specguard.engine.spec_result import SpecResult as SpecResult
     from specguard.error import CacheWarning as CacheWarning

@@ -9,7 +9,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import specguard as sg
-from specguard.engine.auto_weights import (
+from specguard.training.auto_weights import (
     FLOOR,
     MIN_EPISODES,
     WeightAdapter,

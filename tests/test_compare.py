@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from specguard.stats.compare import Baseline, BaselineError, load_baseline, save_baseline
+from specguard.gate.baseline import Baseline, BaselineError, load_baseline, save_baseline
 
 
 def test_save_and_load_round_trip(tmp_path):
@@ -73,7 +73,7 @@ def test_safety_rates_round_trip_and_old_baselines_without_them_are_noted(tmp_pa
     import specguard as sg
     from example_specs import pendulum
     from specguard.engine.judging import judge as _judge
-    from specguard.engine.results import RunResult
+    from specguard.training.result import RunResult
     from specguard.engine.spec_result import SpecResult
     from specguard.pytest_plugin.gate import check_item
 

@@ -73,7 +73,7 @@ DEEP_LEARNING = ("torch", "stable_baselines3")
 
 
 def module_name(path: Path, package: Path) -> str:
-    """``specguard/engine/run.py`` -> ``specguard.engine.run``; a package's ``__init__`` is the package."""
+    """``specguard/engine/run_spec.py`` -> ``specguard.engine.run_spec``; a package's ``__init__`` is the package."""
     parts = path.relative_to(package.parent).with_suffix("").parts
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
@@ -133,7 +133,7 @@ def third_party_imports(package: Path) -> dict[str, set[str]]:
 
 
 def part_of(module: str) -> str:
-    """The part a module belongs to: its first name below the package (``specguard.engine.run`` -> ``engine``)."""
+    """The part a module belongs to: its first name below the package (``specguard.engine.run_spec`` -> ``engine``)."""
     parts = module.split(".")
     return parts[1] if len(parts) > 1 else "__init__"
 
@@ -237,14 +237,14 @@ def test_a_lazy_import_of_the_engine_from_the_tree_is_a_violation(tmp_path):
         {
             "tree/nodes.py": """
                 def strategy():
-                    from specguard.engine.train import train_run
+                    from specguard.training.train import train_run
                     return train_run
             """,
             "engine/train.py": "from specguard.tree import nodes\n",
         },
     )
     assert layer_violations(import_graph(package)) == [
-        "specguard.tree.nodes -> specguard.engine.train (tree may not import engine)"
+        "specguard.tree.nodes -> specguard.training.train (tree may not import engine)"
     ]
 
 
@@ -258,8 +258,8 @@ def test_the_engine_importing_the_cli_and_the_plugin_are_violations(tmp_path):
         },
     )
     assert layer_violations(import_graph(package)) == [
-        "specguard.engine.run -> specguard.cli.main (engine may not import cli)",
-        "specguard.engine.run -> specguard.pytest_plugin.report (engine may not import pytest_plugin)",
+        "specguard.engine.run_spec -> specguard.cli.main (engine may not import cli)",
+        "specguard.engine.run_spec -> specguard.pytest_plugin.report (engine may not import pytest_plugin)",
     ]
 
 
@@ -290,10 +290,10 @@ def test_relative_imports_and_the_facade_are_resolved(tmp_path):
         },
     )
     graph = import_graph(package)
-    assert graph["specguard.engine.run"] == {"specguard", "specguard.engine.cache"}
-    assert graph["specguard.engine.cache"] == {"specguard.error"}
+    assert graph["specguard.engine.run_spec"] == {"specguard", "specguard.cache.store"}
+    assert graph["specguard.cache.store"] == {"specguard.error"}
     assert layer_violations(graph) == [
-        "specguard.engine.run -> specguard (the facade: import the module that defines the name)"
+        "specguard.engine.run_spec -> specguard (the facade: import the module that defines the name)"
     ]
 
 
@@ -302,7 +302,7 @@ def test_torch_in_the_construction_is_found(tmp_path):
     assert deep_learning_imports(package) == ["specguard.construction.env imports torch"]
 
 
-@pytest.mark.parametrize("module", ["specguard.tree.nodes", "specguard.engine.run", "specguard.cli.main"])
+@pytest.mark.parametrize("module", ["specguard.tree.nodes", "specguard.engine.run_spec", "specguard.cli.main"])
 def test_the_real_graph_is_read(module):
     graph = import_graph(PACKAGE)
     assert graph[module], f"{module} imports nothing of specguard? the reader is broken"

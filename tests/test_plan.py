@@ -11,8 +11,8 @@ import pytest
 import specguard as sg
 from example_specs import lunar_lander, pendulum
 from specguard.cli.main import main
-from specguard.engine.plan import plan_spec
-from specguard.report.plan import plan_lines
+from specguard.gate.plan import plan_spec
+from specguard.report.plan_lines import plan_lines
 from specguard.stats.power import chance_met
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "example_specs"

@@ -17,8 +17,8 @@ import pytest
 import specguard as sg
 from example_specs import pendulum
 from specguard.cli.main import main
-from specguard.engine.fingerprint import versions
-from specguard.engine.reproduction import sized
+from specguard.cache.fingerprint import versions
+from specguard.engine.reproduce import sized
 from specguard.report.reproduction import TITLE, sections
 
 REPO = Path(__file__).resolve().parents[1]
@@ -173,8 +173,8 @@ def test_an_interruption_stops_the_running_specs_at_once_and_starts_no_other(tmp
 
 def test_a_run_counts_as_met_by_its_interval_as_every_door_judges_it():
     from specguard.engine.judging import judge
-    from specguard.engine.reproduction import CaseStudy
-    from specguard.engine.results import RunResult
+    from specguard.engine.reproduce import CaseStudy
+    from specguard.training.result import RunResult
     from specguard.engine.spec_result import SpecResult
     from specguard.report.reproduction import _root_row
 

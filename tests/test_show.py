@@ -9,7 +9,7 @@ import warnings
 import pytest
 
 import specguard as sg
-from specguard.engine.budget import trained_timesteps
+from specguard.spec.budget import trained_timesteps
 from specguard.pytest_plugin.show import has_goal_specs, render_spec
 
 SPECS = textwrap.dedent(

@@ -10,7 +10,7 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.engine.train import EVAL_SEED_BASE, TrainingError, evaluate, train_run
+from specguard.training.train import EVAL_SEED_BASE, TrainingError, evaluate, train_run
 from specguard.stats.anytime import min_successes_to_meet
 from specguard.testing import ReplayEnv
 
@@ -132,7 +132,7 @@ def test_evaluate_counts_an_episode_ended_by_its_constraint_as_unsafe():
 
 
 def test_training_curve_records_safety_rates():
-    from specguard.engine.train import _GoalCurve
+    from specguard.training.train import _GoalCurve
 
     curve = _GoalCurve(every=2, wall_clock_s=None, total=4, report=None)
     unsafe = {"goals": {"root": True}, "safe": {"root:c": False}}

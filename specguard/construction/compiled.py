@@ -325,7 +325,7 @@ def compile_tree(
         weights: per path of a node that adapts its weights
             (:attr:`Node.adapts_weights`), one weight per child and then one
             per adapted safety annotation of the node, replacing the node's
-            own (:mod:`specguard.engine.auto_weights`).
+            own (:mod:`specguard.training.auto_weights`).
 
     Raises:
         UnknownFeature: a goal names a feature not in ``features``.

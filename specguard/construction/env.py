@@ -171,7 +171,7 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         Args:
             weights: per path of a node with ``weights="auto"``, one weight per
                 child, then one per constraint of the node left at its default
-                weight (:mod:`specguard.engine.auto_weights`).
+                weight (:mod:`specguard.training.auto_weights`).
 
         Raises:
             InvalidSpec: a path without ``weights="auto"``, a wrong count of

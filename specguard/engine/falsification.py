@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from specguard.engine.spec import Spec
+from specguard.spec.spec import Spec
 from specguard.falsify.search import EpisodeRunner, Falsification, falsify
 from specguard.falsify.starts import StartSpace
 
@@ -53,7 +53,7 @@ def database_key(spec_key: str, seed: int, space: StartSpace) -> str:
 
 def batch_policy(model: Any, normalizer: Any, deterministic: bool) -> Callable[[np.ndarray], Any]:
     """``model``'s actions for a batch of observations (rows), its ``VecNormalize`` statistics applied if any."""
-    from specguard.engine.rollout import _normalizer
+    from specguard.training.rollout import _normalizer
 
     norm = _normalizer(model, normalizer)
 
@@ -86,7 +86,7 @@ def falsify_run(
     """
     from hypothesis.database import DirectoryBasedExampleDatabase
 
-    from specguard.engine.rollout import spec_env
+    from specguard.training.rollout import spec_env
     from specguard.error import SpecError
 
     if spec.baseline:

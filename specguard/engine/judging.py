@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from specguard.engine.results import RunResult
-from specguard.engine.spec import Spec
+from specguard.training.result import RunResult
+from specguard.spec.spec import Spec
 from specguard.engine.spec_result import GoalVerdict
 from specguard.stats.intervals import QuorumVerdict, RunVerdict, quorum_verdict, run_verdict, success_interval
 

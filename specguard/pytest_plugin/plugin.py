@@ -46,7 +46,7 @@ def pytest_configure(config: pytest.Config) -> None:
     options = parse_options(config)
     state = Session(options)
     if options.enabled and options.compare:
-        from specguard.stats.compare import BaselineError, load_baseline
+        from specguard.gate.baseline import BaselineError, load_baseline
 
         try:
             state.baseline = load_baseline(baseline_path(options, options.compare))

@@ -86,7 +86,7 @@ def unsigned_cache_note(rows: list[dict[str, Any]], environ: Mapping[str, str]) 
         >>> unsigned_cache_note([{"cached": True}], {"CI": "true", "SPECGUARD_CACHE_KEY": "k"}) is None
         True
     """
-    from specguard.engine.cache import SECRET_ENV
+    from specguard.cache.store import SECRET_ENV
 
     if not environ.get("CI") or environ.get(SECRET_ENV) or not any(row.get("cached") for row in rows):
         return None
@@ -114,7 +114,7 @@ def write_outputs(config: pytest.Config, state: Session) -> list[Path]:
             if gif.path is None and terminal is not None:
                 terminal.write_line(f"specguard: {group}: {gif.text}")
     if state.options.save:
-        from specguard.stats.compare import save_baseline
+        from specguard.gate.baseline import save_baseline
 
         path = state.options.baseline_dir / f"{state.options.save}.json"
         rows = [r for r in state.rows if r.get("baseline_runs")]

@@ -19,7 +19,7 @@ class Session:
     """What a session keeps: options, the baseline compared with, the executor, results and report rows."""
 
     options: Options
-    baseline: Any = None  # a specguard.stats.compare.Baseline
+    baseline: Any = None  # a specguard.gate.baseline.Baseline
     executor: Any = None  # a specguard.parallel.executors.Executor, made once per session
     memo: dict[str, Any] = dataclasses.field(default_factory=dict)
     rows: list[dict[str, Any]] = dataclasses.field(default_factory=list)
@@ -46,7 +46,7 @@ def terminal_progress(config: pytest.Config) -> Callable[[Any], None]:
     """
 
     def write(event: Any) -> None:
-        from specguard.engine.progress import format_event, print_event
+        from specguard.training.progress import format_event, print_event
 
         _terminal_line(config, format_event(event), final=event.finished, fallback=lambda: print_event(event))
 
@@ -82,8 +82,8 @@ def _terminal_line(config: pytest.Config, text: str, *, final: bool, fallback: C
 
 def run(state: Session, spec: Any) -> Any:
     """The spec's result: trained (or read from the cache) once per session, shared by all its goal items."""
-    from specguard.engine.fingerprint import fingerprint_spec
-    from specguard.engine.run import run_spec
+    from specguard.cache.fingerprint import fingerprint_spec
+    from specguard.engine.run_spec import run_spec
 
     # Every goal item of a spec shares one result, under the spec's whole identity
     # (seeds, quorum and `undecided` included), the one the cache and baselines use.
@@ -102,7 +102,7 @@ def run(state: Session, spec: Any) -> Any:
 
 def _train(state: Session, spec: Any) -> Callable[[list[int]], Any]:
     """Train given seeds of ``spec`` with the session's options (cached seeds are reused)."""
-    from specguard.engine.run import train_seeds
+    from specguard.engine.run_spec import train_seeds
 
     def train(seeds: list[int]) -> Any:
         return train_seeds(
@@ -119,7 +119,7 @@ def _train(state: Session, spec: Any) -> Callable[[list[int]], Any]:
 
 def gate_of(state: Session, spec: Any, result: Any, group: str) -> Any:
     """The spec's comparisons with the session's baseline (None without one), once per spec: extra seeds are
-    trained here while a comparison is open (:func:`specguard.engine.gating.compare_spec`).
+    trained here while a comparison is open (:func:`specguard.gate.comparison.compare_spec`).
 
     Each comparison is judged at Holm's first step over the baseline's goals and safety rates.
     """
@@ -127,7 +127,7 @@ def gate_of(state: Session, spec: Any, result: Any, group: str) -> Any:
         return None
     key = result.spec_key or group
     if key not in state.gates:
-        from specguard.engine.gating import compare_spec, gate_ceiling
+        from specguard.gate.comparison import compare_spec, gate_ceiling
         from specguard.stats.family import first_level
         from specguard.stats.sequential import DEFAULT_ALPHA
 
@@ -147,7 +147,7 @@ def saved_runs(state: Session, spec: Any, result: Any, gate: Any) -> Any:
     """The runs ``--goal-specs-save`` stores for the spec: its own and more, up to the ceiling, once per spec."""
     key = result.spec_key or spec.label
     if key not in state.saved:
-        from specguard.engine.gating import baseline_runs, gate_ceiling
+        from specguard.gate.comparison import baseline_runs, gate_ceiling
 
         state.saved[key] = baseline_runs(
             result,

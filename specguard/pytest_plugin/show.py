@@ -6,7 +6,7 @@ observation space, and so runs the static checks of :mod:`specguard.construction
 but trains nothing. :func:`show_goal_spec_file` shows the goal specs of a
 pytest file, whose fixtures only pytest can resolve, by running pytest on it
 in-process with ``--goal-specs-show``. :func:`plan_text` is the plan of a goal
-item's spec (``--goal-specs-plan``, :mod:`specguard.engine.plan`), and
+item's spec (``--goal-specs-plan``, :mod:`specguard.gate.plan`), and
 :func:`plan_goal_spec_file` the same for ``specguard plan`` on a pytest file.
 """
 
@@ -16,9 +16,9 @@ import ast
 from pathlib import Path
 from typing import Any
 
-from specguard.engine.budget import trained_timesteps
-from specguard.engine.sb3 import collect_steps, collection_unit
-from specguard.engine.spec import Spec
+from specguard.spec.budget import trained_timesteps
+from specguard.spec.algorithms import collect_steps, collection_unit
+from specguard.spec.spec import Spec
 from specguard.tree.formula import formula
 from specguard.tree.nodes import Node
 from specguard.utils.text import bounds_text
@@ -154,9 +154,9 @@ def _look_at_goal_spec_file(target: str, *flags: str) -> int:
 
 
 def plan_text(spec: Spec, group: str, *, family: int, compare_seeds: int, baseline: Any = None) -> str:
-    """The plan of a goal item's spec (:mod:`specguard.engine.plan`), its baseline's figures where it has them."""
-    from specguard.engine.plan import plan_spec
-    from specguard.report.plan import plan_lines
+    """The plan of a goal item's spec (:mod:`specguard.gate.plan`), its baseline's figures where it has them."""
+    from specguard.gate.plan import plan_spec
+    from specguard.report.plan_lines import plan_lines
 
     runs = None
     if baseline is not None:

@@ -16,10 +16,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from specguard.engine.models import load_model
-from specguard.engine.rollout import episode, policy, spec_env
-from specguard.engine.spec import Spec
-from specguard.engine.train import EVAL_SEED_BASE
+from specguard.cache.models import load_model
+from specguard.training.rollout import episode, policy, spec_env
+from specguard.spec.spec import Spec
+from specguard.training.train import EVAL_SEED_BASE
 from specguard.falsify.starts import START_OPTION, StartSpace
 
 __all__ = ["MAX_FRAMES", "Gif", "counterexample_gifs", "report_gifs", "write_gif"]

@@ -15,7 +15,7 @@ from typing import Any
 
 import cloudpickle
 
-from specguard.engine.spec import Spec
+from specguard.spec.spec import Spec
 from specguard.error import SpecError
 
 __all__ = ["import_file", "load_objects"]

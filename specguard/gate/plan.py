@@ -24,8 +24,8 @@ import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
-from specguard.engine.gating import gate_ceiling
-from specguard.engine.spec import Spec
+from specguard.gate.comparison import gate_ceiling
+from specguard.spec.spec import Spec
 from specguard.stats.family import first_level
 from specguard.stats.power import DEFAULT_SPREAD, chance_met, chance_passed, estimated_spread, min_detectable_drop
 from specguard.stats.sequential import DEFAULT_ALPHA, DEFAULT_COMPARE_SEEDS, Design

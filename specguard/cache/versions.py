@@ -1,7 +1,7 @@
 """Which code a run is made by: specguard's source digest, installed libraries' versions, and the check workers make.
 
 Library code (the standard library, installed distributions, specguard) enters
-a cache key by name and version, not content (:mod:`specguard.engine.canonical`);
+a cache key by name and version, not content (:mod:`specguard.cache.canonical`);
 specguard by its version and a digest of every source file of the package.
 """
 

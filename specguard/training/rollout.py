@@ -3,7 +3,7 @@
 :func:`rollout` runs the policy on the env a run trained on (the constructed
 env, or the initial env for a baseline spec) and returns every step. GIFs of
 an episode are :mod:`specguard.report.gifs`; loading a cached model is
-:mod:`specguard.engine.models`.
+:mod:`specguard.cache.models`.
 """
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from specguard.engine.spec import Spec
-from specguard.engine.train import EVAL_SEED_BASE
+from specguard.spec.spec import Spec
+from specguard.training.train import EVAL_SEED_BASE
 
 __all__ = ["episode", "policy", "rollout", "spec_env"]
 

@@ -42,9 +42,9 @@ import hashlib
 import warnings
 from typing import Any
 
-from specguard.engine.canonical import canonical, digest
-from specguard.engine.probe import PROBE_STEPS, probe
-from specguard.engine.versions import check_versions, versions
+from specguard.cache.canonical import canonical, digest
+from specguard.cache.probe import PROBE_STEPS, probe
+from specguard.cache.versions import check_versions, versions
 
 __all__ = [
     "PROBE_STEPS",
@@ -99,7 +99,7 @@ def _compute(spec: Any) -> SpecFingerprint:
     full = _fields(spec, _NOT_IDENTITY_FIELDS)
     run = _fields(spec, _SPEC_ONLY_FIELDS | _NOT_IDENTITY_FIELDS)
     run["budget"] = _fields(spec.budget, _BUDGET_SPEC_ONLY_FIELDS)
-    from specguard.engine.train import env_factory
+    from specguard.training.train import env_factory
 
     build = env_factory(spec)  # a fresh env per probe, on one compiled tree
     first, second = probe(spec, build=build), probe(spec, build=build)

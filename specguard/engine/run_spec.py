@@ -5,7 +5,7 @@ each with one torch thread), judges every thresholded goal and safety rate
 (keys of :mod:`specguard.tree.keys`), and trains further seeds, up to
 ``budget.max_seeds``, only while some quorum is still open.
 Runs come from the cache when an identical run was trained before
-(:mod:`specguard.engine.cache`).
+(:mod:`specguard.cache.store`).
 
 Example:
     >>> import specguard as sg
@@ -22,11 +22,11 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
-from specguard.engine.cache import Cache
+from specguard.cache.store import Cache
 from specguard.engine.judging import judge, seeds_still_needed
-from specguard.engine.progress import ProgressEvent, print_event
+from specguard.training.progress import ProgressEvent, print_event
 from specguard.engine.runs import Runs
-from specguard.engine.spec import Spec
+from specguard.spec.spec import Spec
 from specguard.engine.spec_result import GoalVerdict, SpecResult
 from specguard.error import SpecError
 from specguard.parallel.executors import LOCAL, Executor, make_executor
@@ -75,7 +75,7 @@ def run_spec(
         spec: the spec.
         workers: parallel training processes (``"auto"``: the usable cores).
         cache_dir: where trained runs are kept and looked up; ``None`` disables the cache.
-        progress: called with a :class:`~specguard.engine.progress.ProgressEvent` per
+        progress: called with a :class:`~specguard.training.progress.ProgressEvent` per
             seed's start, tenth of training, end, cache hit, failure or wait
             (``format_event`` or ``str(event)`` makes it a line); ``None`` for silence.
         lock_timeout: seconds to wait for another process training the same run.
@@ -120,7 +120,7 @@ def train_seeds(
     """Train exactly ``seeds`` of ``spec`` (each from the cache when an identical run was stored), as ``run_spec`` does.
 
     For seeds beyond a spec's own: the extra seeds of a comparison with a baseline, and the
-    seeds a saved baseline stores (:mod:`specguard.engine.gating`). The result has runs and
+    seeds a saved baseline stores (:mod:`specguard.gate.comparison`). The result has runs and
     errors only: no verdicts (these seeds are beyond the spec's quorum).
     """
     _refuse_in_spawned_import()

@@ -24,11 +24,11 @@ from typing import Any
 import gymnasium as gym
 
 from specguard.construction.env import EnvFactory
-from specguard.engine.auto_weights import WeightAdapter
-from specguard.engine.progress import ProgressEvent, decode_update, encode_update
-from specguard.engine.results import RunResult
-from specguard.engine.sb3 import ALGORITHMS, algorithm_class
-from specguard.engine.spec import Spec
+from specguard.training.auto_weights import WeightAdapter
+from specguard.training.progress import ProgressEvent, decode_update, encode_update
+from specguard.training.result import RunResult
+from specguard.spec.algorithms import ALGORITHMS, algorithm_class
+from specguard.spec.spec import Spec
 from specguard.error import InvalidSpec, SpecError
 from specguard.parallel.protocol import Report
 from specguard.stats.anytime import checkpoint_steps, final_evaluation, interim_look
@@ -110,7 +110,7 @@ class _GoalCurve:
     checkpoint (:mod:`specguard.stats.anytime`); a checkpoint's evaluation is stored
     in its point under ``"evaluation"``, and a met one stops training. An
     ``adapter`` (``weights="auto"``) sees every finished training episode, and
-    each point records the weights in force (:mod:`specguard.engine.auto_weights`).
+    each point records the weights in force (:mod:`specguard.training.auto_weights`).
     """
 
     def __init__(
@@ -170,7 +170,7 @@ class _GoalCurve:
     def _point(self, num_timesteps: int) -> None:
         rates = {p: c / self._episodes for p, c in self._counts.items()} if self._episodes else {}
         self._append(num_timesteps, self._episodes, rates)
-        if self.report is not None:  # numbers, as JSON: the parent makes the event (specguard.engine.progress)
+        if self.report is not None:  # numbers, as JSON: the parent makes the event (specguard.training.progress)
             root = next(iter(rates.values())) if rates else None  # goals come first, the root first
             elapsed = time.perf_counter() - self.start
             line = encode_update(num_timesteps, self.total, elapsed, root, self._episodes)
@@ -200,7 +200,7 @@ def train_run(
 ) -> tuple[RunResult, Any]:
     """Train and evaluate one run of ``spec`` with ``seed``.
 
-    ``progress``, if given, receives a :class:`~specguard.engine.progress.ProgressEvent`
+    ``progress``, if given, receives a :class:`~specguard.training.progress.ProgressEvent`
     at each of the learning curve's points (every tenth of the budget), as
     ``run_spec``'s ``progress`` does (``print_event`` prints it). ``report``, if given,
     receives ``(phase, step, line)`` as the run moves through building the
@@ -298,7 +298,7 @@ def train_run(
             return curve.on_step(self.num_timesteps, self.locals["dones"], self.locals["infos"])
 
         def _on_rollout_end(self) -> None:
-            # Between rollouts, so every env switches at its next reset (specguard.engine.auto_weights).
+            # Between rollouts, so every env switches at its next reset (specguard.training.auto_weights).
             if adapter is not None and adapter.update() is not None:
                 self.training_env.env_method("set_weights", adapter.in_force)
 

@@ -25,7 +25,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from specguard.engine.sb3 import collect_parameter, collect_steps
+from specguard.spec.algorithms import collect_parameter, collect_steps
 from specguard.error import InvalidSpec
 from specguard.stats.anytime import DEFAULT_CHECKPOINTS
 from specguard.validation import check_count, check_positive

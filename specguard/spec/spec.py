@@ -22,8 +22,8 @@ from numbers import Real
 from typing import Any
 
 from specguard.construction.initial_env import InitialEnv
-from specguard.engine.budget import Budget
-from specguard.engine.sb3 import ALGORITHMS
+from specguard.spec.budget import Budget
+from specguard.spec.algorithms import ALGORITHMS
 from specguard.error import InvalidSpec
 from specguard.falsify.starts import StartSpace, as_start_space
 from specguard.stats.intervals import UNDECIDED_OUTCOMES

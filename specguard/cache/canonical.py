@@ -1,6 +1,6 @@
 """The canonical form of a spec's values: exact, JSON-able, every reference followed (the key's reading of code).
 
-See :mod:`specguard.engine.fingerprint` for what enters a key and why.
+See :mod:`specguard.cache.fingerprint` for what enters a key and why.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from specguard.engine.versions import library_module
+from specguard.cache.versions import library_module
 from specguard.error import FingerprintError
 from specguard.extend import Annotation, Node
 

@@ -1,11 +1,11 @@
-"""A spec's plan as text: what its gate can see (:mod:`specguard.engine.plan`), for ``specguard plan`` and
+"""A spec's plan as text: what its gate can see (:mod:`specguard.gate.plan`), for ``specguard plan`` and
 ``pytest --goal-specs --goal-specs-plan``."""
 
 from __future__ import annotations
 
 import math
 
-from specguard.engine.plan import OFFSETS, VISIBLE_DROP, GoalPlan, SpecPlan
+from specguard.gate.plan import OFFSETS, VISIBLE_DROP, GoalPlan, SpecPlan
 from specguard.tree.keys import label
 from specguard.utils.text import render_table
 

@@ -1,8 +1,8 @@
 """The run cache: unchanged specs are not retrained, changed ones are, and stored results are never trusted blindly.
 
-A trained run is keyed by :meth:`specguard.engine.fingerprint.SpecFingerprint.run_key`:
+A trained run is keyed by :meth:`specguard.cache.fingerprint.SpecFingerprint.run_key`:
 an exact digest of everything that decides the run (see
-:mod:`specguard.engine.fingerprint` for what it covers and what it cannot see).
+:mod:`specguard.cache.fingerprint` for what it covers and what it cannot see).
 
 An entry is a folder ``<root>/<key[:2]>/<key>/`` holding ``result.json``,
 ``model.zip`` (loadable with SB3's ``load``) and, with ``normalize=True``,
@@ -39,9 +39,9 @@ from collections.abc import Collection
 from pathlib import Path
 from typing import Any
 
-from specguard.engine.fingerprint import fingerprint_spec, versions
-from specguard.engine.results import RunResult
-from specguard.engine.spec import Spec
+from specguard.cache.fingerprint import fingerprint_spec, versions
+from specguard.training.result import RunResult
+from specguard.spec.spec import Spec
 from specguard.error import SpecError
 from specguard.tree.keys import result_keys
 from specguard.utils.files import staged

@@ -1,7 +1,7 @@
 """Gating a spec against a stored baseline: extra seeds while a comparison is open, and the seeds a baseline stores.
 
 Plain logic over a spec's result and a trainer (``train(seeds)``, e.g.
-:func:`specguard.engine.run.train_seeds`), used by the pytest plugin and by
+:func:`specguard.engine.run_spec.train_seeds`), used by the pytest plugin and by
 ``benchmarks/gate_real.py``:
 
 * :func:`compare_spec` compares every goal and safety rate of a spec that the
@@ -18,7 +18,7 @@ Plain logic over a spec's result and a trainer (``train(seeds)``, e.g.
   baseline.
 
 Verdicts against thresholds are not touched: they stay those of the spec's
-own seeds (:func:`specguard.engine.run.run_spec`).
+own seeds (:func:`specguard.engine.run_spec.run_spec`).
 """
 
 from __future__ import annotations
@@ -26,10 +26,10 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
-from specguard.engine.results import RunResult
-from specguard.engine.spec import Spec
+from specguard.training.result import RunResult
+from specguard.spec.spec import Spec
 from specguard.engine.spec_result import SpecResult
-from specguard.stats.compare import Baseline
+from specguard.gate.baseline import Baseline
 from specguard.stats.sequential import DEFAULT_MARGIN, Design, GateState, Look, compare_seeds
 
 __all__ = ["SpecGate", "Train", "baseline_runs", "compare_spec", "gate_ceiling"]

@@ -16,7 +16,7 @@ asserted, or before safety rates were measured) is not compared:
 :func:`specguard.pytest_plugin.gate.check_item` notes that instead of failing.
 
 Each stored goal also records its spec's identity
-(:attr:`specguard.engine.fingerprint.SpecFingerprint.spec_key`, the key the cache and
+(:attr:`specguard.cache.fingerprint.SpecFingerprint.spec_key`, the key the cache and
 the plugin's shared results use) and its seeds, so a comparison says whether
 the spec itself changed since the baseline or only its result did, and a spec
 whose identity and runs are the baseline's own is not compared at all

@@ -5,8 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from specguard.engine import sb3
-from specguard.engine.spec import Spec
+from specguard.spec import algorithms as sb3
+from specguard.spec.spec import Spec
 
 __all__ = ["load_model"]
 
@@ -19,7 +19,7 @@ def load_model(spec: Spec, seed: int, cache_dir: Path | str) -> tuple[Any, Any]:
     """
     import pickle
 
-    from specguard.engine.cache import NORMALIZER, Cache
+    from specguard.cache.store import NORMALIZER, Cache
 
     cache = Cache(cache_dir)
     if cache.load(spec, seed) is None:  # validates the entry's checksums before anything is unpickled

@@ -39,7 +39,7 @@ class RunResult:
             training stopped there (``timesteps`` is that step) and that
             checkpoint's evaluation is the run's result (:mod:`specguard.stats.anytime`).
         weights: per node with ``weights="auto"``, the adapted weights in
-            force when training ended (:mod:`specguard.engine.auto_weights`); each
+            force when training ended (:mod:`specguard.training.auto_weights`); each
             curve point also has the ones in force then, under ``"weights"``.
             Empty when no node adapts its weights.
     """

@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from specguard.engine.canonical import canonical, dumps
-from specguard.engine.train import make_single_env
+from specguard.cache.canonical import canonical, dumps
+from specguard.training.train import make_single_env
 from specguard.error import FingerprintError
 
 __all__ = ["PROBE_STEPS", "probe"]
@@ -31,8 +31,8 @@ def probe(spec: Any, steps: int = PROBE_STEPS, build: Callable[[], Any] | None =
     An env that raises is not an error here: the exception's type and message
     are hashed and the rollout ends (the training run reports the failure
     with its seed, where it belongs). ``build`` makes the env (``None``:
-    :func:`~specguard.engine.train.make_single_env`); probes of one spec share
-    one :func:`~specguard.engine.train.env_factory`, so its tree is compiled once.
+    :func:`~specguard.training.train.make_single_env`); probes of one spec share
+    one :func:`~specguard.training.train.env_factory`, so its tree is compiled once.
     """
     h = hashlib.sha256()
     env = None
