@@ -156,7 +156,7 @@ def test_specguard_plan_on_a_pytest_goal_spec_file(pytester):
 
 
 def test_the_case_studies_file_is_a_goal_spec_file():
-    from specguard.pytest_plugin.show import has_goal_specs
+    from specguard.report.show import has_goal_specs
 
     assert has_goal_specs(EXAMPLES / "test_case_studies.py") and not has_goal_specs(EXAMPLES / "pendulum.py")
     assert sg.goal_specs  # what the file calls

@@ -10,7 +10,7 @@ import pytest
 
 import specguard as sg
 from specguard.spec.budget import trained_timesteps
-from specguard.pytest_plugin.show import has_goal_specs, render_spec
+from specguard.report.show import has_goal_specs, render_spec
 
 SPECS = textwrap.dedent(
     """

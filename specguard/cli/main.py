@@ -40,7 +40,7 @@ __all__ = ["main"]
 
 
 def _show(target: str) -> int:
-    from specguard.pytest_plugin.show import has_goal_specs, render_spec, render_tree, show_goal_spec_file
+    from specguard.report.show import has_goal_specs, render_spec, render_tree, show_goal_spec_file
 
     if has_goal_specs(Path(target.partition("::")[0])):  # a pytest file: only pytest resolves its fixtures
         return show_goal_spec_file(target)
@@ -55,7 +55,7 @@ def _show(target: str) -> int:
 
 def _plan(args: argparse.Namespace) -> int:
     from specguard.gate.plan import plan_spec
-    from specguard.pytest_plugin.show import has_goal_specs, plan_goal_spec_file
+    from specguard.report.show import has_goal_specs, plan_goal_spec_file
     from specguard.report.plan_lines import plan_lines
 
     if has_goal_specs(Path(args.target.partition("::")[0])):  # a pytest file: only pytest resolves its fixtures
