@@ -46,9 +46,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the case stud
 
 import specguard as sg
 from specguard.engine.falsification import batch_policy, property_keys
-from specguard.training.rollout import episode, policy, spec_env
 from specguard.falsify.search import EpisodeRunner, falsify
 from specguard.falsify.starts import StartSpace
+from specguard.training.rollout import episode, policy, spec_env
 
 WIDE = StartSpace({"x": (-1.0, 1.0), "v": (-0.5, 0.5), "theta": (-0.1, 0.1), "omega": (-0.5, 0.5)})
 ANY_ANGLE = StartSpace({"theta": (-3.14159, 3.14159), "omega": (-1.0, 1.0)})

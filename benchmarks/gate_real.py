@@ -34,11 +34,11 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import specguard as sg
 from example_specs import pendulum
-from specguard.gate.comparison import compare_spec, gate_ceiling
 from specguard.engine.run_spec import train_seeds
-from specguard.spec.spec import Spec
 from specguard.engine.spec_result import SpecResult
 from specguard.gate.baseline import Baseline
+from specguard.gate.comparison import compare_spec, gate_ceiling
+from specguard.spec.spec import Spec
 from specguard.stats.family import first_level
 from specguard.stats.sequential import DEFAULT_ALPHA, DEFAULT_COMPARE_SEEDS
 

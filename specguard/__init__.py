@@ -96,6 +96,7 @@ def __dir__() -> list[str]:
 
 
 if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
+    from specguard.cache.store import Cache as Cache
     from specguard.construction.compiled import CompiledTree as CompiledTree
     from specguard.construction.compiled import compile_tree as compile_tree
     from specguard.construction.env import BaselineEnv as BaselineEnv
@@ -103,10 +104,7 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.construction.env import make_baseline_env as make_baseline_env
     from specguard.construction.env import make_env as make_env
     from specguard.construction.initial_env import InitialEnv as InitialEnv
-    from specguard.spec.budget import Budget as Budget
-    from specguard.cache.store import Cache as Cache
     from specguard.engine.run_spec import run_spec as run_spec
-    from specguard.spec.spec import Spec as Spec
     from specguard.engine.spec_result import GoalVerdict as GoalVerdict
     from specguard.engine.spec_result import SpecResult as SpecResult
     from specguard.error import CacheWarning as CacheWarning
@@ -125,6 +123,8 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.falsify.starts import StartSpace as StartSpace
     from specguard.pytest_plugin.declare import goal_spec as goal_spec
     from specguard.pytest_plugin.declare import goal_specs as goal_specs
+    from specguard.spec.budget import Budget as Budget
+    from specguard.spec.spec import Spec as Spec
     from specguard.tree.builtin_annotations import Constraint as Constraint
     from specguard.tree.builtin_annotations import Distance as Distance
     from specguard.tree.formula import formula as formula

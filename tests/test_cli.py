@@ -9,8 +9,8 @@ import textwrap
 import pytest
 
 from specguard.cli.main import main
-from specguard.spec.files import load_objects
 from specguard.error import SpecError
+from specguard.spec.files import load_objects
 
 SPEC_FILE = textwrap.dedent(
     """

@@ -19,9 +19,9 @@ import pytest
 import scipy.stats  # noqa: F401
 
 import specguard as sg
+import specguard.cache.versions
 import specguard.engine.run_spec
 import specguard.engine.train_task
-import specguard.cache.versions
 from specguard.cli.main import main
 from specguard.spec.files import load_objects
 from specguard.stats.intervals import GoalOutcome

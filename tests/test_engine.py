@@ -279,8 +279,8 @@ SAFE_TREE = sg.All(*pendulum.trees["b"].children, name="pendulum").annotate(FAST
 
 def _safety_result(per_seed, expect):
     from specguard.engine.judging import judge as _judge
-    from specguard.training.result import RunResult
     from specguard.engine.spec_result import SpecResult
+    from specguard.training.result import RunResult
 
     s = sg.Spec(pendulum.initial_env, SAFE_TREE, budget=sg.Budget(timesteps=10), expect=expect)
     runs = [
@@ -372,8 +372,8 @@ def test_the_table_lists_each_seeds_adapted_weights():
 
 def test_a_worker_running_other_code_than_the_key_names_refuses_to_train(tmp_path, monkeypatch):
     # The driver keyed its runs with one specguard; the spawned workers import another (sources edited meanwhile).
-    from specguard.engine import runs as engine
     from specguard.cache.fingerprint import versions
+    from specguard.engine import runs as engine
 
     keyed = {**versions(), "specguard": "0.0.0+edited"}
     monkeypatch.setattr(engine, "versions", lambda: keyed)

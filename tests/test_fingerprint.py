@@ -407,11 +407,11 @@ def test_the_source_digest_sees_every_module_of_every_subpackage(tmp_path):
     package = tmp_path / "specguard"
     shutil.copytree(Path(sg.__file__).parent, package, ignore=shutil.ignore_patterns("__pycache__"))
     before = source_digest(package)
-    deep = package / "engine" / "run.py"
+    deep = package / "engine" / "run_spec.py"
     deep.write_text(deep.read_text() + "\n# edited\n")
     edited = source_digest(package)
     assert edited != before  # a module two folders down counts
-    (package / "engine" / "run.py").rename(package / "engine" / "moved.py")
+    (package / "engine" / "run_spec.py").rename(package / "engine" / "moved.py")
     assert source_digest(package) != edited  # so does where it lies
     assert len({source_digest(package), source_digest(package)}) == 1  # and it is stable
 

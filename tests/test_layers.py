@@ -10,8 +10,10 @@ design dependency). Parts, lowest first:
 - ``falsify/`` (start spaces, robustness margins, the guided search for failing starts: over any policy callable);
 - ``parallel/`` (tasks in processes or on a cluster: generic, it knows nothing of specs);
 - the public tools over the core: ``strategies``, ``registry``, ``contract/``, ``testing``;
-- ``engine/`` (specs, training, runs, the cache);
-- ``report/`` (session reports, figures, GIFs);
+- ``spec/`` (the spec, its budget, the algorithms, spec files), then ``training/`` (one seed), then ``cache/``
+  (run identity and the store), then ``engine/`` (``run_spec``, its runs and verdicts), then ``gate/`` (the baseline
+  gate);
+- ``report/`` (session reports, figures, GIFs, spec rendering);
 - the doors: ``pytest_plugin/`` and ``cli/``; and the facade ``specguard`` (``__init__``) and ``__main__``.
 """
 
@@ -34,6 +36,7 @@ PACKAGE = Path(specguard.__file__).parent
 BASE = frozenset({"error", "validation", "version", "utils"})
 CORE = BASE | {"extend", "tree", "construction"}
 TOOLS = CORE | {"strategies", "registry", "contract", "testing"}
+RUNNING = TOOLS | {"stats", "parallel", "falsify", "spec", "training", "cache"}
 # Per part, the parts its modules may import (its own included).
 ALLOWED: Mapping[str, frozenset[str]] = {
     "error": frozenset({"error"}),
@@ -50,10 +53,14 @@ ALLOWED: Mapping[str, frozenset[str]] = {
     "testing": CORE | {"contract", "testing"},
     "falsify": CORE | {"stats", "falsify"},
     "parallel": BASE | {"parallel"},
-    "engine": TOOLS | {"stats", "parallel", "falsify", "engine"},
-    "report": TOOLS | {"stats", "parallel", "falsify", "engine", "report"},
-    "pytest_plugin": TOOLS | {"stats", "parallel", "falsify", "engine", "report", "pytest_plugin"},
-    "cli": TOOLS | {"stats", "parallel", "falsify", "engine", "report", "pytest_plugin", "cli"},
+    "spec": CORE | {"stats", "falsify", "spec"},
+    "training": CORE | {"stats", "falsify", "parallel", "spec", "training"},
+    "cache": CORE | {"stats", "falsify", "parallel", "spec", "training", "cache"},
+    "engine": RUNNING | {"engine"},
+    "gate": RUNNING | {"engine", "gate"},
+    "report": RUNNING | {"engine", "gate", "report"},
+    "pytest_plugin": RUNNING | {"engine", "gate", "report", "pytest_plugin"},
+    "cli": RUNNING | {"engine", "gate", "report", "cli"},
     "__main__": frozenset({"cli", "__main__"}),
 }
 NO_DEEP_LEARNING = (
@@ -240,11 +247,43 @@ def test_a_lazy_import_of_the_engine_from_the_tree_is_a_violation(tmp_path):
                     from specguard.training.train import train_run
                     return train_run
             """,
-            "engine/train.py": "from specguard.tree import nodes\n",
+            "training/train.py": "from specguard.tree import nodes\n",
         },
     )
     assert layer_violations(import_graph(package)) == [
-        "specguard.tree.nodes -> specguard.training.train (tree may not import engine)"
+        "specguard.tree.nodes -> specguard.training.train (tree may not import training)"
+    ]
+
+
+UPWARD = [
+    ("spec/spec.py", "training/train.py"),
+    ("training/train.py", "cache/store.py"),
+    ("cache/store.py", "engine/runs.py"),
+    ("engine/runs.py", "gate/comparison.py"),
+    ("gate/comparison.py", "report/session.py"),
+    ("report/session.py", "pytest_plugin/items.py"),
+]
+
+
+@pytest.mark.parametrize(("importer", "imported"), UPWARD)
+def test_an_upward_import_between_the_running_parts_is_a_violation(tmp_path, importer, imported):
+    """spec below training below cache below engine below gate below report; the CLI imports no pytest plugin."""
+    low, high = (m.removesuffix(".py").replace("/", ".") for m in (importer, imported))
+    package = write_package(tmp_path, {importer: f"from specguard.{high} import x\n", imported: ""})
+    assert layer_violations(import_graph(package)) == [
+        f"specguard.{low} -> specguard.{high} ({low.split('.')[0]} may not import {high.split('.')[0]})"
+    ]
+    downward = write_package(tmp_path / "down", {imported: f"from specguard.{low} import x\n", importer: ""})
+    assert layer_violations(import_graph(downward)) == []
+
+
+def test_the_cli_importing_the_pytest_plugin_is_a_violation(tmp_path):
+    """The two doors are siblings: the CLI renders specs with ``report/``, never through a pytest plugin module."""
+    package = write_package(
+        tmp_path, {"cli/main.py": "from specguard.pytest_plugin.items import spec_of\n", "pytest_plugin/items.py": ""}
+    )
+    assert layer_violations(import_graph(package)) == [
+        "specguard.cli.main -> specguard.pytest_plugin.items (cli may not import pytest_plugin)"
     ]
 
 
@@ -252,7 +291,7 @@ def test_the_engine_importing_the_cli_and_the_plugin_are_violations(tmp_path):
     package = write_package(
         tmp_path,
         {
-            "engine/run.py": "from specguard.cli import main\nfrom specguard.pytest_plugin.report import markdown\n",
+            "engine/run_spec.py": "from specguard.cli import main\nfrom specguard.pytest_plugin.report import md\n",
             "cli/main.py": "",
             "pytest_plugin/report.py": "",
         },
@@ -284,14 +323,14 @@ def test_relative_imports_and_the_facade_are_resolved(tmp_path):
     package = write_package(
         tmp_path,
         {
-            "engine/run.py": "from . import cache\nfrom .cache import Cache\nimport specguard\n",
-            "engine/cache.py": "from .. import error\n",
+            "engine/run_spec.py": "from . import runs\nfrom .runs import Runs\nimport specguard\n",
+            "engine/runs.py": "from .. import error\n",
             "error.py": "",
         },
     )
     graph = import_graph(package)
-    assert graph["specguard.engine.run_spec"] == {"specguard", "specguard.cache.store"}
-    assert graph["specguard.cache.store"] == {"specguard.error"}
+    assert graph["specguard.engine.run_spec"] == {"specguard", "specguard.engine.runs"}
+    assert graph["specguard.engine.runs"] == {"specguard.error"}
     assert layer_violations(graph) == [
         "specguard.engine.run_spec -> specguard (the facade: import the module that defines the name)"
     ]

@@ -16,8 +16,8 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.cli.main import main
 from specguard.cache.fingerprint import versions
+from specguard.cli.main import main
 from specguard.engine.reproduce import sized
 from specguard.report.reproduction import TITLE, sections
 
@@ -174,9 +174,9 @@ def test_an_interruption_stops_the_running_specs_at_once_and_starts_no_other(tmp
 def test_a_run_counts_as_met_by_its_interval_as_every_door_judges_it():
     from specguard.engine.judging import judge
     from specguard.engine.reproduce import CaseStudy
-    from specguard.training.result import RunResult
     from specguard.engine.spec_result import SpecResult
     from specguard.report.reproduction import _root_row
+    from specguard.training.result import RunResult
 
     spec = sized(
         sg.Spec(pendulum.initial_env, pendulum.trees["w"], budget=sg.Budget(timesteps=100)), seeds=2, budget_scale=1

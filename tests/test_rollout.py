@@ -8,11 +8,11 @@ import pytest
 from PIL import Image
 
 import specguard as sg
-from specguard.cache.store import Cache
 from specguard.cache.models import load_model
+from specguard.cache.store import Cache
+from specguard.report.gifs import Gif, report_gifs, write_gif
 from specguard.training.rollout import rollout
 from specguard.training.train import train_run
-from specguard.report.gifs import Gif, report_gifs, write_gif
 
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 
@@ -67,8 +67,8 @@ def test_gif_has_the_episode_and_a_caption_naming_the_goals(trained, tmp_path):
 
 def test_a_gif_from_a_start_replays_the_falsifiers_episode_from_it(trained, tmp_path):
     from specguard.engine.falsification import batch_policy, property_keys
-    from specguard.training.rollout import spec_env
     from specguard.falsify.search import EpisodeRunner
+    from specguard.training.rollout import spec_env
 
     spec, _, model = trained
     space = sg.StartSpace({"theta": (-0.2, 0.2), "omega": (-1.0, 1.0)})

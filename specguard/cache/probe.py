@@ -14,8 +14,8 @@ from typing import Any
 import numpy as np
 
 from specguard.cache.canonical import canonical, dumps
-from specguard.training.train import make_single_env
 from specguard.error import FingerprintError
+from specguard.training.train import make_single_env
 
 __all__ = ["PROBE_STEPS", "probe"]
 

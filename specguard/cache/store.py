@@ -40,9 +40,9 @@ from pathlib import Path
 from typing import Any
 
 from specguard.cache.fingerprint import fingerprint_spec, versions
-from specguard.training.result import RunResult
-from specguard.spec.spec import Spec
 from specguard.error import SpecError
+from specguard.spec.spec import Spec
+from specguard.training.result import RunResult
 from specguard.tree.keys import result_keys
 from specguard.utils.files import staged
 

@@ -28,9 +28,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from specguard.spec.spec import Spec
-from specguard.spec.files import load_objects
 from specguard.error import InvalidSpec, SpecError
+from specguard.spec.files import load_objects
+from specguard.spec.spec import Spec
 from specguard.stats.intervals import UNDECIDED_OUTCOMES
 from specguard.tree.keys import require_thresholds
 from specguard.tree.nodes import Node
@@ -55,8 +55,8 @@ def _show(target: str) -> int:
 
 def _plan(args: argparse.Namespace) -> int:
     from specguard.gate.plan import plan_spec
-    from specguard.report.show import has_goal_specs, plan_goal_spec_file
     from specguard.report.plan_lines import plan_lines
+    from specguard.report.show import has_goal_specs, plan_goal_spec_file
 
     if has_goal_specs(Path(args.target.partition("::")[0])):  # a pytest file: only pytest resolves its fixtures
         return plan_goal_spec_file(args.target, compare_seeds=args.compare_seeds)
@@ -106,8 +106,8 @@ def _run(args: argparse.Namespace) -> int:
 
 def _run_all(args: argparse.Namespace, specs: dict[str, Any], executor: Any) -> tuple[dict[str, Any], bool]:
     """Train and print every spec; returns the results as JSON data and whether one failed."""
-    from specguard.training.progress import print_event
     from specguard.engine.run_spec import run_spec
+    from specguard.training.progress import print_event
 
     results = {}
     failed = False
@@ -351,9 +351,9 @@ def _start_range(text: str) -> tuple[str, tuple[float, float]]:
 def _falsify(args: argparse.Namespace) -> int:
     """Train (or find in the cache) each spec, then search its start space for counterexamples, per run."""
     from specguard.engine.falsification import start_space
-    from specguard.training.progress import print_event
     from specguard.engine.run_spec import run_spec
     from specguard.falsify.starts import StartSpace
+    from specguard.training.progress import print_event
 
     starts = StartSpace(dict(args.starts)) if args.starts else None  # None: each spec's own, else the env's
     found_any = False
@@ -376,10 +376,10 @@ def _falsify(args: argparse.Namespace) -> int:
 
 
 def _reproduce(args: argparse.Namespace, argv: Sequence[str]) -> int:
-    from specguard.training.progress import print_event
     from specguard.engine.reproduce import load_case, reproduce
     from specguard.parallel.workers import resolve_workers
     from specguard.report.reproduction import replot, write_markdown
+    from specguard.training.progress import print_event
 
     if args.replot:
         if args.targets:

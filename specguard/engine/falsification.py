@@ -19,9 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from specguard.spec.spec import Spec
 from specguard.falsify.search import EpisodeRunner, Falsification, falsify
 from specguard.falsify.starts import StartSpace
+from specguard.spec.spec import Spec
 
 __all__ = ["batch_policy", "database_key", "falsify_run", "property_keys", "start_space"]
 
@@ -86,8 +86,8 @@ def falsify_run(
     """
     from hypothesis.database import DirectoryBasedExampleDatabase
 
-    from specguard.training.rollout import spec_env
     from specguard.error import SpecError
+    from specguard.training.rollout import spec_env
 
     if spec.baseline:
         raise SpecError(

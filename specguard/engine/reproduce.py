@@ -25,16 +25,16 @@ from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
 
-from specguard.spec.budget import Budget
 from specguard.cache.fingerprint import versions
-from specguard.training.progress import ProgressEvent
 from specguard.engine.run_spec import run_spec
-from specguard.spec.spec import Spec
 from specguard.engine.spec_result import SpecResult
-from specguard.spec.files import import_file, load_objects
 from specguard.error import SpecError
 from specguard.parallel.signals import STOP_POLL_S, stopping_all_tasks
 from specguard.parallel.workers import resolve_workers
+from specguard.spec.budget import Budget
+from specguard.spec.files import import_file, load_objects
+from specguard.spec.spec import Spec
+from specguard.training.progress import ProgressEvent
 
 __all__ = ["CaseStudy", "Reproduction", "load_case", "machine", "reproduce", "sized"]
 

@@ -6,10 +6,10 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from specguard.training.result import RunResult
-from specguard.spec.spec import Spec
 from specguard.error import SpecError
+from specguard.spec.spec import Spec
 from specguard.stats.intervals import GoalOutcome, QuorumVerdict, RunVerdict, success_interval
+from specguard.training.result import RunResult
 from specguard.tree.keys import GOAL, kind, label
 from specguard.utils.text import interval_text, render_table, weights_text
 

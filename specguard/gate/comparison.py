@@ -26,11 +26,11 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
-from specguard.training.result import RunResult
-from specguard.spec.spec import Spec
 from specguard.engine.spec_result import SpecResult
 from specguard.gate.baseline import Baseline
+from specguard.spec.spec import Spec
 from specguard.stats.sequential import DEFAULT_MARGIN, Design, GateState, Look, compare_seeds
+from specguard.training.result import RunResult
 
 __all__ = ["SpecGate", "Train", "baseline_runs", "compare_spec", "gate_ceiling"]
 

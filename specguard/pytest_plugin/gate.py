@@ -11,17 +11,17 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from specguard.spec.spec import Spec
 from specguard.engine.spec_result import SpecResult
 from specguard.extend import SHAPING, Node
+from specguard.spec.spec import Spec
 from specguard.stats.intervals import GoalOutcome, RunVerdict
 from specguard.tree.keys import GOAL, SAFETY, kind, require_thresholds, resolve_goal
 from specguard.utils.text import interval_text
 from specguard.validation import child_path
 
 if TYPE_CHECKING:
-    from specguard.gate.comparison import SpecGate
     from specguard.gate.baseline import Baseline
+    from specguard.gate.comparison import SpecGate
 
 __all__ = ["GoalCheck", "check_item", "gate_goal", "with_thresholds"]
 
@@ -306,8 +306,8 @@ def _compare(check: GoalCheck, gate: SpecGate, baseline: Baseline, name: str) ->
 
 def _one_look(result: SpecResult, spec: Spec, group: str, baseline: Baseline) -> SpecGate:
     """The spec's comparisons at one look, on its own runs (nothing more is trained)."""
-    from specguard.gate.comparison import compare_spec
     from specguard.engine.spec_result import SpecResult as Empty
+    from specguard.gate.comparison import compare_spec
     from specguard.stats.family import first_level
     from specguard.stats.sequential import DEFAULT_ALPHA
 

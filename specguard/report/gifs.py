@@ -17,10 +17,10 @@ from pathlib import Path
 from typing import Any
 
 from specguard.cache.models import load_model
-from specguard.training.rollout import episode, policy, spec_env
-from specguard.spec.spec import Spec
-from specguard.training.train import EVAL_SEED_BASE
 from specguard.falsify.starts import START_OPTION, StartSpace
+from specguard.spec.spec import Spec
+from specguard.training.rollout import episode, policy, spec_env
+from specguard.training.train import EVAL_SEED_BASE
 
 __all__ = ["MAX_FRAMES", "Gif", "counterexample_gifs", "report_gifs", "write_gif"]
 

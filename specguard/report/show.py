@@ -16,8 +16,8 @@ import ast
 from pathlib import Path
 from typing import Any
 
-from specguard.spec.budget import trained_timesteps
 from specguard.spec.algorithms import collect_steps, collection_unit
+from specguard.spec.budget import trained_timesteps
 from specguard.spec.spec import Spec
 from specguard.tree.formula import formula
 from specguard.tree.nodes import Node

@@ -25,8 +25,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from specguard.spec.algorithms import collect_parameter, collect_steps
 from specguard.error import InvalidSpec
+from specguard.spec.algorithms import collect_parameter, collect_steps
 from specguard.stats.anytime import DEFAULT_CHECKPOINTS
 from specguard.validation import check_count, check_positive
 

@@ -15,8 +15,8 @@ from typing import Any
 
 import cloudpickle
 
-from specguard.spec.spec import Spec
 from specguard.error import SpecError
+from specguard.spec.spec import Spec
 
 __all__ = ["import_file", "load_objects"]
 

@@ -22,10 +22,10 @@ from numbers import Real
 from typing import Any
 
 from specguard.construction.initial_env import InitialEnv
-from specguard.spec.budget import Budget
-from specguard.spec.algorithms import ALGORITHMS
 from specguard.error import InvalidSpec
 from specguard.falsify.starts import StartSpace, as_start_space
+from specguard.spec.algorithms import ALGORITHMS
+from specguard.spec.budget import Budget
 from specguard.stats.intervals import UNDECIDED_OUTCOMES
 from specguard.tree.keys import check_expect, check_xfail, check_xfail_thresholded, resolve_goal
 from specguard.tree.nodes import Node

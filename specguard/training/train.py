@@ -24,14 +24,14 @@ from typing import Any
 import gymnasium as gym
 
 from specguard.construction.env import EnvFactory
+from specguard.error import InvalidSpec, SpecError
+from specguard.parallel.protocol import Report
+from specguard.spec.algorithms import ALGORITHMS, algorithm_class
+from specguard.spec.spec import Spec
+from specguard.stats.anytime import checkpoint_steps, final_evaluation, interim_look
 from specguard.training.auto_weights import WeightAdapter
 from specguard.training.progress import ProgressEvent, decode_update, encode_update
 from specguard.training.result import RunResult
-from specguard.spec.algorithms import ALGORITHMS, algorithm_class
-from specguard.spec.spec import Spec
-from specguard.error import InvalidSpec, SpecError
-from specguard.parallel.protocol import Report
-from specguard.stats.anytime import checkpoint_steps, final_evaluation, interim_look
 
 __all__ = [
     "EVAL_SEED_BASE",
