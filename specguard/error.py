@@ -110,7 +110,7 @@ class VersionMismatch(SpecError):
     """The process that was to train a run has other code than the one that keyed it.
 
     A run's cache key names the versions of specguard (its source digest) and
-    of the RL stack (:func:`specguard.cache.fingerprint.versions`); a worker whose own
+    of the RL stack (:func:`specguard.cache.versions.versions`); a worker whose own
     differ (specguard's sources edited while runs were queued, a cluster worker
     with another library) would store a result under a key that does not
     describe the code that made it, so it refuses to train.

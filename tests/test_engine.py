@@ -17,7 +17,7 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.engine.run_spec import resolve_workers
+from specguard.parallel.workers import resolve_workers
 
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 
@@ -372,7 +372,7 @@ def test_the_table_lists_each_seeds_adapted_weights():
 
 def test_a_worker_running_other_code_than_the_key_names_refuses_to_train(tmp_path, monkeypatch):
     # The driver keyed its runs with one specguard; the spawned workers import another (sources edited meanwhile).
-    from specguard.cache.fingerprint import versions
+    from specguard.cache.versions import versions
     from specguard.engine import runs as engine
 
     keyed = {**versions(), "specguard": "0.0.0+edited"}
@@ -383,7 +383,7 @@ def test_a_worker_running_other_code_than_the_key_names_refuses_to_train(tmp_pat
 
 
 def test_a_worker_with_the_keyed_versions_trains():
-    from specguard.cache.fingerprint import versions
+    from specguard.cache.versions import versions
     from specguard.engine.train_task import train_task as _train_task
 
     out = _train_task(spec(), 0, versions(), report=lambda phase, step=None, line=None: None)

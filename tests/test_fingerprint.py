@@ -21,7 +21,9 @@ from hypothesis import strategies as st
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.cache.fingerprint import canonical, digest, fingerprint_spec, probe
+from specguard.cache.canonical import canonical, digest
+from specguard.cache.fingerprint import fingerprint_spec
+from specguard.cache.probe import probe
 
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 BUDGET = sg.Budget(timesteps=128, min_seeds=1, eval_episodes=2)

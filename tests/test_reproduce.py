@@ -16,7 +16,7 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.cache.fingerprint import versions
+from specguard.cache.versions import versions
 from specguard.cli.main import main
 from specguard.engine.reproduce import sized
 from specguard.report.reproduction import TITLE, sections

@@ -438,7 +438,7 @@ def test_run_spec_resolves_workers_by_the_same_function(tmp_path):
     import specguard.engine.run_spec
     from example_specs import pendulum
 
-    assert specguard.engine.run_spec.resolve_workers is resolve_workers  # re-exported, not a second rule
+    assert specguard.engine.run_spec.resolve_workers is resolve_workers  # the one rule, not a second
     spec = sg.Spec(pendulum.initial_env, pendulum.trees["w"], budget=sg.Budget(timesteps=10), expect=0.5)
     with pytest.raises(sg.SpecError, match=r"workers: expected an integer >= 1 .*got True"):
         sg.run_spec(spec, workers=True, cache_dir=tmp_path)  # refused before anything trains

@@ -266,7 +266,7 @@ def _tree(budget):
 def test_trees_of_plugin_operators_have_exact_fingerprints():
     # Under an editable install the plugin is user code, whose dataclass bodies the fingerprint follows
     # (it failed on Field.metadata, a mappingproxy, until specguard's encoder learnt it).
-    from specguard.cache.fingerprint import digest
+    from specguard.cache.canonical import digest
 
     assert digest(_UserOperator("o")) == digest(_UserOperator("o"))
     assert digest(_tree(2)) == digest(_tree(2))

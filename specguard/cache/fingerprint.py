@@ -42,20 +42,11 @@ import hashlib
 import warnings
 from typing import Any
 
-from specguard.cache.canonical import canonical, digest
-from specguard.cache.probe import PROBE_STEPS, probe
-from specguard.cache.versions import check_versions, versions
+from specguard.cache.canonical import digest
+from specguard.cache.probe import probe
+from specguard.cache.versions import versions
 
-__all__ = [
-    "PROBE_STEPS",
-    "SpecFingerprint",
-    "canonical",
-    "check_versions",
-    "digest",
-    "fingerprint_spec",
-    "probe",
-    "versions",
-]
+__all__ = ["SpecFingerprint", "fingerprint_spec"]
 
 # Spec fields that change how many runs are trained or how they are counted, not what one run does:
 # they are part of the spec's identity (shared results, baselines) but not of a run's cache key.

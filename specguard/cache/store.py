@@ -39,7 +39,8 @@ from collections.abc import Collection
 from pathlib import Path
 from typing import Any
 
-from specguard.cache.fingerprint import fingerprint_spec, versions
+from specguard.cache.fingerprint import fingerprint_spec
+from specguard.cache.versions import versions
 from specguard.error import SpecError
 from specguard.spec.spec import Spec
 from specguard.training.result import RunResult

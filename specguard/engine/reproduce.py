@@ -25,7 +25,7 @@ from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
 
-from specguard.cache.fingerprint import versions
+from specguard.cache.versions import versions
 from specguard.engine.run_spec import run_spec
 from specguard.engine.spec_result import SpecResult
 from specguard.error import SpecError

@@ -25,14 +25,14 @@ from pathlib import Path
 from specguard.cache.store import Cache
 from specguard.engine.judging import judge, seeds_still_needed
 from specguard.engine.runs import Runs
-from specguard.engine.spec_result import GoalVerdict, SpecResult
+from specguard.engine.spec_result import SpecResult
 from specguard.error import SpecError
 from specguard.parallel.executors import LOCAL, Executor, make_executor
 from specguard.parallel.workers import resolve_workers
 from specguard.spec.spec import Spec
 from specguard.training.progress import ProgressEvent, print_event
 
-__all__ = ["GoalVerdict", "SpecResult", "resolve_workers", "run_spec", "train_seeds"]
+__all__ = ["run_spec", "train_seeds"]
 
 Progress = Callable[[ProgressEvent], None]
 

@@ -6,8 +6,9 @@ import warnings
 from collections.abc import Callable
 from typing import Any, Literal
 
-from specguard.cache.fingerprint import fingerprint_spec, versions
+from specguard.cache.fingerprint import fingerprint_spec
 from specguard.cache.store import Cache, try_acquire, wait_for
+from specguard.cache.versions import versions
 from specguard.engine.spec_result import SpecResult
 from specguard.engine.train_task import describe_failure, is_spec_error, train_task
 from specguard.error import CacheWarning

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from specguard.cache.fingerprint import check_versions
+from specguard.cache.versions import check_versions
 from specguard.error import SpecError
 from specguard.parallel.protocol import Failure, Report
 from specguard.spec.spec import Spec

@@ -1,6 +1,6 @@
 """Judging one goal (or safety rate) of a trained spec for a test item: outcome, message, figures.
 
-Plain logic over :class:`specguard.engine.run_spec.SpecResult`, used by the pytest
+Plain logic over :class:`specguard.engine.spec_result.SpecResult`, used by the pytest
 plugin and unit-tested without pytest. A safety rate (key ``path:name``, see
 :mod:`specguard.tree.keys`) is judged exactly as a goal is; its message and hint
 speak of violations.
