@@ -20,6 +20,7 @@ design dependency). Parts, lowest first:
 from __future__ import annotations
 
 import ast
+import builtins
 import re
 import subprocess
 import sys
@@ -374,3 +375,40 @@ def test_every_docstring_example_is_collected_by_the_readme_test_command():
     }
     assert with_examples, "no module has an example? the reader is broken"
     assert sorted(with_examples - collected_files(root, PACKAGE.name)) == []
+
+
+# -- one home for errors -----------------------------------------------------------------------
+
+
+def exception_classes_outside_error(package: Path) -> list[str]:
+    """Classes deriving from an exception or warning (a builtin one or one of ``error.py``'s) defined elsewhere."""
+    error_module = package / "error.py"
+    known = {
+        name for name, value in vars(builtins).items() if isinstance(value, type) and issubclass(value, BaseException)
+    }
+    if error_module.exists():
+        known |= {n.name for n in ast.walk(ast.parse(error_module.read_text())) if isinstance(n, ast.ClassDef)}
+    found = []
+    for name, path in modules_of(package).items():
+        if path == error_module:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.ClassDef) and any(ast.unparse(b).rpartition(".")[2] in known for b in node.bases):
+                found.append(f"{name}.{node.name}")
+    return sorted(found)
+
+
+def test_every_exception_class_is_defined_in_error():
+    assert exception_classes_outside_error(PACKAGE) == []
+
+
+def test_an_exception_class_outside_error_is_found(tmp_path):
+    package = write_package(
+        tmp_path,
+        {
+            "error.py": "class SpecError(Exception):\n    pass\n",
+            "engine/runs.py": "from specguard import error\nclass Late(error.SpecError):\n    pass\n",
+            "registry.py": "class Loud(UserWarning):\n    pass\nclass Plain:\n    pass\n",
+        },
+    )
+    assert exception_classes_outside_error(package) == ["specguard.engine.runs.Late", "specguard.registry.Loud"]

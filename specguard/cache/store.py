@@ -41,7 +41,7 @@ from typing import Any
 
 from specguard.cache.fingerprint import fingerprint_spec
 from specguard.cache.versions import versions
-from specguard.error import SpecError
+from specguard.error import CacheLockTimeout
 from specguard.spec.spec import Spec
 from specguard.training.result import RunResult
 from specguard.tree.keys import result_keys
@@ -62,10 +62,6 @@ FORMAT = 5  # 3: runs record met_early (anytime verdicts); 4: adapted weights; 5
 MODEL = "model.zip"
 NORMALIZER = "vecnormalize.pkl"
 RESULT = "result.json"
-
-
-class CacheLockTimeout(SpecError):
-    """Another process held a run's lock for longer than the timeout."""
 
 
 def _sha256(path: Path) -> str:

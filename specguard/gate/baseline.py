@@ -31,17 +31,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from specguard.error import SpecError
+from specguard.error import BaselineError
 from specguard.utils.files import write_atomic
 
 __all__ = ["Baseline", "BaselineError", "load_baseline", "save_baseline"]
 
 FORMAT = 3
 FORMATS = (1, 2, 3)  # format 1 stored runs only; 2 added the spec identity; 3 the seeds
-
-
-class BaselineError(SpecError):
-    """A stored baseline cannot be read."""
 
 
 Runs = Sequence[tuple[int, int]]  # (successes, episodes) per seed

@@ -15,6 +15,7 @@ from typing import Any
 
 import pytest
 
+from specguard.error import GoalMissed
 from specguard.pytest_plugin.declare import GOAL_FIXTURE, FalsifyItem, SpecItem
 
 __all__ = [
@@ -27,10 +28,6 @@ __all__ = [
     "raise_outcome",
     "spec_of",
 ]
-
-
-class GoalMissed(AssertionError):
-    """A goal missed its threshold (the failure an ``xfail`` goal expects)."""
 
 
 def group_of(item: pytest.Item) -> str:

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from specguard.cache.models import load_model
+from specguard.error import NoFrames
 from specguard.falsify.starts import START_OPTION, StartSpace
 from specguard.spec.spec import Spec
 from specguard.training.rollout import episode, policy, spec_env
@@ -140,7 +141,7 @@ def write_gif(
             return
         frame = env.render()
         if not (isinstance(frame, np.ndarray) and frame.ndim == 3 and frame.shape[-1] in (3, 4)):
-            raise _NoFrames(f"render() returned {type(frame).__name__}, not an RGB array")
+            raise NoFrames(f"render() returned {type(frame).__name__}, not an RGB array")
         frames.append(frame)
         last = step
         if len(frames) > 2 * max_frames:
@@ -155,7 +156,7 @@ def write_gif(
                     frames.append(frame)
         finally:
             env.close()
-    except _NoFrames as e:
+    except NoFrames as e:
         return Gif(None, f"no GIF of spec {spec.label!r}: its env does not render rgb_array frames ({e})")
     except Exception as e:
         return Gif(None, f"no GIF of spec {spec.label!r}: rendering failed ({type(e).__name__}: {e})")
@@ -170,10 +171,6 @@ def write_gif(
     path.parent.mkdir(parents=True, exist_ok=True)
     images[0].save(path, save_all=True, append_images=images[1:], duration=duration, loop=0, optimize=False)
     return Gif(path, caption, len(images))
-
-
-class _NoFrames(Exception):
-    pass
 
 
 def _slug(group: str) -> str:

@@ -24,7 +24,7 @@ from typing import Any
 import gymnasium as gym
 
 from specguard.construction.env import EnvFactory
-from specguard.error import InvalidSpec, SpecError
+from specguard.error import InvalidSpec, SpecError, TrainingError
 from specguard.parallel.protocol import Report
 from specguard.spec.algorithms import ALGORITHMS, algorithm_class
 from specguard.spec.spec import Spec
@@ -47,12 +47,6 @@ __all__ = [
 EVAL_SEED_BASE = 1_000_000
 EVAL_SEED_STRIDE = 100_000
 CURVE_POINTS = 10
-
-
-class TrainingError(SpecError):
-    """The environment or a user function failed while a run trained or was evaluated."""
-
-    default_hint = "reproduce it without training: build sg.make_env(...) and step it from the seed named above"
 
 
 def _policy_action(space: gym.Space[Any], action: Any) -> Any:
