@@ -68,11 +68,10 @@ def test_gif_has_the_episode_and_a_caption_naming_the_goals(trained, tmp_path):
 def test_a_gif_from_a_start_replays_the_falsifiers_episode_from_it(trained, tmp_path):
     from specguard.engine.falsification import batch_policy, property_keys
     from specguard.falsify.search import EpisodeRunner
-    from specguard.training.rollout import spec_env
 
     spec, _, model = trained
     space = sg.StartSpace({"theta": (-0.2, 0.2), "omega": (-1.0, 1.0)})
-    runner = EpisodeRunner(lambda: spec_env(spec), batch_policy(model, None, True), space, property_keys(spec))
+    runner = EpisodeRunner(spec.make_env, batch_policy(model, None, True), space, property_keys(spec))
     points = np.array([[0.0, 0.0, 0.19, 0.9], [0.0, 0.0, -0.19, -0.9], [0.0, 0.0, 0.0, 0.0]])
     outcomes = runner.run(points)
     assert len({o.steps for o in outcomes}) > 1  # the starts make different episodes

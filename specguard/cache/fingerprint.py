@@ -90,9 +90,7 @@ def _compute(spec: Any) -> SpecFingerprint:
     full = _fields(spec, _NOT_IDENTITY_FIELDS)
     run = _fields(spec, _SPEC_ONLY_FIELDS | _NOT_IDENTITY_FIELDS)
     run["budget"] = _fields(spec.budget, _BUDGET_SPEC_ONLY_FIELDS)
-    from specguard.training.train import env_factory
-
-    build = env_factory(spec)  # a fresh env per probe, on one compiled tree
+    build = spec.env_factory()  # a fresh env per probe, on one compiled tree
     first, second = probe(spec, build=build), probe(spec, build=build)
     if first != second:
         warnings.warn(

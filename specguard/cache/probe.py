@@ -15,7 +15,6 @@ import numpy as np
 
 from specguard.cache.canonical import canonical, dumps
 from specguard.error import FingerprintError
-from specguard.training.train import make_single_env
 
 __all__ = ["PROBE_STEPS", "probe"]
 
@@ -31,13 +30,13 @@ def probe(spec: Any, steps: int = PROBE_STEPS, build: Callable[[], Any] | None =
     An env that raises is not an error here: the exception's type and message
     are hashed and the rollout ends (the training run reports the failure
     with its seed, where it belongs). ``build`` makes the env (``None``:
-    :func:`~specguard.training.train.make_single_env`); probes of one spec share
-    one :func:`~specguard.training.train.env_factory`, so its tree is compiled once.
+    :meth:`Spec.make_env <specguard.spec.spec.Spec.make_env>`); probes of one spec share
+    one :meth:`Spec.env_factory <specguard.spec.spec.Spec.env_factory>`, so its tree is compiled once.
     """
     h = hashlib.sha256()
     env = None
     try:
-        env = make_single_env(spec) if build is None else build()
+        env = spec.make_env() if build is None else build()
         h.update(dumps(canonical((env.observation_space, env.action_space), "spaces")).encode())
         actions = copy.deepcopy(env.action_space)  # seeding the user's own space would change it
         actions.seed(0)

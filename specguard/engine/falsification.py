@@ -53,14 +53,9 @@ def database_key(spec_key: str, seed: int, space: StartSpace) -> str:
 
 def batch_policy(model: Any, normalizer: Any, deterministic: bool) -> Callable[[np.ndarray], Any]:
     """``model``'s actions for a batch of observations (rows), its ``VecNormalize`` statistics applied if any."""
-    from specguard.training.rollout import _normalizer
+    from specguard.training.policy import policy
 
-    norm = _normalizer(model, normalizer)
-
-    def act(obs: np.ndarray) -> Any:
-        return model.predict(norm.normalize_obs(obs) if norm is not None else obs, deterministic=deterministic)[0]
-
-    return act
+    return policy(model, normalizer, deterministic=deterministic, batch=True)
 
 
 def falsify_run(
@@ -87,7 +82,6 @@ def falsify_run(
     from hypothesis.database import DirectoryBasedExampleDatabase
 
     from specguard.error import SpecError
-    from specguard.training.rollout import spec_env
 
     if spec.baseline:
         raise SpecError(
@@ -96,7 +90,7 @@ def falsify_run(
         )
     space = start_space(spec, starts)
     runner = EpisodeRunner(
-        lambda: spec_env(spec), batch_policy(model, normalizer, spec.deterministic), space, property_keys(spec)
+        spec.make_env, batch_policy(model, normalizer, spec.deterministic), space, property_keys(spec)
     )
     db = DirectoryBasedExampleDatabase(str(database)) if database is not None and spec_key else None
     key = database_key(spec_key, seed, space) if spec_key else ""

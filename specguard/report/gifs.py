@@ -20,7 +20,8 @@ from specguard.cache.models import load_model
 from specguard.error import NoFrames
 from specguard.falsify.starts import START_OPTION, StartSpace
 from specguard.spec.spec import Spec
-from specguard.training.rollout import episode, policy, spec_env
+from specguard.training.policy import policy
+from specguard.training.rollout import episode
 from specguard.training.train import EVAL_SEED_BASE
 
 __all__ = ["MAX_FRAMES", "Gif", "counterexample_gifs", "report_gifs", "write_gif"]
@@ -121,7 +122,7 @@ def write_gif(
     try:
         # Frames are drawn off-screen: SDL needs no display (and prints no complaint about a missing one).
         os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
-        env = spec_env(spec, render_mode="rgb_array")
+        env = spec.make_env(render_mode="rgb_array")
         options = None
         if start is not None:  # as the falsifier's runner: the start wrapper under the spec's env, reset seed 0
             env.env = (starts or StartSpace()).resolve(env.env).wrap(env.env)

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from numbers import Real
 from typing import Any
 
+from specguard.construction.env import BaselineEnv, EnvFactory, SpecEnv
 from specguard.construction.initial_env import InitialEnv
 from specguard.error import InvalidSpec
 from specguard.falsify.starts import StartSpace, as_start_space
@@ -122,6 +123,19 @@ class Spec:
     @property
     def label(self) -> str:
         return self.name or str(getattr(self.tree, "name", "?"))
+
+    def env_factory(self) -> EnvFactory:
+        """Builds the envs this spec trains on, compiling its tree once for all of them (one run's envs share one)."""
+        return EnvFactory(self.initial_env, self.tree, baseline=self.baseline)
+
+    def make_env(self, **make_kwargs: Any) -> SpecEnv | BaselineEnv:
+        """The env this spec trains on, built afresh, as Gymnasium's ``EnvSpec.make`` builds a registered env.
+
+        The constructed env (:class:`~specguard.construction.env.SpecEnv`), or for a
+        baseline spec the initial env with goal info (:class:`~specguard.construction.env.BaselineEnv`);
+        ``make_kwargs`` override the base env's ``gymnasium.make`` kwargs (e.g. ``render_mode="rgb_array"``).
+        """
+        return self.env_factory()(**make_kwargs)
 
     def scaled(self, factor: float, *, checkpoints: int | None = None) -> Spec:
         """This spec with its training budget multiplied by ``factor`` (the one place budgets are scaled).

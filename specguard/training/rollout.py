@@ -1,6 +1,7 @@
 """Watching a trained policy: trajectories of evaluation episodes on the env its run trained on.
 
-:func:`rollout` runs the policy on the env a run trained on (the constructed
+:func:`rollout` runs the policy (:func:`specguard.training.policy.policy`) on the env a
+run trained on (:meth:`Spec.make_env <specguard.spec.spec.Spec.make_env>`: the constructed
 env, or the initial env for a baseline spec) and returns every step. GIFs of
 an episode are :mod:`specguard.report.gifs`; loading a cached model is
 :mod:`specguard.cache.models`.
@@ -12,42 +13,10 @@ from collections.abc import Callable
 from typing import Any
 
 from specguard.spec.spec import Spec
+from specguard.training.policy import policy
 from specguard.training.train import EVAL_SEED_BASE
 
-__all__ = ["episode", "policy", "rollout", "spec_env"]
-
-
-def spec_env(spec: Spec, **make_kwargs: Any) -> Any:
-    """The env ``spec`` trains on, built afresh: the constructed env, or the initial env for a baseline spec."""
-    from specguard.construction.env import make_baseline_env, make_env
-
-    if spec.baseline:
-        return make_baseline_env(spec.initial_env, spec.tree, **make_kwargs)
-    return make_env(spec.initial_env, spec.tree, **make_kwargs)
-
-
-def _normalizer(model: Any, normalizer: Any) -> Any:
-    """The ``VecNormalize`` whose statistics the policy expects: given, or the model's training env."""
-    if normalizer is not None:
-        return normalizer
-    from stable_baselines3.common.vec_env import VecNormalize
-
-    env = model.get_env() if hasattr(model, "get_env") else None
-    return env if isinstance(env, VecNormalize) else None
-
-
-def policy(model: Any, normalizer: Any, deterministic: bool) -> Callable[[Any], Any]:
-    """``model``'s action for an observation, with its ``VecNormalize`` statistics applied where it has them."""
-    import gymnasium as gym
-
-    norm = _normalizer(model, normalizer)
-    discrete = isinstance(getattr(model, "action_space", None), gym.spaces.Discrete)
-
-    def act(obs: Any) -> Any:
-        action = model.predict(norm.normalize_obs(obs) if norm is not None else obs, deterministic=deterministic)[0]
-        return int(action) if discrete else action
-
-    return act
+__all__ = ["episode", "rollout"]
 
 
 def episode(
@@ -106,8 +75,8 @@ def rollout(
         the action was chosen on and ``info["goals"]`` says which goals the
         state reached by the step lies in.
     """
-    act = policy(model, normalizer, deterministic)
-    env = spec_env(spec)
+    act = policy(model, normalizer, deterministic=deterministic)
+    env = spec.make_env()
     try:
         return [episode(env, act, seed + i) for i in range(episodes)]
     finally:
