@@ -34,7 +34,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import specguard as sg
 from example_specs import pendulum
-from specguard.engine.run_spec import train_seeds
+from specguard.engine.run_spec import RunOptions, train_seeds
 from specguard.engine.spec_result import SpecResult
 from specguard.gate.baseline import Baseline
 from specguard.gate.comparison import compare_spec, gate_ceiling
@@ -75,7 +75,7 @@ def main() -> int:
     workers: int | str = int(args.workers) if args.workers.isdigit() else args.workers
 
     def train(spec: Spec, seeds: list[int]) -> SpecResult:
-        return train_seeds(spec, seeds, workers=workers, cache_dir=args.cache_dir, progress=None)
+        return train_seeds(spec, seeds, RunOptions(workers=workers, cache_dir=args.cache_dir, progress=None))
 
     paths = list(BASE.thresholds)
     keys = {path: f"pendulum-w::{path}" for path in paths}

@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import time
 from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 from specguard.cache.store import Cache
@@ -32,7 +33,7 @@ from specguard.parallel.workers import resolve_workers
 from specguard.spec.spec import Spec
 from specguard.training.progress import ProgressEvent, print_event
 
-__all__ = ["run_spec", "train_seeds"]
+__all__ = ["RunOptions", "run_spec", "run_with", "train_seeds"]
 
 Progress = Callable[[ProgressEvent], None]
 
@@ -52,6 +53,20 @@ def _refuse_in_spawned_import() -> None:
             "run_spec was called while a worker process imported your script",
             hint='call it under `if __name__ == "__main__":` (worker processes import the script again)',
         )
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """How one call trains a spec's seeds: :func:`run_spec`'s keyword arguments as one value (see them there).
+
+    The pytest plugin makes one per session and passes it to :func:`run_with` and :func:`train_seeds`.
+    """
+
+    workers: int | str = "auto"
+    cache_dir: str | Path | None = ".specguard/cache"
+    progress: Progress | None = print_event
+    lock_timeout: float = 3600.0
+    executor: str | Executor = LOCAL
 
 
 def run_spec(
@@ -91,9 +106,14 @@ def run_spec(
         SpecError: the spec is invalid (also when a worker finds it so, e.g.
             rejected hyperparameters), or cannot be fingerprinted for the cache.
     """
+    return run_with(spec, RunOptions(workers, cache_dir, progress, lock_timeout, executor))
+
+
+def run_with(spec: Spec, options: RunOptions) -> SpecResult:
+    """:func:`run_spec` with its options as one :class:`RunOptions` value."""
     _refuse_in_spawned_import()
     start = time.perf_counter()
-    with _seeds_of(spec, workers, cache_dir, progress, lock_timeout, executor) as (runs, result):
+    with _seeds_of(spec, options) as (runs, result):
         next_seed = 0
         while True:
             result.goals = judge(spec, result.runs, len(result.errors))
@@ -107,16 +127,7 @@ def run_spec(
     return result
 
 
-def train_seeds(
-    spec: Spec,
-    seeds: Sequence[int],
-    *,
-    workers: int | str = "auto",
-    cache_dir: str | Path | None = ".specguard/cache",
-    progress: Progress | None = print_event,
-    lock_timeout: float = 3600.0,
-    executor: str | Executor = LOCAL,
-) -> SpecResult:
+def train_seeds(spec: Spec, seeds: Sequence[int], options: RunOptions = RunOptions()) -> SpecResult:
     """Train exactly ``seeds`` of ``spec`` (each from the cache when an identical run was stored), as ``run_spec`` does.
 
     For seeds beyond a spec's own: the extra seeds of a comparison with a baseline, and the
@@ -125,7 +136,7 @@ def train_seeds(
     """
     _refuse_in_spawned_import()
     start = time.perf_counter()
-    with _seeds_of(spec, workers, cache_dir, progress, lock_timeout, executor) as (runs, result):
+    with _seeds_of(spec, options) as (runs, result):
         runs.run(list(seeds))
         result.runs.sort(key=lambda r: r.seed)
     result.seconds = time.perf_counter() - start
@@ -133,23 +144,17 @@ def train_seeds(
 
 
 @contextlib.contextmanager
-def _seeds_of(
-    spec: Spec,
-    workers: int | str,
-    cache_dir: str | Path | None,
-    progress: Progress | None,
-    lock_timeout: float,
-    executor: str | Executor,
-) -> Iterator[tuple[Runs, SpecResult]]:
+def _seeds_of(spec: Spec, options: RunOptions) -> Iterator[tuple[Runs, SpecResult]]:
     """The seeds of one call (cache, executor) and the result they fill; an executor made here is closed here."""
-    say = progress or (lambda event: None)
-    n_workers = resolve_workers(workers)
-    cache = Cache(Path(cache_dir)) if cache_dir is not None else None
+    say = options.progress or (lambda event: None)
+    n_workers = resolve_workers(options.workers)
+    cache = Cache(Path(options.cache_dir)) if options.cache_dir is not None else None
+    executor = options.executor
     result = SpecResult(spec=spec.label, runs=[], goals={}, confidence=spec.confidence, trained=spec)
     owned = isinstance(executor, str)
     runner = make_executor(executor, workers=n_workers) if isinstance(executor, str) else executor
     try:
-        runs = Runs(spec, result, cache, runner, lock_timeout, say)
+        runs = Runs(spec, result, cache, runner, options.lock_timeout, say)
         result.spec_key = None if runs.fingerprint is None else runs.fingerprint.spec_key
         result.cache_dir = None if runs.cache is None else runs.cache.root
         yield runs, result

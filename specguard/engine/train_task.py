@@ -6,10 +6,9 @@ from collections.abc import Mapping
 from typing import Any
 
 from specguard.cache.versions import check_versions
-from specguard.error import SpecError
+from specguard.error import SpecError, TrainingError
 from specguard.parallel.protocol import Failure, Report
 from specguard.spec.spec import Spec
-from specguard.training.train import TrainingError
 
 __all__ = ["describe_failure", "is_spec_error", "train_task"]
 

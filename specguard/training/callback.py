@@ -12,7 +12,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 if TYPE_CHECKING:
     from specguard.training.auto_weights import WeightAdapter
-    from specguard.training.train import GoalCurve
+    from specguard.training.curve import GoalCurve
 
 __all__ = ["GoalCurveCallback"]
 
