@@ -46,9 +46,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the case stud
 
 import specguard as sg
 from specguard.engine.falsification import batch_policy, property_keys
-from specguard.engine.rollout import episode, policy, spec_env
 from specguard.falsify.search import EpisodeRunner, falsify
 from specguard.falsify.starts import StartSpace
+from specguard.training.policy import policy
+from specguard.training.rollout import episode
 
 WIDE = StartSpace({"x": (-1.0, 1.0), "v": (-0.5, 0.5), "theta": (-0.1, 0.1), "omega": (-0.5, 0.5)})
 ANY_ANGLE = StartSpace({"theta": (-3.14159, 3.14159), "omega": (-1.0, 1.0)})
@@ -143,8 +144,8 @@ def distance(runner: EpisodeRunner, start: dict[str, float]) -> float:
 
 def episode_cost(spec: sg.Spec, model: Any, normalizer: Any, runner: EpisodeRunner, n: int = 40) -> float:
     """Seconds per episode of the falsifier's runner over seconds per episode of a plain rollout, same starts."""
-    env = spec_env(spec)
-    act = policy(model, normalizer, spec.deterministic)
+    env = spec.make_env()
+    act = policy(model, normalizer, deterministic=spec.deterministic)
     points = runner.starts.uniform(np.random.default_rng(0), n)
     plain, ours = math.inf, math.inf
     for _ in range(3):  # interleaved, the fastest of each: what else the machine runs weighs on both alike
@@ -180,7 +181,7 @@ def main() -> int:
         for seed in args.seeds:
             model, normalizer = result.model(seed), result.normalizer(seed)
             runner = EpisodeRunner(
-                lambda spec=spec: spec_env(spec),
+                spec.make_env,
                 batch_policy(model, normalizer, spec.deterministic),
                 space,
                 property_keys(spec),

@@ -3,7 +3,7 @@
 For every case-study spec of ``example_specs`` (and its baseline), prints the
 median over ``--rounds`` of: the static fingerprint (the exact description of
 the spec's values and functions), one behavioural probe (a fixed-seed rollout
-of :data:`specguard.engine.fingerprint.PROBE_STEPS` steps), and the whole
+of :data:`specguard.cache.probe.PROBE_STEPS` steps), and the whole
 ``fingerprint_spec`` (static part, two probes to check the env repeats
 itself, and the key). The aim: well under a second per spec.
 
@@ -24,7 +24,9 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the case studies live beside the package
 from example_specs import acrobot, lunar_lander, mountain_car, pendulum
-from specguard.engine.fingerprint import _compute, digest, probe
+from specguard.cache.canonical import digest
+from specguard.cache.fingerprint import _compute
+from specguard.cache.probe import probe
 
 
 def _median_ms(fn: Any, rounds: int) -> float:

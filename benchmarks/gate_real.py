@@ -2,7 +2,7 @@
 
 A baseline as ``--goal-specs-save`` stores it: Pendulum (w), seeds 0-7. Then
 three pull requests, compared by the gate itself
-(:func:`specguard.engine.gating.compare_spec`: the permutation test per look,
+(:func:`specguard.gate.comparison.compare_spec`: the permutation test per look,
 the group-sequential levels, extra seeds while a comparison is open), each
 comparison judged at Holm's first step over a session of ``--family``
 comparisons (15, as the main job's):
@@ -34,11 +34,11 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import specguard as sg
 from example_specs import pendulum
-from specguard.engine.gating import compare_spec, gate_ceiling
-from specguard.engine.run import train_seeds
-from specguard.engine.spec import Spec
+from specguard.engine.run_spec import RunOptions, train_seeds
 from specguard.engine.spec_result import SpecResult
-from specguard.stats.compare import Baseline
+from specguard.gate.baseline import Baseline
+from specguard.gate.comparison import compare_spec, gate_ceiling
+from specguard.spec.spec import Spec
 from specguard.stats.family import first_level
 from specguard.stats.sequential import DEFAULT_ALPHA, DEFAULT_COMPARE_SEEDS
 
@@ -75,7 +75,7 @@ def main() -> int:
     workers: int | str = int(args.workers) if args.workers.isdigit() else args.workers
 
     def train(spec: Spec, seeds: list[int]) -> SpecResult:
-        return train_seeds(spec, seeds, workers=workers, cache_dir=args.cache_dir, progress=None)
+        return train_seeds(spec, seeds, RunOptions(workers=workers, cache_dir=args.cache_dir, progress=None))
 
     paths = list(BASE.thresholds)
     keys = {path: f"pendulum-w::{path}" for path in paths}

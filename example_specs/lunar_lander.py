@@ -125,7 +125,7 @@ trees["w"] = sg.All(*near, name="lander", weights=(200, 100, 50, 20)).annotate(n
 specs["w"] = sg.Spec(initial_env, trees["w"], expect={"lander": 0.05}, name="lunar_lander-w", **COMMON)
 
 # (auto) (c) with weights="auto" (beyond the paper): the weights of the children and of the crash constraint
-# adapt to their success during training (specguard.engine.auto_weights) instead of the paper's hand-tuned
+# adapt to their success during training (specguard.training.auto_weights) instead of the paper's hand-tuned
 # 200/100/50/20. Measured at 1M steps, 5 seeds x 30 episodes (docs/reproduction.md, "weights"): root goal
 # 20, 8, 14, 8, 17 of 30 (45%; (w) 37%, 5/5 each), crash-free 30, 15, 25, 20, 30 of 30 (80%; (w) 99%).
 # Weights at the end: position 0.09-0.25, velocity 0.26-0.32, stabilisation 0.05-0.31, legs 0.15-0.26,

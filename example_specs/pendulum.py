@@ -80,7 +80,7 @@ trees["w"] = sg.All(near_position, stabilization, name="pendulum", weights=(0.8,
 specs["w"] = sg.Spec(initial_env, trees["w"], expect={"pendulum": 0.8, "position": 0.8}, name="pendulum-w", **COMMON)
 
 # (auto) (c) with weights="auto" (beyond the paper): no hand tuning, the weights adapt to the children's
-# success during training (specguard.engine.auto_weights).
+# success during training (specguard.training.auto_weights).
 # Measured at 100k, 5 seeds x 30-120 episodes: the adapted weights approach the manual ones, position 0.71 to
 # 0.82 and stabilization 0.18 to 0.29 at the end, but only once the agent starts to hang still, after 40k-60k
 # steps (until then both goals fail together and the weights stay near 1/2); root goal 99/120, 87/120, 17/30,

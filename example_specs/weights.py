@@ -3,7 +3,7 @@
 Pendulum (w) and LunarLander (w) weight their subgoals by hand (position 0.8
 and stabilization 0.2; position 200, velocity 100, stabilisation 50, legs 20);
 their (auto) specs are the same trees with ``All(..., weights="auto")``
-(:mod:`specguard.engine.auto_weights`). This module only gathers the four specs,
+(:mod:`specguard.training.auto_weights`). This module only gathers the four specs,
 declared once in their case-study modules, so that one reproduction trains
 them side by side with the same code and seeds::
 

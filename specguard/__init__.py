@@ -34,24 +34,24 @@ from specguard.version import __version__
 _EXPORTS = {
     "All": "specguard.tree.nodes",
     "Annotation": "specguard.extend",
-    "Budget": "specguard.engine.budget",
-    "Cache": "specguard.engine.cache",
+    "Budget": "specguard.spec.budget",
+    "Cache": "specguard.cache.store",
     "CacheWarning": "specguard.error",
-    "CompiledTree": "specguard.build.compiled",
+    "CompiledTree": "specguard.construction.compiled",
     "Constraint": "specguard.tree.builtin_annotations",
     "Distance": "specguard.tree.builtin_annotations",
     "EvaluationError": "specguard.error",
     "Falsify": "specguard.falsify.check",
     "FingerprintError": "specguard.error",
     "Goal": "specguard.tree.nodes",
-    "SpecEnv": "specguard.build.env",
-    "BaselineEnv": "specguard.build.env",
+    "SpecEnv": "specguard.construction.env",
+    "BaselineEnv": "specguard.construction.env",
     "GoalVerdict": "specguard.engine.spec_result",
-    "InitialEnv": "specguard.build.initial_env",
+    "InitialEnv": "specguard.construction.initial_env",
     "InitialEnvError": "specguard.error",
     "InvalidSpec": "specguard.error",
     "Node": "specguard.extend",
-    "Spec": "specguard.engine.spec",
+    "Spec": "specguard.spec.spec",
     "SpecError": "specguard.error",
     "SpecResult": "specguard.engine.spec_result",
     "StartSpace": "specguard.falsify.starts",
@@ -59,13 +59,13 @@ _EXPORTS = {
     "UnknownFeature": "specguard.error",
     "UnreachableGoal": "specguard.error",
     "VersionMismatch": "specguard.error",
-    "compile_tree": "specguard.build.compiled",
+    "compile_tree": "specguard.construction.compiled",
     "formula": "specguard.tree.formula",
     "goal_spec": "specguard.pytest_plugin.declare",
     "goal_specs": "specguard.pytest_plugin.declare",
-    "make_baseline_env": "specguard.build.env",
-    "make_env": "specguard.build.env",
-    "run_spec": "specguard.engine.run",
+    "make_baseline_env": "specguard.construction.env",
+    "make_env": "specguard.construction.env",
+    "run_spec": "specguard.engine.run_spec",
 }
 
 # The one list of public names: __all__ is derived from it, and the TYPE_CHECKING imports
@@ -93,17 +93,15 @@ def __dir__() -> list[str]:
 
 
 if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
-    from specguard.build.compiled import CompiledTree as CompiledTree
-    from specguard.build.compiled import compile_tree as compile_tree
-    from specguard.build.env import BaselineEnv as BaselineEnv
-    from specguard.build.env import SpecEnv as SpecEnv
-    from specguard.build.env import make_baseline_env as make_baseline_env
-    from specguard.build.env import make_env as make_env
-    from specguard.build.initial_env import InitialEnv as InitialEnv
-    from specguard.engine.budget import Budget as Budget
-    from specguard.engine.cache import Cache as Cache
-    from specguard.engine.run import run_spec as run_spec
-    from specguard.engine.spec import Spec as Spec
+    from specguard.cache.store import Cache as Cache
+    from specguard.construction.compiled import CompiledTree as CompiledTree
+    from specguard.construction.compiled import compile_tree as compile_tree
+    from specguard.construction.env import BaselineEnv as BaselineEnv
+    from specguard.construction.env import SpecEnv as SpecEnv
+    from specguard.construction.env import make_baseline_env as make_baseline_env
+    from specguard.construction.env import make_env as make_env
+    from specguard.construction.initial_env import InitialEnv as InitialEnv
+    from specguard.engine.run_spec import run_spec as run_spec
     from specguard.engine.spec_result import GoalVerdict as GoalVerdict
     from specguard.engine.spec_result import SpecResult as SpecResult
     from specguard.error import CacheWarning as CacheWarning
@@ -122,6 +120,8 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.falsify.starts import StartSpace as StartSpace
     from specguard.pytest_plugin.declare import goal_spec as goal_spec
     from specguard.pytest_plugin.declare import goal_specs as goal_specs
+    from specguard.spec.budget import Budget as Budget
+    from specguard.spec.spec import Spec as Spec
     from specguard.tree.builtin_annotations import Constraint as Constraint
     from specguard.tree.builtin_annotations import Distance as Distance
     from specguard.tree.formula import formula as formula

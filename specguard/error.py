@@ -8,13 +8,21 @@ catch :class:`SpecError` to handle all of them.
 from __future__ import annotations
 
 __all__ = [
+    "BaselineError",
+    "Broken",
+    "CacheLockTimeout",
     "CacheWarning",
     "EvaluationError",
+    "ExecutorError",
     "FingerprintError",
+    "GoalMissed",
     "InitialEnvError",
     "InvalidSpec",
+    "NoFrames",
+    "PluginWarning",
     "SpecError",
     "StateMappingError",
+    "TrainingError",
     "UnknownFeature",
     "UnreachableGoal",
     "VersionMismatch",
@@ -110,7 +118,7 @@ class VersionMismatch(SpecError):
     """The process that was to train a run has other code than the one that keyed it.
 
     A run's cache key names the versions of specguard (its source digest) and
-    of the RL stack (:func:`specguard.engine.fingerprint.versions`); a worker whose own
+    of the RL stack (:func:`specguard.cache.versions.versions`); a worker whose own
     differ (specguard's sources edited while runs were queued, a cluster worker
     with another library) would store a result under a key that does not
     describe the code that made it, so it refuses to train.
@@ -127,3 +135,37 @@ class CacheWarning(UserWarning):
     Issued once per spec, naming the path and the cause; the verdict never
     depends on the cache.
     """
+
+
+class TrainingError(SpecError):
+    """The environment or a user function failed while a run trained or was evaluated."""
+
+    default_hint = "reproduce it without training: build sg.make_env(...) and step it from the seed named above"
+
+
+class CacheLockTimeout(SpecError):
+    """Another process held a run's lock for longer than the timeout."""
+
+
+class ExecutorError(SpecError):
+    """An executor address that is malformed, or a cluster that cannot be reached."""
+
+
+class BaselineError(SpecError):
+    """A stored baseline cannot be read."""
+
+
+class PluginWarning(UserWarning):
+    """An installed specguard plugin could not be loaded; its operators are unavailable."""
+
+
+class GoalMissed(AssertionError):
+    """A goal missed its threshold (the failure an ``xfail`` goal expects)."""
+
+
+class Broken(Exception):
+    """Raised by a contract property with what breaks the invariant; ``contract.trees.run_property`` adds the rest."""
+
+
+class NoFrames(Exception):
+    """An env's ``render()`` gave no RGB frame, so a GIF cannot be written (the report notes it and goes on)."""

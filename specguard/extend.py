@@ -295,7 +295,7 @@ class Node:
 
         The weights of the node's own safety annotations left at their default
         weight adapt with them (:func:`adapted_annotations`).
-        ``All(weights="auto")`` does (:mod:`specguard.engine.auto_weights`); the tree
+        ``All(weights="auto")`` does (:mod:`specguard.training.auto_weights`); the tree
         as declared keeps its own weights, so an env built from it alone is
         unchanged.
         """
@@ -539,7 +539,7 @@ def adapted_annotations(node: Node) -> tuple[int, ...]:
 
     The rule: its safety annotations left at their default weight; a weight the
     user set is kept. The compiled tree, the reward formula and the training-time
-    adapter (:mod:`specguard.engine.auto_weights`) all read it here.
+    adapter (:mod:`specguard.training.auto_weights`) all read it here.
     """
     return tuple(i for i, a in enumerate(node.annotations) if a.role == SAFETY and a.weight is None)
 

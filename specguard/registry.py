@@ -34,7 +34,7 @@ from collections.abc import Callable
 from importlib import metadata
 from typing import TypeVar
 
-from specguard.error import InvalidSpec
+from specguard.error import InvalidSpec, PluginWarning
 
 __all__ = ["GROUP", "PluginWarning", "lookup", "register", "registered"]
 
@@ -45,10 +45,6 @@ T = TypeVar("T", bound=type)
 _lock = threading.Lock()
 _explicit: dict[str, type] = {}
 _plugins: dict[str, type] | None = None
-
-
-class PluginWarning(UserWarning):
-    """An installed specguard plugin could not be loaded; its operators are unavailable."""
 
 
 def _builtins() -> dict[str, type]:

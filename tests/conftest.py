@@ -20,7 +20,7 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci" if os.environ.ge
 @pytest.fixture
 def build_counts(monkeypatch):
     """Counts, from here on, the goal trees compiled (``compile_tree``, wherever imported) and code-generated."""
-    from specguard.build import compiled as compiled_module
+    from specguard.construction import compiled as compiled_module
 
     counts = {"compile": 0, "codegen": 0}
     compile_tree, source_of = compiled_module.compile_tree, compiled_module.source_of

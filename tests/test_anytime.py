@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from specguard.engine.budget import Budget
+from specguard.spec.budget import Budget
 from specguard.stats.anytime import (
     checkpoint_steps,
     evaluation_stages,

@@ -9,14 +9,14 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import specguard as sg
-from specguard.engine.auto_weights import (
+from specguard.extend import adapted_annotations
+from specguard.training.auto_weights import (
     FLOOR,
     MIN_EPISODES,
     WeightAdapter,
     adapted_weights,
     adapting_nodes,
 )
-from specguard.extend import adapted_annotations
 
 up = sg.Goal("up", x=(0.9, 1.0))
 still = sg.Goal("still", v=(-0.1, 0.1))

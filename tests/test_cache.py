@@ -14,9 +14,9 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.engine.cache import SECRET_ENV, Cache
-from specguard.engine.results import RunResult
-from specguard.engine.train import train_run
+from specguard.cache.store import SECRET_ENV, Cache
+from specguard.training.result import RunResult
+from specguard.training.train import train_run
 
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 BUDGET = sg.Budget(timesteps=128, min_seeds=1, eval_episodes=2)
@@ -67,7 +67,7 @@ def _edit(folder: Path, change) -> None:
 
 def _resign(record) -> None:
     """Recompute the checksum after an edit: the forger who knows the format (but not a secret)."""
-    from specguard.engine.cache import _checksum
+    from specguard.cache.store import _checksum
 
     record["checksum"] = _checksum(record)
 
@@ -189,8 +189,8 @@ def test_a_store_killed_midway_leaves_no_entry_only_a_temporary_folder(tmp_path)
         f"""
         import os
         from pathlib import Path
-        from specguard.engine.cache import Cache
-        from specguard.engine.results import RunResult
+        from specguard.cache.store import Cache
+        from specguard.training.result import RunResult
 
         def dies(path, data):
             with open(path, "wb") as f:
@@ -240,7 +240,7 @@ def test_lock_is_released_by_the_os_when_its_holder_dies(tmp_path):
     script = textwrap.dedent(
         f"""
         import os
-        from specguard.engine.cache import Cache
+        from specguard.cache.store import Cache
         Cache({str(tmp_path)!r}).lock("ef" * 32, 1).acquire()
         os._exit(0)
         """
@@ -252,7 +252,7 @@ def test_lock_is_released_by_the_os_when_its_holder_dies(tmp_path):
 
 
 def test_waiting_for_a_lock_held_too_long_is_a_clear_error(tmp_path):
-    from specguard.engine.cache import CacheLockTimeout, try_acquire, wait_for
+    from specguard.cache.store import CacheLockTimeout, try_acquire, wait_for
 
     holder = Cache(tmp_path).lock("12" * 32, 1)
     assert try_acquire(holder)

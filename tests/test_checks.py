@@ -7,9 +7,9 @@ import warnings
 import pytest
 
 import specguard as sg
-from specguard.build.checks import check_goals_off_the_edge, check_goals_reachable, unreachable_reason
-from specguard.build.compiled import compile_tree
-from specguard.engine.run import run_spec
+from specguard.construction.checks import check_goals_off_the_edge, check_goals_reachable, unreachable_reason
+from specguard.construction.compiled import compile_tree
+from specguard.engine.run_spec import run_spec
 from specguard.error import InvalidSpec, UnreachableGoal
 
 FEATURES = ("x", "v", "theta", "omega")

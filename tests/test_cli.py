@@ -9,8 +9,8 @@ import textwrap
 import pytest
 
 from specguard.cli.main import main
-from specguard.engine.specfiles import load_objects
 from specguard.error import SpecError
+from specguard.spec.files import load_objects
 
 SPEC_FILE = textwrap.dedent(
     """
@@ -155,7 +155,7 @@ def test_bad_reproduce_options_are_usage_errors(spec_file, option, message, caps
 @pytest.fixture
 def no_training(monkeypatch):
     """Replace training by a stub that records what it was asked, and stops the run."""
-    import specguard.engine.run
+    import specguard.engine.run_spec
 
     calls = []
 
@@ -163,7 +163,7 @@ def no_training(monkeypatch):
         calls.append(spec)
         raise SpecError("stub: no training in this test")
 
-    monkeypatch.setattr(specguard.engine.run, "run_spec", run_spec)
+    monkeypatch.setattr(specguard.engine.run_spec, "run_spec", run_spec)
     return calls
 
 

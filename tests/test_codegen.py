@@ -10,8 +10,8 @@ from hypothesis import strategies as st
 
 import specguard as sg
 from specguard import strategies as sgst
-from specguard.build.compiled import compile_tree
-from specguard.build.reference import ReferenceEvaluator
+from specguard.construction.compiled import compile_tree
+from specguard.construction.reference import ReferenceEvaluator
 from specguard.extend import ChildWeights, Context, Node, Slot
 
 FEATURES = ("a", "b", "c")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from specguard.stats.compare import Baseline, BaselineError, load_baseline, save_baseline
+from specguard.gate.baseline import Baseline, BaselineError, load_baseline, save_baseline
 
 
 def test_save_and_load_round_trip(tmp_path):
@@ -73,9 +73,9 @@ def test_safety_rates_round_trip_and_old_baselines_without_them_are_noted(tmp_pa
     import specguard as sg
     from example_specs import pendulum
     from specguard.engine.judging import judge as _judge
-    from specguard.engine.results import RunResult
     from specguard.engine.spec_result import SpecResult
     from specguard.pytest_plugin.gate import check_item
+    from specguard.training.result import RunResult
 
     old = tmp_path / "old.json"  # saved before safety rates were measured: goals only
     old.write_text('{"format": 2, "goals": {"g::pendulum": {"runs": [[30, 30], [29, 30]], "spec": null}}}')
@@ -137,7 +137,7 @@ def test_a_corrupt_baseline_is_not_overwritten_by_a_save(tmp_path):
 SAVER = """
 import sys, time
 from pathlib import Path
-from specguard.stats.compare import save_baseline
+from specguard.gate.baseline import save_baseline
 
 path, spec, ready = Path(sys.argv[1]), sys.argv[2], Path(sys.argv[3])
 ready.write_text("")

@@ -12,9 +12,9 @@ from hypothesis import strategies as st
 
 import specguard as sg
 from specguard import strategies as sgst
-from specguard.build.compiled import compile_tree
-from specguard.build.initial_env import state_type
-from specguard.build.reference import ExtendedState, ReferenceEvaluator, process
+from specguard.construction.compiled import compile_tree
+from specguard.construction.initial_env import state_type
+from specguard.construction.reference import ExtendedState, ReferenceEvaluator, process
 
 FEATURES = ("a", "b", "c")
 State = state_type(FEATURES)

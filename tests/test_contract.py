@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import specguard as sg
-from specguard.build.env import SpecEnv
+from specguard.construction.env import SpecEnv
 from specguard.contract import checks as contract
 from specguard.testing import check_operator, parametrize_with_checks
 

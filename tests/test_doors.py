@@ -19,11 +19,11 @@ import pytest
 import scipy.stats  # noqa: F401
 
 import specguard as sg
-import specguard.engine.run
+import specguard.cache.versions
+import specguard.engine.run_spec
 import specguard.engine.train_task
-import specguard.engine.versions
 from specguard.cli.main import main
-from specguard.engine.specfiles import load_objects
+from specguard.spec.files import load_objects
 from specguard.stats.intervals import GoalOutcome
 
 SPEC_FILE = """

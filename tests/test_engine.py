@@ -17,7 +17,7 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.engine.run import resolve_workers
+from specguard.parallel.workers import resolve_workers
 
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 
@@ -279,8 +279,8 @@ SAFE_TREE = sg.All(*pendulum.trees["b"].children, name="pendulum").annotate(FAST
 
 def _safety_result(per_seed, expect):
     from specguard.engine.judging import judge as _judge
-    from specguard.engine.results import RunResult
     from specguard.engine.spec_result import SpecResult
+    from specguard.training.result import RunResult
 
     s = sg.Spec(pendulum.initial_env, SAFE_TREE, budget=sg.Budget(timesteps=10), expect=expect)
     runs = [
@@ -372,8 +372,8 @@ def test_the_table_lists_each_seeds_adapted_weights():
 
 def test_a_worker_running_other_code_than_the_key_names_refuses_to_train(tmp_path, monkeypatch):
     # The driver keyed its runs with one specguard; the spawned workers import another (sources edited meanwhile).
+    from specguard.cache.versions import versions
     from specguard.engine import runs as engine
-    from specguard.engine.fingerprint import versions
 
     keyed = {**versions(), "specguard": "0.0.0+edited"}
     monkeypatch.setattr(engine, "versions", lambda: keyed)
@@ -383,7 +383,7 @@ def test_a_worker_running_other_code_than_the_key_names_refuses_to_train(tmp_pat
 
 
 def test_a_worker_with_the_keyed_versions_trains():
-    from specguard.engine.fingerprint import versions
+    from specguard.cache.versions import versions
     from specguard.engine.train_task import train_task as _train_task
 
     out = _train_task(spec(), 0, versions(), report=lambda phase, step=None, line=None: None)
@@ -497,7 +497,7 @@ def test_a_cache_that_cannot_be_written_warns_once_and_keeps_the_trained_result(
 def test_a_full_disk_warns_with_its_cause_and_keeps_every_run(tmp_path, monkeypatch):
     import errno
 
-    from specguard.engine.cache import Cache
+    from specguard.cache.store import Cache
 
     def full(self, key, result, files):
         raise OSError(errno.ENOSPC, "No space left on device", str(self.folder(key)))
@@ -512,7 +512,7 @@ def test_a_full_disk_warns_with_its_cause_and_keeps_every_run(tmp_path, monkeypa
 def test_a_lock_that_cannot_be_created_warns_and_keeps_every_run(tmp_path, monkeypatch):
     import errno
 
-    from specguard.engine.cache import Cache
+    from specguard.cache.store import Cache
 
     def denied(self, key, timeout):
         raise PermissionError(errno.EACCES, "Permission denied", str(self.folder(key).parent / f"{key}.lock"))

@@ -79,7 +79,7 @@ def test_a_factory_that_has_compiled_its_tree_builds_subprocess_envs():
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import SubprocVecEnv
 
-    from specguard.build.env import EnvFactory
+    from specguard.construction.env import EnvFactory
 
     build = EnvFactory(pendulum.initial_env, pendulum.trees["c"])
     build().close()
@@ -294,7 +294,7 @@ def test_make_env_compiles_and_generates_the_tree_once(build_counts, make):
 
 
 def test_envs_of_one_factory_share_the_compiled_tree_but_not_the_episode(build_counts):
-    from specguard.build.env import EnvFactory
+    from specguard.construction.env import EnvFactory
 
     build = EnvFactory(pendulum.initial_env, pendulum.trees["w"])
     first, second = build(), build()
@@ -335,7 +335,7 @@ def test_what_a_step_returns_is_never_changed_by_a_later_step(tree):
 
 
 def test_a_factory_refuses_again_what_its_preflight_refused():
-    from specguard.build.env import EnvFactory
+    from specguard.construction.env import EnvFactory
 
     build = EnvFactory(pendulum.initial_env, sg.Goal("g", v=(0, 1)), baseline=True)
     for _ in range(2):
@@ -344,7 +344,7 @@ def test_a_factory_refuses_again_what_its_preflight_refused():
 
 
 def test_an_env_refuses_the_compiled_tree_of_another_tree():
-    from specguard.build.compiled import compile_tree
+    from specguard.construction.compiled import compile_tree
 
     base = gym.make("Pendulum-v1")
     other = compile_tree(pendulum.trees["b"], pendulum.initial_env.features)

@@ -7,7 +7,7 @@ import re
 import pytest
 
 import specguard as sg
-from specguard.build.initial_env import state_type
+from specguard.construction.initial_env import state_type
 from specguard.extend import ChildWeights, Context, Node, Slot, check_children, component_weights, goal_test
 
 State = state_type(("x", "y"))

@@ -8,8 +8,8 @@ import pytest
 from hypothesis.database import InMemoryExampleDatabase
 
 import specguard as sg
-from specguard.build.initial_env import state_type
 from specguard.cli.main import main
+from specguard.construction.initial_env import state_type
 from specguard.falsify.robustness import box_margin, feature_scales, margins
 from specguard.falsify.search import EpisodeRunner, falsify
 from specguard.falsify.starts import StartSpace

@@ -21,7 +21,9 @@ from hypothesis import strategies as st
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.engine.fingerprint import canonical, digest, fingerprint_spec, probe
+from specguard.cache.canonical import canonical, digest
+from specguard.cache.fingerprint import fingerprint_spec
+from specguard.cache.probe import probe
 
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 BUDGET = sg.Budget(timesteps=128, min_seeds=1, eval_episodes=2)
@@ -330,7 +332,7 @@ def test_the_key_is_the_same_across_processes_and_hash_seeds(tmp_path):
         """
         import specguard as sg
         from example_specs import pendulum
-        from specguard.engine.fingerprint import fingerprint_spec
+        from specguard.cache.fingerprint import fingerprint_spec
 
         def factory(inner, target, names):
             def distance(s):
@@ -402,21 +404,21 @@ def test_anytime_checkpoints_and_thresholds_are_part_of_a_runs_key_but_xfail_is_
 def test_the_source_digest_sees_every_module_of_every_subpackage(tmp_path):
     import shutil
 
-    from specguard.engine.versions import source_digest
+    from specguard.cache.versions import source_digest
 
     package = tmp_path / "specguard"
     shutil.copytree(Path(sg.__file__).parent, package, ignore=shutil.ignore_patterns("__pycache__"))
     before = source_digest(package)
-    deep = package / "engine" / "run.py"
+    deep = package / "engine" / "run_spec.py"
     deep.write_text(deep.read_text() + "\n# edited\n")
     edited = source_digest(package)
     assert edited != before  # a module two folders down counts
-    (package / "engine" / "run.py").rename(package / "engine" / "moved.py")
+    (package / "engine" / "run_spec.py").rename(package / "engine" / "moved.py")
     assert source_digest(package) != edited  # so does where it lies
     assert len({source_digest(package), source_digest(package)}) == 1  # and it is stable
 
 
 def test_the_run_key_uses_the_digest_of_the_installed_package():
-    from specguard.engine.versions import source_digest, versions
+    from specguard.cache.versions import source_digest, versions
 
     assert versions()["specguard"] == f"{sg.__version__}+{source_digest(Path(sg.__file__).parent)}"

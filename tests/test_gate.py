@@ -7,11 +7,11 @@ import pytest
 import specguard as sg
 from example_specs import pendulum
 from specguard.engine.judging import judge as _judge
-from specguard.engine.results import RunResult
 from specguard.engine.spec_result import SpecResult
+from specguard.gate.baseline import Baseline
 from specguard.pytest_plugin.gate import gate_goal
-from specguard.stats.compare import Baseline
 from specguard.stats.intervals import GoalOutcome
+from specguard.training.result import RunResult
 from specguard.tree.keys import ROOT
 
 

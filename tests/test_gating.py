@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.engine.gating import baseline_runs, compare_spec, gate_ceiling
-from specguard.engine.results import RunResult
 from specguard.engine.spec_result import SpecResult
-from specguard.stats.compare import Baseline
+from specguard.gate.baseline import Baseline
+from specguard.gate.comparison import baseline_runs, compare_spec, gate_ceiling
+from specguard.training.result import RunResult
 
 SPEC = sg.Spec(
     pendulum.initial_env,

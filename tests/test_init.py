@@ -41,7 +41,7 @@ def test_the_names_no_release_had_are_gone():
     for name in ("GoalEnv", "GoalInfo"):
         assert name not in sg.__all__
         assert not hasattr(sg, name)
-        assert not hasattr(importlib.import_module("specguard.build.env"), name)
+        assert not hasattr(importlib.import_module("specguard.construction.env"), name)
 
 
 def test_the_type_checking_imports_are_the_public_names_from_their_modules():

@@ -5,19 +5,25 @@ function (a lazy import is still a dependency) or under ``TYPE_CHECKING`` (a
 design dependency). Parts, lowest first:
 
 - base: ``error``, ``validation``, ``version``, ``utils/``;
-- ``extend`` (the operator API), then ``tree/`` (the built-in nodes), then ``build/`` (the constructed env);
+- ``extend`` (the operator API), then ``tree/`` (the built-in nodes), then ``construction/`` (the constructed env);
 - ``stats/`` (intervals, anytime looks, comparisons: numbers only);
 - ``falsify/`` (start spaces, robustness margins, the guided search for failing starts: over any policy callable);
 - ``parallel/`` (tasks in processes or on a cluster: generic, it knows nothing of specs);
 - the public tools over the core: ``strategies``, ``registry``, ``contract/``, ``testing``;
-- ``engine/`` (specs, training, runs, the cache);
-- ``report/`` (session reports, figures, GIFs);
+- ``spec/`` (the spec, its budget, the algorithms, spec files), then ``training/`` (one seed), then ``cache/``
+  (run identity and the store), then ``engine/`` (``run_spec``, its runs and verdicts), then ``gate/`` (the baseline
+  gate);
+- ``report/`` (session reports, figures, GIFs, spec rendering);
 - the doors: ``pytest_plugin/`` and ``cli/``; and the facade ``specguard`` (``__init__``) and ``__main__``.
 """
 
 from __future__ import annotations
 
 import ast
+import builtins
+import re
+import subprocess
+import sys
 import textwrap
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -29,8 +35,9 @@ import specguard
 PACKAGE = Path(specguard.__file__).parent
 
 BASE = frozenset({"error", "validation", "version", "utils"})
-CORE = BASE | {"extend", "tree", "build"}
+CORE = BASE | {"extend", "tree", "construction"}
 TOOLS = CORE | {"strategies", "registry", "contract", "testing"}
+RUNNING = TOOLS | {"stats", "parallel", "falsify", "spec", "training", "cache"}
 # Per part, the parts its modules may import (its own included).
 ALLOWED: Mapping[str, frozenset[str]] = {
     "error": frozenset({"error"}),
@@ -39,7 +46,7 @@ ALLOWED: Mapping[str, frozenset[str]] = {
     "utils": BASE,
     "extend": BASE | {"extend"},
     "tree": BASE | {"extend", "tree"},
-    "build": CORE,
+    "construction": CORE,
     "stats": BASE | {"stats"},
     "strategies": BASE | {"extend", "tree", "strategies"},
     "registry": BASE | {"extend", "tree", "registry"},
@@ -47,16 +54,20 @@ ALLOWED: Mapping[str, frozenset[str]] = {
     "testing": CORE | {"contract", "testing"},
     "falsify": CORE | {"stats", "falsify"},
     "parallel": BASE | {"parallel"},
-    "engine": TOOLS | {"stats", "parallel", "falsify", "engine"},
-    "report": TOOLS | {"stats", "parallel", "falsify", "engine", "report"},
-    "pytest_plugin": TOOLS | {"stats", "parallel", "falsify", "engine", "report", "pytest_plugin"},
-    "cli": TOOLS | {"stats", "parallel", "falsify", "engine", "report", "pytest_plugin", "cli"},
+    "spec": CORE | {"stats", "falsify", "spec"},
+    "training": CORE | {"stats", "falsify", "parallel", "spec", "training"},
+    "cache": CORE | {"stats", "falsify", "parallel", "spec", "training", "cache"},
+    "engine": RUNNING | {"engine"},
+    "gate": RUNNING | {"engine", "gate"},
+    "report": RUNNING | {"engine", "gate", "report"},
+    "pytest_plugin": RUNNING | {"engine", "gate", "report", "pytest_plugin"},
+    "cli": RUNNING | {"engine", "gate", "report", "cli"},
     "__main__": frozenset({"cli", "__main__"}),
 }
 NO_DEEP_LEARNING = (
     "extend",
     "tree",
-    "build",
+    "construction",
     "stats",
     "falsify",
     "parallel",
@@ -70,7 +81,7 @@ DEEP_LEARNING = ("torch", "stable_baselines3")
 
 
 def module_name(path: Path, package: Path) -> str:
-    """``specguard/engine/run.py`` -> ``specguard.engine.run``; a package's ``__init__`` is the package."""
+    """``specguard/engine/run_spec.py`` -> ``specguard.engine.run_spec``; a package's ``__init__`` is the package."""
     parts = path.relative_to(package.parent).with_suffix("").parts
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
@@ -130,7 +141,7 @@ def third_party_imports(package: Path) -> dict[str, set[str]]:
 
 
 def part_of(module: str) -> str:
-    """The part a module belongs to: its first name below the package (``specguard.engine.run`` -> ``engine``)."""
+    """The part a module belongs to: its first name below the package (``specguard.engine.run_spec`` -> ``engine``)."""
     parts = module.split(".")
     return parts[1] if len(parts) > 1 else "__init__"
 
@@ -234,14 +245,46 @@ def test_a_lazy_import_of_the_engine_from_the_tree_is_a_violation(tmp_path):
         {
             "tree/nodes.py": """
                 def strategy():
-                    from specguard.engine.train import train_run
+                    from specguard.training.train import train_run
                     return train_run
             """,
-            "engine/train.py": "from specguard.tree import nodes\n",
+            "training/train.py": "from specguard.tree import nodes\n",
         },
     )
     assert layer_violations(import_graph(package)) == [
-        "specguard.tree.nodes -> specguard.engine.train (tree may not import engine)"
+        "specguard.tree.nodes -> specguard.training.train (tree may not import training)"
+    ]
+
+
+UPWARD = [
+    ("spec/spec.py", "training/train.py"),
+    ("training/train.py", "cache/store.py"),
+    ("cache/store.py", "engine/runs.py"),
+    ("engine/runs.py", "gate/comparison.py"),
+    ("gate/comparison.py", "report/session.py"),
+    ("report/session.py", "pytest_plugin/items.py"),
+]
+
+
+@pytest.mark.parametrize(("importer", "imported"), UPWARD)
+def test_an_upward_import_between_the_running_parts_is_a_violation(tmp_path, importer, imported):
+    """spec below training below cache below engine below gate below report; the CLI imports no pytest plugin."""
+    low, high = (m.removesuffix(".py").replace("/", ".") for m in (importer, imported))
+    package = write_package(tmp_path, {importer: f"from specguard.{high} import x\n", imported: ""})
+    assert layer_violations(import_graph(package)) == [
+        f"specguard.{low} -> specguard.{high} ({low.split('.')[0]} may not import {high.split('.')[0]})"
+    ]
+    downward = write_package(tmp_path / "down", {imported: f"from specguard.{low} import x\n", importer: ""})
+    assert layer_violations(import_graph(downward)) == []
+
+
+def test_the_cli_importing_the_pytest_plugin_is_a_violation(tmp_path):
+    """The two doors are siblings: the CLI renders specs with ``report/``, never through a pytest plugin module."""
+    package = write_package(
+        tmp_path, {"cli/main.py": "from specguard.pytest_plugin.items import spec_of\n", "pytest_plugin/items.py": ""}
+    )
+    assert layer_violations(import_graph(package)) == [
+        "specguard.cli.main -> specguard.pytest_plugin.items (cli may not import pytest_plugin)"
     ]
 
 
@@ -249,14 +292,14 @@ def test_the_engine_importing_the_cli_and_the_plugin_are_violations(tmp_path):
     package = write_package(
         tmp_path,
         {
-            "engine/run.py": "from specguard.cli import main\nfrom specguard.pytest_plugin.report import markdown\n",
+            "engine/run_spec.py": "from specguard.cli import main\nfrom specguard.pytest_plugin.report import md\n",
             "cli/main.py": "",
             "pytest_plugin/report.py": "",
         },
     )
     assert layer_violations(import_graph(package)) == [
-        "specguard.engine.run -> specguard.cli.main (engine may not import cli)",
-        "specguard.engine.run -> specguard.pytest_plugin.report (engine may not import pytest_plugin)",
+        "specguard.engine.run_spec -> specguard.cli.main (engine may not import cli)",
+        "specguard.engine.run_spec -> specguard.pytest_plugin.report (engine may not import pytest_plugin)",
     ]
 
 
@@ -264,16 +307,16 @@ def test_a_cycle_through_a_type_checking_import_is_found(tmp_path):
     package = write_package(
         tmp_path,
         {
-            "build/compiled.py": "from specguard.build.codegen import source_of\n",
-            "build/codegen.py": """
+            "construction/compiled.py": "from specguard.construction.codegen import source_of\n",
+            "construction/codegen.py": """
                 from typing import TYPE_CHECKING
                 if TYPE_CHECKING:
-                    from specguard.build.compiled import CompiledTree
+                    from specguard.construction.compiled import CompiledTree
             """,
-            "build/env.py": "from specguard.build import compiled\n",
+            "construction/env.py": "from specguard.construction import compiled\n",
         },
     )
-    assert cycles(import_graph(package)) == [["specguard.build.codegen", "specguard.build.compiled"]]
+    assert cycles(import_graph(package)) == [["specguard.construction.codegen", "specguard.construction.compiled"]]
     assert layer_violations(import_graph(package)) == []
 
 
@@ -281,25 +324,91 @@ def test_relative_imports_and_the_facade_are_resolved(tmp_path):
     package = write_package(
         tmp_path,
         {
-            "engine/run.py": "from . import cache\nfrom .cache import Cache\nimport specguard\n",
-            "engine/cache.py": "from .. import error\n",
+            "engine/run_spec.py": "from . import runs\nfrom .runs import Runs\nimport specguard\n",
+            "engine/runs.py": "from .. import error\n",
             "error.py": "",
         },
     )
     graph = import_graph(package)
-    assert graph["specguard.engine.run"] == {"specguard", "specguard.engine.cache"}
-    assert graph["specguard.engine.cache"] == {"specguard.error"}
+    assert graph["specguard.engine.run_spec"] == {"specguard", "specguard.engine.runs"}
+    assert graph["specguard.engine.runs"] == {"specguard.error"}
     assert layer_violations(graph) == [
-        "specguard.engine.run -> specguard (the facade: import the module that defines the name)"
+        "specguard.engine.run_spec -> specguard (the facade: import the module that defines the name)"
     ]
 
 
-def test_torch_in_the_build_is_found(tmp_path):
-    package = write_package(tmp_path, {"build/env.py": "def f():\n    import torch.nn\n"})
-    assert deep_learning_imports(package) == ["specguard.build.env imports torch"]
+def test_torch_in_the_construction_is_found(tmp_path):
+    package = write_package(tmp_path, {"construction/env.py": "def f():\n    import torch.nn\n"})
+    assert deep_learning_imports(package) == ["specguard.construction.env imports torch"]
 
 
-@pytest.mark.parametrize("module", ["specguard.tree.nodes", "specguard.engine.run", "specguard.cli.main"])
+@pytest.mark.parametrize("module", ["specguard.tree.nodes", "specguard.engine.run_spec", "specguard.cli.main"])
 def test_the_real_graph_is_read(module):
     graph = import_graph(PACKAGE)
     assert graph[module], f"{module} imports nothing of specguard? the reader is broken"
+
+
+# -- every docstring example is collected ------------------------------------------------------
+
+EXAMPLE = re.compile(r"^\s*>>> ", re.MULTILINE)
+
+
+def collected_files(root: Path, *args: str) -> set[str]:
+    """The files (relative to ``root``) holding at least one item pytest collects for ``pytest --collect-only -q``."""
+    out = subprocess.run(
+        [sys.executable, "-m", "pytest", "--collect-only", "-q", *args],
+        cwd=root,
+        capture_output=True,
+        text=True,
+        check=False,
+    ).stdout
+    return {line.split("::")[0] for line in out.splitlines() if "::" in line}
+
+
+def test_every_docstring_example_is_collected_by_the_readme_test_command():
+    """README's test command is ``pytest`` over its ``testpaths``; a folder pytest skips (``build``) hides examples."""
+    root = PACKAGE.parent
+    with_examples = {
+        path.relative_to(root).as_posix()
+        for path in modules_of(PACKAGE).values()
+        if EXAMPLE.search(path.read_text(encoding="utf-8"))
+    }
+    assert with_examples, "no module has an example? the reader is broken"
+    assert sorted(with_examples - collected_files(root, PACKAGE.name)) == []
+
+
+# -- one home for errors -----------------------------------------------------------------------
+
+
+def exception_classes_outside_error(package: Path) -> list[str]:
+    """Classes deriving from an exception or warning (a builtin one or one of ``error.py``'s) defined elsewhere."""
+    error_module = package / "error.py"
+    known = {
+        name for name, value in vars(builtins).items() if isinstance(value, type) and issubclass(value, BaseException)
+    }
+    if error_module.exists():
+        known |= {n.name for n in ast.walk(ast.parse(error_module.read_text())) if isinstance(n, ast.ClassDef)}
+    found = []
+    for name, path in modules_of(package).items():
+        if path == error_module:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.ClassDef) and any(ast.unparse(b).rpartition(".")[2] in known for b in node.bases):
+                found.append(f"{name}.{node.name}")
+    return sorted(found)
+
+
+def test_every_exception_class_is_defined_in_error():
+    assert exception_classes_outside_error(PACKAGE) == []
+
+
+def test_an_exception_class_outside_error_is_found(tmp_path):
+    package = write_package(
+        tmp_path,
+        {
+            "error.py": "class SpecError(Exception):\n    pass\n",
+            "engine/runs.py": "from specguard import error\nclass Late(error.SpecError):\n    pass\n",
+            "registry.py": "class Loud(UserWarning):\n    pass\nclass Plain:\n    pass\n",
+        },
+    )
+    assert exception_classes_outside_error(package) == ["specguard.engine.runs.Late", "specguard.registry.Loud"]

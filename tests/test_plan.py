@@ -11,8 +11,8 @@ import pytest
 import specguard as sg
 from example_specs import lunar_lander, pendulum
 from specguard.cli.main import main
-from specguard.engine.plan import plan_spec
-from specguard.report.plan import plan_lines
+from specguard.gate.plan import plan_spec
+from specguard.report.plan_lines import plan_lines
 from specguard.stats.power import chance_met
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "example_specs"
@@ -156,7 +156,7 @@ def test_specguard_plan_on_a_pytest_goal_spec_file(pytester):
 
 
 def test_the_case_studies_file_is_a_goal_spec_file():
-    from specguard.pytest_plugin.show import has_goal_specs
+    from specguard.report.show import has_goal_specs
 
     assert has_goal_specs(EXAMPLES / "test_case_studies.py") and not has_goal_specs(EXAMPLES / "pendulum.py")
     assert sg.goal_specs  # what the file calls

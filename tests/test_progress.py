@@ -9,7 +9,7 @@ from test_plugin import run, write
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.engine.progress import ProgressEvent, decode_update, encode_update, format_duration, format_event
+from specguard.training.progress import ProgressEvent, decode_update, encode_update, format_duration, format_event
 
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 

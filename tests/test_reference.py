@@ -11,8 +11,8 @@ from hypothesis import strategies as st
 
 import specguard as sg
 from specguard import strategies as sgst
-from specguard.build.initial_env import state_type
-from specguard.build.reference import ExtendedState, ReferenceEvaluator, process
+from specguard.construction.initial_env import state_type
+from specguard.construction.reference import ExtendedState, ReferenceEvaluator, process
 from specguard.extend import component_weights
 
 FEATURES = ("a", "b", "c")

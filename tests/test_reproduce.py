@@ -16,9 +16,9 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
+from specguard.cache.versions import versions
 from specguard.cli.main import main
-from specguard.engine.fingerprint import versions
-from specguard.engine.reproduction import sized
+from specguard.engine.reproduce import sized
 from specguard.report.reproduction import TITLE, sections
 
 REPO = Path(__file__).resolve().parents[1]
@@ -173,10 +173,10 @@ def test_an_interruption_stops_the_running_specs_at_once_and_starts_no_other(tmp
 
 def test_a_run_counts_as_met_by_its_interval_as_every_door_judges_it():
     from specguard.engine.judging import judge
-    from specguard.engine.reproduction import CaseStudy
-    from specguard.engine.results import RunResult
+    from specguard.engine.reproduce import CaseStudy
     from specguard.engine.spec_result import SpecResult
     from specguard.report.reproduction import _root_row
+    from specguard.training.result import RunResult
 
     spec = sized(
         sg.Spec(pendulum.initial_env, pendulum.trees["w"], budget=sg.Budget(timesteps=100)), seeds=2, budget_scale=1

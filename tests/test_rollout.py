@@ -8,11 +8,11 @@ import pytest
 from PIL import Image
 
 import specguard as sg
-from specguard.engine.cache import Cache
-from specguard.engine.models import load_model
-from specguard.engine.rollout import rollout
-from specguard.engine.train import train_run
+from specguard.cache.models import load_model
+from specguard.cache.store import Cache
 from specguard.report.gifs import Gif, report_gifs, write_gif
+from specguard.training.rollout import rollout
+from specguard.training.train import train_run
 
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 
@@ -67,12 +67,11 @@ def test_gif_has_the_episode_and_a_caption_naming_the_goals(trained, tmp_path):
 
 def test_a_gif_from_a_start_replays_the_falsifiers_episode_from_it(trained, tmp_path):
     from specguard.engine.falsification import batch_policy, property_keys
-    from specguard.engine.rollout import spec_env
     from specguard.falsify.search import EpisodeRunner
 
     spec, _, model = trained
     space = sg.StartSpace({"theta": (-0.2, 0.2), "omega": (-1.0, 1.0)})
-    runner = EpisodeRunner(lambda: spec_env(spec), batch_policy(model, None, True), space, property_keys(spec))
+    runner = EpisodeRunner(spec.make_env, batch_policy(model, None, True), space, property_keys(spec))
     points = np.array([[0.0, 0.0, 0.19, 0.9], [0.0, 0.0, -0.19, -0.9], [0.0, 0.0, 0.0, 0.0]])
     outcomes = runner.run(points)
     assert len({o.steps for o in outcomes}) > 1  # the starts make different episodes
@@ -172,7 +171,7 @@ def test_writing_a_gif_prints_nothing_to_stderr(tmp_path):
         """
         import sys
         import specguard as sg
-        from specguard.engine.train import train_run
+        from specguard.training.train import train_run
         from specguard.report.gifs import write_gif
 
         pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))

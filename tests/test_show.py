@@ -9,8 +9,8 @@ import warnings
 import pytest
 
 import specguard as sg
-from specguard.engine.budget import trained_timesteps
-from specguard.pytest_plugin.show import has_goal_specs, render_spec
+from specguard.report.show import has_goal_specs, render_spec
+from specguard.spec.budget import trained_timesteps
 
 SPECS = textwrap.dedent(
     """

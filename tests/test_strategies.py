@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 
 import specguard as sg
 from specguard import strategies as sgst
-from specguard.build.compiled import compile_tree
+from specguard.construction.compiled import compile_tree
 
 FEATURES = ("a", "b", "c")
 

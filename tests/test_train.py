@@ -4,15 +4,17 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 
 import gymnasium as gym
 import pytest
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.engine.train import EVAL_SEED_BASE, TrainingError, evaluate, train_run
+from specguard.error import TrainingError
 from specguard.stats.anytime import min_successes_to_meet
 from specguard.testing import ReplayEnv
+from specguard.training.train import EVAL_SEED_BASE, evaluate, train_run
 
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 
@@ -79,6 +81,30 @@ def test_env_failures_name_the_seed_and_step():
         train_run(spec, seed=5)
 
 
+class ExplodingInEvaluation(gym.Wrapper):
+    """Trains fine; raises on the first reset of an evaluation episode (its seeds start at EVAL_SEED_BASE)."""
+
+    def reset(self, *, seed=None, options=None):
+        if seed is not None and seed >= EVAL_SEED_BASE:
+            raise RuntimeError("simulator diverged")
+        return self.env.reset(seed=seed, options=options)
+
+
+def test_an_env_failure_in_a_checkpoint_evaluation_names_the_evaluation_not_a_training_step():
+    initial = sg.InitialEnv(lambda: ExplodingInEvaluation(ReplayEnv([[0.0], [1.0]])), features=("x",))
+    budget = sg.Budget(timesteps=256, eval_episodes=2, checkpoints=4)
+    spec = sg.Spec(initial, sg.Goal("up", x=(0.5, None)), budget=budget, hyperparameters=TINY, expect=0.8)
+    with pytest.raises(TrainingError) as raised:
+        train_run(spec, seed=5)
+    message = str(raised.value)
+    assert re.match(
+        r"Spec 'up', seed 5, checkpoint evaluation at step 64, evaluation episode 0: "
+        r"the environment raised RuntimeError: simulator diverged",
+        message,
+    ), message
+    assert "training step" not in message
+
+
 def test_baseline_trains_on_the_initial_env_and_reports_goals():
     result, model = train_run(tiny_spec(baseline=True), seed=0)
     assert model.observation_space.shape == (3,)
@@ -132,9 +158,9 @@ def test_evaluate_counts_an_episode_ended_by_its_constraint_as_unsafe():
 
 
 def test_training_curve_records_safety_rates():
-    from specguard.engine.train import _GoalCurve
+    from specguard.training.curve import GoalCurve
 
-    curve = _GoalCurve(every=2, wall_clock_s=None, total=4, report=None)
+    curve = GoalCurve(every=2, wall_clock_s=None, total=4, report=None)
     unsafe = {"goals": {"root": True}, "safe": {"root:c": False}}
     safe = {"goals": {"root": False}, "safe": {"root:c": True}}
     curve.on_step(1, [True, False], [unsafe, {}])

@@ -435,17 +435,17 @@ def test_parse_workers_refuses(value):
 
 def test_run_spec_resolves_workers_by_the_same_function(tmp_path):
     import specguard as sg
-    import specguard.engine.run
+    import specguard.engine.run_spec
     from example_specs import pendulum
 
-    assert specguard.engine.run.resolve_workers is resolve_workers  # re-exported, not a second rule
+    assert specguard.engine.run_spec.resolve_workers is resolve_workers  # the one rule, not a second
     spec = sg.Spec(pendulum.initial_env, pendulum.trees["w"], budget=sg.Budget(timesteps=10), expect=0.5)
     with pytest.raises(sg.SpecError, match=r"workers: expected an integer >= 1 .*got True"):
         sg.run_spec(spec, workers=True, cache_dir=tmp_path)  # refused before anything trains
 
 
 def test_reproduce_resolves_workers_by_the_same_function():
-    from specguard.engine.reproduction import reproduce
+    from specguard.engine.reproduce import reproduce
 
     # it clamped with max(1, workers): 0 and -3 trained one spec at a time, "auto" raised a TypeError
     with pytest.raises(InvalidSpec, match=r"workers: expected an integer >= 1 .*got 0"):

@@ -12,7 +12,7 @@ from specguard_plugins import AnyOf, Avoid, Sequence
 
 import specguard as sg
 from specguard import strategies as sgst
-from specguard.build.reference import ExtendedState, process
+from specguard.construction.reference import ExtendedState, process
 from specguard.error import InvalidSpec
 from specguard.extend import ChildWeights, Context
 
@@ -310,7 +310,7 @@ def test_constructed_envs_pass_both_checkers():
 
 
 def test_a_union_s_margin_is_its_best_child_s():
-    from specguard.build.initial_env import state_type
+    from specguard.construction.initial_env import state_type
     from specguard.falsify.robustness import margins
 
     union = AnyOf(sg.Goal("left", x=(-1.0, 0.7)), sg.Goal("right", x=(0.5, 1.0)), name="sides")

@@ -12,7 +12,7 @@ from specguard_plugins import AnyOf, Avoid, Sequence
 
 import specguard as sg
 from specguard import strategies as sgst
-from specguard.build.reference import ExtendedState, ReferenceEvaluator, process
+from specguard.construction.reference import ExtendedState, ReferenceEvaluator, process
 
 FEATURES = ("a", "b", "c")
 State = namedtuple("State", FEATURES)

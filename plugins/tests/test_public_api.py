@@ -117,9 +117,9 @@ def test_plugin_sources_import_only_the_public_extension_api(path):
     "source",
     [
         "from specguard.tree.nodes import Goal",
-        "from specguard.build.reference import process",
-        "import specguard.build.compiled",
-        "import specguard.build.codegen as cg",
+        "from specguard.construction.reference import process",
+        "import specguard.construction.compiled",
+        "import specguard.construction.codegen as cg",
         "from specguard.extend import _private",
         "from specguard.extend import annotation_key, _call",
         "from specguard import _EXPORTS",
@@ -130,9 +130,9 @@ def test_plugin_sources_import_only_the_public_extension_api(path):
         "import specguard as sg\nsg.tree.nodes.Goal",
         "import specguard as sg\nsg._EXPORTS",
         "from specguard import strategies as st\nst._values",
-        "import importlib\nimportlib.import_module('specguard.build.compiled')",
-        "__import__('specguard.build.reference')",
-        "def f():\n    from specguard.build.initial_env import state_type",
+        "import importlib\nimportlib.import_module('specguard.construction.compiled')",
+        "__import__('specguard.construction.reference')",
+        "def f():\n    from specguard.construction.initial_env import state_type",
     ],
 )
 def test_the_checker_flags_private_uses(source):
@@ -266,7 +266,7 @@ def _tree(budget):
 def test_trees_of_plugin_operators_have_exact_fingerprints():
     # Under an editable install the plugin is user code, whose dataclass bodies the fingerprint follows
     # (it failed on Field.metadata, a mappingproxy, until specguard's encoder learnt it).
-    from specguard.engine.fingerprint import digest
+    from specguard.cache.canonical import digest
 
     assert digest(_UserOperator("o")) == digest(_UserOperator("o"))
     assert digest(_tree(2)) == digest(_tree(2))

@@ -11,7 +11,7 @@ from specguard_plugins import AnyOf, Avoid, Sequence
 
 import specguard as sg
 from specguard import strategies as sgst
-from specguard.build.reference import ReferenceEvaluator
+from specguard.construction.reference import ReferenceEvaluator
 from specguard.error import InvalidSpec
 from specguard.extend import SHAPING, Annotation, ChildWeights, Context, Slot
 

@@ -2,11 +2,11 @@
 
 ``specguard show PATH[::NAME]`` prints the tree and the reward formula of the
 specs (or trees) a Python file defines; ``specguard plan PATH[::NAME]`` prints
-what each spec's gate can see, training nothing (:mod:`specguard.engine.plan`);
+what each spec's gate can see, training nothing (:mod:`specguard.gate.plan`);
 ``specguard run PATH[::NAME]`` trains
 them within their budgets and prints the per-goal table; ``specguard reproduce
 PATH...`` trains every spec of case-study files on several seeds and writes a
-Markdown table and plots (:mod:`specguard.engine.reproduction`,
+Markdown table and plots (:mod:`specguard.engine.reproduce`,
 :mod:`specguard.report.reproduction`). A file's specs are its
 module-level ``Spec`` objects (named by variable) and the values of its
 module-level dicts of specs (named by key); ``show`` also lists goal trees.
@@ -28,9 +28,9 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from specguard.engine.spec import Spec
-from specguard.engine.specfiles import load_objects
 from specguard.error import InvalidSpec, SpecError
+from specguard.spec.files import load_objects
+from specguard.spec.spec import Spec
 from specguard.stats.intervals import UNDECIDED_OUTCOMES
 from specguard.tree.keys import require_thresholds
 from specguard.tree.nodes import Node
@@ -41,7 +41,7 @@ __all__ = ["main"]
 
 
 def _show(target: str) -> int:
-    from specguard.pytest_plugin.show import has_goal_specs, render_spec, render_tree, show_goal_spec_file
+    from specguard.report.show import has_goal_specs, render_spec, render_tree, show_goal_spec_file
 
     if has_goal_specs(Path(target.partition("::")[0])):  # a pytest file: only pytest resolves its fixtures
         return show_goal_spec_file(target)
@@ -55,9 +55,9 @@ def _show(target: str) -> int:
 
 
 def _plan(args: argparse.Namespace) -> int:
-    from specguard.engine.plan import plan_spec
-    from specguard.pytest_plugin.show import has_goal_specs, plan_goal_spec_file
-    from specguard.report.plan import plan_lines
+    from specguard.gate.plan import plan_spec
+    from specguard.report.plan_lines import plan_lines
+    from specguard.report.show import has_goal_specs, plan_goal_spec_file
 
     if has_goal_specs(Path(args.target.partition("::")[0])):  # a pytest file: only pytest resolves its fixtures
         return plan_goal_spec_file(args.target, compare_seeds=args.compare_seeds)
@@ -107,8 +107,8 @@ def _run(args: argparse.Namespace) -> int:
 
 def _run_all(args: argparse.Namespace, specs: dict[str, Any], executor: Any) -> tuple[dict[str, Any], bool]:
     """Train and print every spec; returns the results as JSON data and whether one failed."""
-    from specguard.engine.progress import print_event
-    from specguard.engine.run import run_spec
+    from specguard.engine.run_spec import run_spec
+    from specguard.training.progress import print_event
 
     results = {}
     failed = False
@@ -360,9 +360,9 @@ def _start_range(text: str) -> tuple[str, tuple[float, float]]:
 def _falsify(args: argparse.Namespace) -> int:
     """Train (or find in the cache) each spec, then search its start space for counterexamples, per run."""
     from specguard.engine.falsification import start_space
-    from specguard.engine.progress import print_event
-    from specguard.engine.run import run_spec
+    from specguard.engine.run_spec import run_spec
     from specguard.falsify.starts import StartSpace
+    from specguard.training.progress import print_event
 
     starts = StartSpace(check_unique("--starts", args.starts)) if args.starts else None  # None: the spec's own
     found_any = False
@@ -385,10 +385,10 @@ def _falsify(args: argparse.Namespace) -> int:
 
 
 def _reproduce(args: argparse.Namespace, argv: Sequence[str]) -> int:
-    from specguard.engine.progress import print_event
-    from specguard.engine.reproduction import load_case, reproduce
+    from specguard.engine.reproduce import load_case, reproduce
     from specguard.parallel.workers import resolve_workers
     from specguard.report.reproduction import replot, write_markdown
+    from specguard.training.progress import print_event
 
     if args.replot:
         if args.targets:

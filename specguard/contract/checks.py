@@ -35,8 +35,8 @@ from typing import Any
 import cloudpickle
 import numpy as np
 
-from specguard.build.compiled import CompiledTree, compile_tree
-from specguard.build.reference import ReferenceEvaluator, process
+from specguard.construction.compiled import CompiledTree, compile_tree
+from specguard.construction.reference import ReferenceEvaluator, process
 from specguard.contract.trees import (
     FEATURES,
     MAX_EXAMPLES,

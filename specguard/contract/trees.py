@@ -18,10 +18,11 @@ from hypothesis import strategies as st
 from hypothesis.errors import FlakyFailure, HypothesisException
 
 from specguard import strategies as sgst
-from specguard.build.env import SpecEnv
-from specguard.build.initial_env import state_type
-from specguard.build.reference import ExtendedState, Requirements, process
+from specguard.construction.env import SpecEnv
+from specguard.construction.initial_env import state_type
+from specguard.construction.reference import ExtendedState, Requirements, process
 from specguard.contract.replay import ReplayEnv
+from specguard.error import Broken
 from specguard.extend import Annotation, Context, Node
 from specguard.tree._draw import values
 from specguard.tree.builtin_annotations import Constraint, Distance
@@ -45,10 +46,6 @@ class Example(NamedTuple):
     trajectory: list[list[float]] | None = None
     actions: list[int] | None = None
     leaf: Node | None = None  # the refined leaf (check_refinement_preserves_root_goal)
-
-
-class Broken(Exception):
-    """Raised by a property with what breaks the invariant; :func:`run_property` adds the rest."""
 
 
 # -- strategies ----------------------------------------------------------------

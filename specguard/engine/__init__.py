@@ -1,1 +1,1 @@
-"""Specs trained and judged: specs and budgets, training one seed, cache keys and the cache, ``run_spec``."""
+"""Specs run and judged: ``run_spec``, the seeds of a run, the worker task, verdicts, ``SpecResult``, reproductions."""

@@ -19,9 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from specguard.engine.spec import Spec
 from specguard.falsify.search import EpisodeRunner, Falsification, falsify
 from specguard.falsify.starts import StartSpace
+from specguard.spec.spec import Spec
 
 __all__ = ["batch_policy", "database_key", "falsify_run", "property_keys", "start_space"]
 
@@ -53,14 +53,9 @@ def database_key(spec_key: str, seed: int, space: StartSpace) -> str:
 
 def batch_policy(model: Any, normalizer: Any, deterministic: bool) -> Callable[[np.ndarray], Any]:
     """``model``'s actions for a batch of observations (rows), its ``VecNormalize`` statistics applied if any."""
-    from specguard.engine.rollout import _normalizer
+    from specguard.training.policy import policy
 
-    norm = _normalizer(model, normalizer)
-
-    def act(obs: np.ndarray) -> Any:
-        return model.predict(norm.normalize_obs(obs) if norm is not None else obs, deterministic=deterministic)[0]
-
-    return act
+    return policy(model, normalizer, deterministic=deterministic, batch=True)
 
 
 def falsify_run(
@@ -86,7 +81,6 @@ def falsify_run(
     """
     from hypothesis.database import DirectoryBasedExampleDatabase
 
-    from specguard.engine.rollout import spec_env
     from specguard.error import SpecError
 
     if spec.baseline:
@@ -96,7 +90,7 @@ def falsify_run(
         )
     space = start_space(spec, starts)
     runner = EpisodeRunner(
-        lambda: spec_env(spec), batch_policy(model, normalizer, spec.deterministic), space, property_keys(spec)
+        spec.make_env, batch_policy(model, normalizer, spec.deterministic), space, property_keys(spec)
     )
     db = DirectoryBasedExampleDatabase(str(database)) if database is not None and spec_key else None
     key = database_key(spec_key, seed, space) if spec_key else ""

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-from specguard.engine.results import RunResult
-from specguard.engine.spec import Spec
 from specguard.engine.spec_result import GoalVerdict
+from specguard.spec.spec import Spec
 from specguard.stats.intervals import QuorumVerdict, RunVerdict, quorum_verdict, run_verdict, success_interval
+from specguard.training.result import RunResult
 
 __all__ = ["judge", "seeds_still_needed"]
 

@@ -6,16 +6,17 @@ import warnings
 from collections.abc import Callable
 from typing import Any, Literal
 
-from specguard.engine.cache import Cache, try_acquire, wait_for
-from specguard.engine.fingerprint import fingerprint_spec, versions
-from specguard.engine.progress import ProgressEvent, decode_update
-from specguard.engine.results import RunResult
-from specguard.engine.spec import Spec
+from specguard.cache.fingerprint import fingerprint_spec
+from specguard.cache.store import Cache, try_acquire, wait_for
+from specguard.cache.versions import versions
 from specguard.engine.spec_result import SpecResult
 from specguard.engine.train_task import describe_failure, is_spec_error, train_task
 from specguard.error import CacheWarning
 from specguard.parallel.executors import Executor
 from specguard.parallel.protocol import Failure, Task, TaskOutcome
+from specguard.spec.spec import Spec
+from specguard.training.progress import ProgressEvent, decode_update
+from specguard.training.result import RunResult
 from specguard.tree.keys import label, result_keys
 
 __all__ = ["Runs"]

@@ -6,10 +6,10 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from specguard.engine.results import RunResult
-from specguard.engine.spec import Spec
 from specguard.error import SpecError
+from specguard.spec.spec import Spec
 from specguard.stats.intervals import GoalOutcome, QuorumVerdict, RunVerdict, success_interval
+from specguard.training.result import RunResult
 from specguard.tree.keys import GOAL, kind, label
 from specguard.utils.text import interval_text, render_table, weights_text
 
@@ -135,7 +135,7 @@ class SpecResult:
             >>> last = result.rollout(0, episodes=1)[0][-1]  # doctest: +SKIP
             >>> assert last["info"]["goals"]["pendulum/stabilization"]  # doctest: +SKIP
         """
-        from specguard.engine.rollout import rollout
+        from specguard.training.rollout import rollout
 
         model, normalizer = self._load(seed)
         assert self.trained is not None
@@ -190,7 +190,7 @@ class SpecResult:
         return found
 
     def _load(self, seed: int) -> tuple[Any, Any]:
-        from specguard.engine.models import load_model
+        from specguard.cache.models import load_model
 
         if self.trained is None or self.cache_dir is None:
             raise SpecError(

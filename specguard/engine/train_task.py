@@ -5,11 +5,10 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from specguard.engine.fingerprint import check_versions
-from specguard.engine.spec import Spec
-from specguard.engine.train import TrainingError
-from specguard.error import SpecError
+from specguard.cache.versions import check_versions
+from specguard.error import SpecError, TrainingError
 from specguard.parallel.protocol import Failure, Report
+from specguard.spec.spec import Spec
 
 __all__ = ["describe_failure", "is_spec_error", "train_task"]
 
@@ -23,8 +22,8 @@ def train_task(spec: Spec, seed: int, keyed_versions: Mapping[str, str] | None, 
     result is to be cached, are the versions the driver's key names: a worker
     with other code refuses to train (:class:`~specguard.error.VersionMismatch`).
     """
-    from specguard.engine.cache import model_files
-    from specguard.engine.train import train_run
+    from specguard.cache.store import model_files
+    from specguard.training.train import train_run
 
     if keyed_versions is not None:
         check_versions(keyed_versions, f"Spec {spec.label!r}, seed {seed}")

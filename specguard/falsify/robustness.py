@@ -20,7 +20,7 @@ steered by a *robustness score*, the smallest margin over those keys:
 
 Example:
     >>> import specguard as sg
-    >>> from specguard.build.initial_env import state_type
+    >>> from specguard.construction.initial_env import state_type
     >>> tree = sg.Goal("upright", theta=(-0.1, 0.1))
     >>> s = state_type(("x", "theta"))(0.0, 0.05)
     >>> margins(tree, s, {}, {"upright": True}, {"theta": 0.5})["upright"]

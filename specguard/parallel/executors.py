@@ -28,7 +28,7 @@ import uuid
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
-from specguard.error import SpecError
+from specguard.error import ExecutorError
 from specguard.parallel.protocol import Failure, Position, Task, TaskOutcome, TaskRunner, outcome_of
 from specguard.parallel.signals import SigtermGuard, raise_if_stopping
 from specguard.parallel.workers import run_tasks
@@ -39,10 +39,6 @@ LOCAL = "local"
 DASK_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx", "inproc")
 _POLL_S = 0.25
 ADDRESS_EXPECTED = "expected 'local' or a Dask scheduler address such as 'tcp://host:8786'"
-
-
-class ExecutorError(SpecError):
-    """An executor address that is malformed, or a cluster that cannot be reached."""
 
 
 class Executor(Protocol):

@@ -151,7 +151,7 @@ def goal_specs(
     """
     import pytest
 
-    from specguard.engine.spec import Spec
+    from specguard.spec.spec import Spec
 
     cases: list[Any] = []
     for key, spec in specs.items():

@@ -1,6 +1,6 @@
 """Judging one goal (or safety rate) of a trained spec for a test item: outcome, message, figures.
 
-Plain logic over :class:`specguard.engine.run.SpecResult`, used by the pytest
+Plain logic over :class:`specguard.engine.spec_result.SpecResult`, used by the pytest
 plugin and unit-tested without pytest. A safety rate (key ``path:name``, see
 :mod:`specguard.tree.keys`) is judged exactly as a goal is; its message and hint
 speak of violations.
@@ -11,17 +11,17 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from specguard.engine.spec import Spec
 from specguard.engine.spec_result import SpecResult
 from specguard.extend import SHAPING, Node
+from specguard.spec.spec import Spec
 from specguard.stats.intervals import GoalOutcome, RunVerdict
 from specguard.tree.keys import GOAL, SAFETY, kind, require_thresholds, resolve_goal
 from specguard.utils.text import interval_text
 from specguard.validation import child_path
 
 if TYPE_CHECKING:
-    from specguard.engine.gating import SpecGate
-    from specguard.stats.compare import Baseline
+    from specguard.gate.baseline import Baseline
+    from specguard.gate.comparison import SpecGate
 
 __all__ = ["GoalCheck", "check_item", "gate_goal", "with_thresholds"]
 
@@ -152,7 +152,7 @@ def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[RunVerdict])
     never = [r.seed for r in runs if r.successes[path] == 0]
     shaped = any(a.role == SHAPING for _, n in _node(spec.tree, path).walk() for a in n.annotations)
     if never:
-        from specguard.build.checks import unreachable_reason
+        from specguard.construction.checks import unreachable_reason
 
         # "Impossible" is refused before training; should a result from elsewhere (an old cache) get here,
         # no Distance can help: say why, instead of "never reached".
@@ -256,7 +256,7 @@ def check_item(
 
     Args:
         baseline: the stored baseline and its name.
-        gate: the spec's comparisons with it (:func:`specguard.engine.gating.compare_spec`, extra seeds
+        gate: the spec's comparisons with it (:func:`specguard.gate.comparison.compare_spec`, extra seeds
             included); without one, the spec's own runs are compared at one look, at the level of
             a family of the baseline's size.
     """
@@ -306,8 +306,8 @@ def _compare(check: GoalCheck, gate: SpecGate, baseline: Baseline, name: str) ->
 
 def _one_look(result: SpecResult, spec: Spec, group: str, baseline: Baseline) -> SpecGate:
     """The spec's comparisons at one look, on its own runs (nothing more is trained)."""
-    from specguard.engine.gating import compare_spec
     from specguard.engine.spec_result import SpecResult as Empty
+    from specguard.gate.comparison import compare_spec
     from specguard.stats.family import first_level
     from specguard.stats.sequential import DEFAULT_ALPHA
 

@@ -15,6 +15,7 @@ from typing import Any
 
 import pytest
 
+from specguard.error import GoalMissed
 from specguard.pytest_plugin.declare import GOAL_FIXTURE, FalsifyItem, SpecItem
 
 __all__ = [
@@ -27,10 +28,6 @@ __all__ = [
     "raise_outcome",
     "spec_of",
 ]
-
-
-class GoalMissed(AssertionError):
-    """A goal missed its threshold (the failure an ``xfail`` goal expects)."""
 
 
 def group_of(item: pytest.Item) -> str:
@@ -96,8 +93,8 @@ def spec_of(item: pytest.Function, expect: Any) -> tuple[Any, list[str]]:
     Fails the item when the function does not return a ``Spec``; call it inside
     :func:`one_line_errors`, which turns a ``SpecError`` into the item's one line.
     """
-    from specguard.engine.spec import Spec
     from specguard.pytest_plugin.gate import with_thresholds
+    from specguard.spec.spec import Spec
 
     spec = item.obj(**{name: item.funcargs[name] for name in item._fixtureinfo.argnames})
     if not isinstance(spec, Spec):

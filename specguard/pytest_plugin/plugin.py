@@ -6,7 +6,7 @@ Hooks, fixtures and the marker only. The logic lives in plain modules:
 :mod:`~specguard.pytest_plugin.items` (what an item runs and its outcome),
 :mod:`~specguard.pytest_plugin.gate` (judging each goal),
 :mod:`~specguard.pytest_plugin.recorder` (reports and baselines) and
-:mod:`~specguard.pytest_plugin.show` (``--goal-specs-show``, ``--goal-specs-plan``). Training
+:mod:`~specguard.report.show` (``--goal-specs-show``, ``--goal-specs-plan``). Training
 imports only when a goal spec runs, so plain ``pytest`` in a project with
 specguard installed stays fast.
 """
@@ -46,7 +46,7 @@ def pytest_configure(config: pytest.Config) -> None:
     options = parse_options(config)
     state = Session(options)
     if options.enabled and options.compare:
-        from specguard.stats.compare import BaselineError, load_baseline
+        from specguard.gate.baseline import BaselineError, load_baseline
 
         try:
             state.baseline = load_baseline(baseline_path(options, options.compare))
@@ -190,7 +190,7 @@ def pytest_runtest_call(item: pytest.Item) -> None:
     state = item.config.stash[_SESSION]
     if not state.options.enabled or marker.kwargs.get("error"):
         return  # skipped without --goal-specs; a malformed @goal_spec fails as usual
-    from specguard.pytest_plugin.show import SHOW_PROPERTY, SHOWN, plan_text, render_spec
+    from specguard.report.show import SHOW_PROPERTY, SHOWN, plan_text, render_spec
 
     group = group_of(item)
     shown = item.config.stash.setdefault(_SHOWN_GROUPS, set())
@@ -224,7 +224,7 @@ _SHOWN_GROUPS = pytest.StashKey[set[str]]()
 
 def pytest_terminal_summary(terminalreporter: Any) -> None:
     """Print what ``--goal-specs-show`` and ``--goal-specs-plan`` rendered (on the xdist controller too)."""
-    from specguard.pytest_plugin.show import SHOW_PROPERTY, SHOWN
+    from specguard.report.show import SHOW_PROPERTY, SHOWN
 
     texts: dict[str, None] = {}
     for reports in terminalreporter.stats.values():

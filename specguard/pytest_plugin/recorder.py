@@ -87,7 +87,7 @@ def unsigned_cache_note(rows: list[dict[str, Any]], environ: Mapping[str, str]) 
         >>> unsigned_cache_note([{"cached": True}], {"CI": "true", "SPECGUARD_CACHE_KEY": "k"}) is None
         True
     """
-    from specguard.engine.cache import SECRET_ENV
+    from specguard.cache.store import SECRET_ENV
 
     if not environ.get("CI") or environ.get(SECRET_ENV) or not any(row.get("cached") for row in rows):
         return None
@@ -139,7 +139,8 @@ def _write_report(state: Session, directory: Path) -> list[str]:
 
 def _save_baseline(state: Session, name: str) -> str:
     """Merge the session's runs into baseline ``name``: the line saying what it replaced, or why it was not saved."""
-    from specguard.stats.compare import BaselineError, save_baseline
+    from specguard.error import BaselineError
+    from specguard.gate.baseline import save_baseline
 
     path = state.options.baseline_dir / f"{name}.json"
     rows = [r for r in state.rows if r.get("baseline_runs")]

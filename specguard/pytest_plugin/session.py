@@ -5,13 +5,22 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pytest
 
 from specguard.pytest_plugin.options import Options
 
-__all__ = ["Session", "gate_of", "run", "saved_runs", "scaled", "terminal_lines", "terminal_progress"]
+if TYPE_CHECKING:
+    from specguard.engine.run_spec import RunOptions
+    from specguard.engine.spec_result import SpecResult
+    from specguard.gate.baseline import Baseline
+    from specguard.gate.comparison import SpecGate
+    from specguard.parallel.executors import Executor
+    from specguard.spec.spec import Spec
+    from specguard.training.progress import ProgressEvent
+
+__all__ = ["Session", "gate_of", "run", "run_options", "saved_runs", "scaled", "terminal_lines", "terminal_progress"]
 
 
 @dataclasses.dataclass
@@ -19,19 +28,31 @@ class Session:
     """What a session keeps: options, the baseline compared with, the executor, results and report rows."""
 
     options: Options
-    baseline: Any = None  # a specguard.stats.compare.Baseline
-    executor: Any = None  # a specguard.parallel.executors.Executor, made once per session
-    memo: dict[str, Any] = dataclasses.field(default_factory=dict)
+    baseline: Baseline | None = None
+    executor: Executor | None = None  # made once per session
+    memo: dict[str, SpecResult] = dataclasses.field(default_factory=dict)
     rows: list[dict[str, Any]] = dataclasses.field(default_factory=list)
     counterexamples: list[dict[str, Any]] = dataclasses.field(default_factory=list)  # falsify items' runs
-    specs: dict[str, Any] = dataclasses.field(default_factory=dict)  # group -> its trained Spec, for report GIFs
-    progress: Callable[[Any], None] | None = None  # the run_spec sink: events to the terminal reporter
-    gates: dict[str, Any] = dataclasses.field(default_factory=dict)  # spec key -> its SpecGate with the baseline
-    saved: dict[str, Any] = dataclasses.field(default_factory=dict)  # spec key -> the runs a saved baseline stores
+    specs: dict[str, Spec] = dataclasses.field(default_factory=dict)  # group -> its trained Spec, for report GIFs
+    progress: Callable[[ProgressEvent], None] | None = None  # the run_spec sink: events to the terminal reporter
+    gates: dict[str, SpecGate] = dataclasses.field(default_factory=dict)  # spec key -> its comparisons
+    saved: dict[str, SpecGate] = dataclasses.field(default_factory=dict)  # spec key -> the runs a saved baseline stores
     goal_items: int = 0  # goal-spec items collected: a plan's family of comparisons when no baseline gives one
 
 
-def scaled(state: Session, spec: Any) -> Any:
+def run_options(state: Session) -> RunOptions:
+    """How this session trains: its workers, cache, progress sink and executor, one value for every call."""
+    from specguard.engine.run_spec import RunOptions
+
+    return RunOptions(
+        workers=state.options.workers,
+        cache_dir=state.options.cache_dir,
+        progress=state.progress,
+        executor=state.executor or "local",
+    )
+
+
+def scaled(state: Session, spec: Spec) -> Spec:
     """The spec as this session trains and judges it: the session's options applied, the spec's own where unset."""
     options = state.options
     return spec.as_run(options.budget_scale, checkpoints=options.checkpoints, undecided=options.undecided)
@@ -46,7 +67,7 @@ def terminal_progress(config: pytest.Config) -> Callable[[Any], None]:
     """
 
     def write(event: Any) -> None:
-        from specguard.engine.progress import format_event, print_event
+        from specguard.training.progress import format_event, print_event
 
         _terminal_line(config, format_event(event), final=event.finished, fallback=lambda: print_event(event))
 
@@ -80,46 +101,33 @@ def _terminal_line(config: pytest.Config, text: str, *, final: bool, fallback: C
         reporter.write_line(text)
 
 
-def run(state: Session, spec: Any) -> Any:
+def run(state: Session, spec: Spec) -> SpecResult:
     """The spec's result: trained (or read from the cache) once per session, shared by all its goal items."""
-    from specguard.engine.fingerprint import fingerprint_spec
-    from specguard.engine.run import run_spec
+    from specguard.cache.fingerprint import fingerprint_spec
+    from specguard.engine.run_spec import run_with
 
     # Every goal item of a spec shares one result, under the spec's whole identity
     # (seeds, quorum and `undecided` included), the one the cache and baselines use.
     key = fingerprint_spec(spec).spec_key
     if key not in state.memo:
-        state.memo[key] = run_spec(
-            spec,
-            workers=state.options.workers,
-            cache_dir=state.options.cache_dir,
-            progress=state.progress,
-            executor=state.executor or "local",
-        )
+        state.memo[key] = run_with(spec, run_options(state))
         state.memo[key].spec_key = key
     return state.memo[key]
 
 
-def _train(state: Session, spec: Any) -> Callable[[list[int]], Any]:
+def _train(state: Session, spec: Spec) -> Callable[[list[int]], SpecResult]:
     """Train given seeds of ``spec`` with the session's options (cached seeds are reused)."""
-    from specguard.engine.run import train_seeds
+    from specguard.engine.run_spec import train_seeds
 
-    def train(seeds: list[int]) -> Any:
-        return train_seeds(
-            spec,
-            seeds,
-            workers=state.options.workers,
-            cache_dir=state.options.cache_dir,
-            progress=state.progress,
-            executor=state.executor or "local",
-        )
+    def train(seeds: list[int]) -> SpecResult:
+        return train_seeds(spec, seeds, run_options(state))
 
     return train
 
 
-def gate_of(state: Session, spec: Any, result: Any, group: str) -> Any:
+def gate_of(state: Session, spec: Spec, result: SpecResult, group: str) -> SpecGate | None:
     """The spec's comparisons with the session's baseline (None without one), once per spec: extra seeds are
-    trained here while a comparison is open (:func:`specguard.engine.gating.compare_spec`).
+    trained here while a comparison is open (:func:`specguard.gate.comparison.compare_spec`).
 
     Each comparison is judged at Holm's first step over the baseline's goals and safety rates.
     """
@@ -127,7 +135,7 @@ def gate_of(state: Session, spec: Any, result: Any, group: str) -> Any:
         return None
     key = result.spec_key or group
     if key not in state.gates:
-        from specguard.engine.gating import compare_spec, gate_ceiling
+        from specguard.gate.comparison import compare_spec, gate_ceiling
         from specguard.stats.family import first_level
         from specguard.stats.sequential import DEFAULT_ALPHA
 
@@ -143,11 +151,11 @@ def gate_of(state: Session, spec: Any, result: Any, group: str) -> Any:
     return state.gates[key]
 
 
-def saved_runs(state: Session, spec: Any, result: Any, gate: Any) -> Any:
+def saved_runs(state: Session, spec: Spec, result: SpecResult, gate: SpecGate | None) -> SpecGate:
     """The runs ``--goal-specs-save`` stores for the spec: its own and more, up to the ceiling, once per spec."""
     key = result.spec_key or spec.label
     if key not in state.saved:
-        from specguard.engine.gating import baseline_runs, gate_ceiling
+        from specguard.gate.comparison import baseline_runs, gate_ceiling
 
         state.saved[key] = baseline_runs(
             result,

@@ -17,11 +17,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from specguard.engine.models import load_model
-from specguard.engine.rollout import episode, policy, spec_env
-from specguard.engine.spec import Spec
-from specguard.engine.train import EVAL_SEED_BASE
+from specguard.cache.models import load_model
+from specguard.error import NoFrames
 from specguard.falsify.starts import START_OPTION, StartSpace
+from specguard.spec.spec import Spec
+from specguard.training.policy import policy
+from specguard.training.rollout import episode
+from specguard.training.train import EVAL_SEED_BASE
 
 __all__ = ["MAX_FRAMES", "Gif", "counterexample_gifs", "gif_stem", "report_gifs", "write_gif"]
 
@@ -121,7 +123,7 @@ def write_gif(
     try:
         # Frames are drawn off-screen: SDL needs no display (and prints no complaint about a missing one).
         os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
-        env = spec_env(spec, render_mode="rgb_array")
+        env = spec.make_env(render_mode="rgb_array")
         options = None
         if start is not None:  # as the falsifier's runner: the start wrapper under the spec's env, reset seed 0
             env.env = (starts or StartSpace()).resolve(env.env).wrap(env.env)
@@ -141,7 +143,7 @@ def write_gif(
             return
         frame = env.render()
         if not (isinstance(frame, np.ndarray) and frame.ndim == 3 and frame.shape[-1] in (3, 4)):
-            raise _NoFrames(f"render() returned {type(frame).__name__}, not an RGB array")
+            raise NoFrames(f"render() returned {type(frame).__name__}, not an RGB array")
         frames.append(frame)
         last = step
         if len(frames) > 2 * max_frames:
@@ -156,7 +158,7 @@ def write_gif(
                     frames.append(frame)
         finally:
             env.close()
-    except _NoFrames as e:
+    except NoFrames as e:
         return Gif(None, f"no GIF of spec {spec.label!r}: its env does not render rgb_array frames ({e})")
     except Exception as e:
         return Gif(None, f"no GIF of spec {spec.label!r}: rendering failed ({type(e).__name__}: {e})")
@@ -171,10 +173,6 @@ def write_gif(
     path.parent.mkdir(parents=True, exist_ok=True)
     images[0].save(path, save_all=True, append_images=images[1:], duration=duration, loop=0, optimize=False)
     return Gif(path, caption, len(images))
-
-
-class _NoFrames(Exception):
-    pass
 
 
 _PLAIN = re.compile(r"[a-z0-9.-]+(?:(?:::|_)[a-z0-9.-]+)*")  # keys whose readable name is their own, one to one

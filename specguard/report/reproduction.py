@@ -15,7 +15,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from specguard.engine.reproduction import CaseStudy, Reproduction
+from specguard.engine.reproduce import CaseStudy, Reproduction
 from specguard.engine.spec_result import SpecResult
 from specguard.error import SpecError
 from specguard.report.plots import plot_curves

@@ -4,7 +4,7 @@ Every function takes *rows*: the plain dicts of :meth:`specguard.pytest_plugin.g
 plus ``"verdict"`` (what pytest reported: passed, failed, xfailed, xpassed,
 undecided) and optionally ``"comparison"`` and ``"curves"`` (one curve per run,
 in the order of ``"per_seed"``). The Markdown links the PNG and the rollout
-GIFs of :mod:`specguard.engine.rollout` written beside it.
+GIFs of :mod:`specguard.training.rollout` written beside it.
 
 A row whose goal is a safety key ``path:name`` (its ``"kind"`` is
 ``"safety"``) is a safety rate: tables label it ``path:name (safe)`` and list
@@ -241,7 +241,7 @@ def write_reports(
 
     Args:
         gifs: per spec, its rollout GIF (already written into ``directory``) or a
-            note (:func:`specguard.engine.rollout.report_gifs`); the Markdown links them.
+            note (:func:`specguard.training.rollout.report_gifs`); the Markdown links them.
         counterexamples: the falsify items' runs; the JSON lists them and the Markdown shows them with their GIFs.
     """
     directory.mkdir(parents=True, exist_ok=True)

@@ -1,1 +1,1 @@
-"""Numbers only: success intervals and verdicts, anytime looks and their correction, baseline comparisons."""
+"""Numbers only: success intervals and verdicts, anytime looks and their correction, sequential comparisons."""

@@ -84,7 +84,7 @@ def formula(tree: Node) -> str:
 
     out = f"R = {expr(tree, tree.name, frozenset(_ROLES)) or '0'}"
     adapting = [_adapting_text(label(path, node), node) for path, node in paths if node.adapts_weights]
-    if adapting:  # the formula shows where they start (specguard.engine.auto_weights)
+    if adapting:  # the formula shows where they start (specguard.training.auto_weights)
         out += f"\n  weights of {', '.join(adapting)}: as written at the start, adapted during training"
     return out
 

@@ -45,7 +45,7 @@ if TYPE_CHECKING:
 __all__ = ["All", "Annotation", "Constraint", "Distance", "Goal", "Node", "component_weights"]
 
 # Re-exported: modules written before the extension API import these from here.
-AUTO: Literal["auto"] = "auto"  # All(weights=AUTO): adapted during training (specguard.engine.auto_weights)
+AUTO: Literal["auto"] = "auto"  # All(weights=AUTO): adapted during training (specguard.training.auto_weights)
 
 _REEXPORTED = (ANNOTATION_SEPARATOR, PATH_SEPARATOR, Annotation, Constraint, Distance, component_weights)
 
@@ -180,7 +180,7 @@ class All(Node):
     children's (docs/semantics.md, "The AND operator and its weights", "Termination").
 
     ``weights="auto"`` starts at ``1/N`` and lets training adapt the weights
-    to the children's observed success (:mod:`specguard.engine.auto_weights`): the
+    to the children's observed success (:mod:`specguard.training.auto_weights`): the
     env built from the tree alone, as evaluation uses it, keeps ``1/N``.
 
     Args:

@@ -1,0 +1,1 @@
+"""Run identity and the run cache: canonical forms, the probe, library versions, the fingerprint, stored models."""

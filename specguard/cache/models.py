@@ -1,0 +1,34 @@
+"""Trained models: a cached run's SB3 model and its ``VecNormalize`` statistics, loaded after the cache's checks."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from specguard.spec import algorithms as sb3
+from specguard.spec.spec import Spec
+
+__all__ = ["load_model"]
+
+
+def load_model(spec: Spec, seed: int, cache_dir: Path | str) -> tuple[Any, Any]:
+    """The cached model of run ``seed`` of ``spec`` and its ``VecNormalize`` statistics (or ``None``).
+
+    Raises:
+        FileNotFoundError: the run is not (or no longer validly) cached.
+    """
+    import pickle
+
+    from specguard.cache.store import NORMALIZER, Cache
+
+    cache = Cache(cache_dir)
+    if cache.load(spec, seed) is None:  # validates the entry's checksums before anything is unpickled
+        raise FileNotFoundError(f"run seed {seed} of spec {spec.label!r} is not in the cache {str(cache_dir)!r}")
+    path = cache.model_path(spec, seed)
+    model = sb3.load_model(spec.algorithm, path)
+    stats = path.parent / NORMALIZER
+    normalizer = None
+    if stats.exists():
+        with stats.open("rb") as f:
+            normalizer = pickle.load(f)  # VecNormalize.save pickles itself; only its statistics are used
+    return model, normalizer

@@ -1,0 +1,403 @@
+"""The constructed environment: a Gymnasium wrapper built from a goal tree (docs/semantics.md, "The construction").
+
+:class:`SpecEnv` takes the base env as its first argument and records its
+other constructor arguments, so ``env.spec`` re-creates it the Gymnasium way
+(``gym.make(env.spec)``, ``check_env``, ``make_vec_env``, ``SubprocVecEnv``).
+
+Example:
+    >>> import numpy as np
+    >>> import specguard as sg
+    >>> pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
+    >>> tree = sg.All(
+    ...     sg.Goal("position", x=(0.966, 1.0), y=(-0.259, 0.259)),
+    ...     sg.Goal("stabilization", omega=(-0.25, 0.25)),
+    ...     name="pendulum",
+    ... )
+    >>> env = sg.make_env(pendulum, tree)
+    >>> obs, info = env.reset(seed=0)
+    >>> obs, reward, terminated, truncated, info = env.step(np.zeros(1, dtype=np.float32))
+    >>> sorted(info["goals"])
+    ['pendulum', 'pendulum/position', 'pendulum/stabilization']
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, Literal, SupportsFloat, cast
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.utils import RecordConstructorArgs
+
+from specguard.construction.checks import check_goals
+from specguard.construction.compiled import CompiledTree, compile_tree
+from specguard.construction.initial_env import InitialEnv, check_identity_observation
+from specguard.construction.reference import ReferenceEvaluator
+from specguard.error import EvaluationError, InitialEnvError, InvalidSpec, SpecError, StateMappingError
+from specguard.tree.nodes import Node
+
+_FLOAT32 = np.dtype(np.float32)
+_isfinite = math.isfinite
+
+__all__ = ["BaselineEnv", "EnvFactory", "SpecEnv", "make_baseline_env", "make_env", "preflight"]
+
+EvaluatorName = Literal["flat", "reference"]
+
+
+def _compiled_for(tree: Node, features: tuple[str, ...], compiled: CompiledTree | None) -> CompiledTree:
+    """``compiled`` when it is this very tree compiled over ``features`` with its own weights; compiled here if None."""
+    if compiled is None:
+        return compile_tree(tree, features)  # validates feature names, even for "reference"
+    if not isinstance(compiled, CompiledTree) or compiled.nodes[0] is not tree or compiled.features != features:
+        raise InvalidSpec("compiled", "expected compile_tree(tree, features) of this very tree and these features")
+    if compiled.weights:
+        raise InvalidSpec("compiled", "expected the tree compiled with its own weights, not adapted ones")
+    return compiled
+
+
+def _features(obs: Any, state: Callable[[Any], Any] | None, features: tuple[str, ...], where: str) -> list[float]:
+    """``state(obs)`` as a list of finite Python floats, one per feature."""
+    if state is None:
+        f: list[float] = obs.tolist()
+    else:
+        try:
+            raw = state(obs)
+            f = raw.tolist() if isinstance(raw, np.ndarray) else [float(v) for v in raw]
+        except Exception as e:
+            raise StateMappingError(f"{where}: state() raised {type(e).__name__}: {e} on observation {obs!r}") from e
+    if len(f) != len(features) or not math.isfinite(sum(f)):
+        raise StateMappingError(
+            f"{where}: state() must return {len(features)} finite numbers for features "
+            f"{features}, got {f!r} (from observation {obs!r})"
+        )
+    return f
+
+
+class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
+    """Wraps an initial env into the environment Algorithm 1 constructs from ``tree``.
+
+    * observation: ``state(obs*)`` followed by the own state of the nodes and
+      annotations that have one (constraint counters, sequence stages), in
+      Algorithm 1's order, a float32 ``Box`` with finite bounds where known;
+    * reward: the root requirements' ``R_G``, a Python float;
+    * ``terminated``: the base env's, or the root goal reached, or a counter at
+      0, or a node's own termination;
+      ``truncated``: the base env's;
+    * ``info["goals"]``: ``{path: bool}`` membership of ``s'`` in every node's
+      goal (also after ``reset``); ``info["safe"]``: per constraint-like
+      annotation (``path:name``), whether the episode has had no violation
+      so far; ``info["reward_terms"]``: every weighted
+      component by key, summing to the reward; ``info["base_reward"]``: the
+      initial env's own reward.
+
+    Args:
+        env: the base (initial) env.
+        tree: the goal tree.
+        features: the feature names.
+        state: ``state(obs*)``; ``None`` for the identity.
+        execute: ``execute(a)``; ``None`` for the identity.
+        feature_low, feature_high: bounds of the features, ``None`` for
+            unbounded (see :meth:`InitialEnv.feature_bounds`).
+        action_space: ``A_G``; ``None`` for the base env's.
+        evaluator: ``"flat"`` (compiled, fast) or ``"reference"`` (Algorithm 1 as written).
+        compiled: ``compile_tree(tree, features)`` when the caller has it (envs of one
+            tree share it, :class:`EnvFactory`); ``None`` compiles the tree here.
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        tree: Node,
+        features: Sequence[str],
+        state: Callable[[Any], Any] | None = None,
+        execute: Callable[[Any], Any] | None = None,
+        feature_low: Sequence[float] | None = None,
+        feature_high: Sequence[float] | None = None,
+        action_space: gym.Space[Any] | None = None,
+        evaluator: EvaluatorName = "flat",
+        *,
+        compiled: CompiledTree | None = None,
+    ) -> None:
+        RecordConstructorArgs.__init__(  # not ``compiled``: the spec re-creates the env from the tree
+            self,
+            tree=tree,
+            features=tuple(features),
+            state=state,
+            execute=execute,
+            feature_low=feature_low,
+            feature_high=feature_high,
+            action_space=action_space,
+            evaluator=evaluator,
+        )
+        gym.Wrapper.__init__(self, env)
+        if not isinstance(tree, Node):
+            raise InvalidSpec("tree", f"expected a goal-tree node (Goal, All, ...), got {tree!r}")
+        self.tree = tree
+        self.features = tuple(features)
+        self.compiled = _compiled_for(tree, self.features, compiled)
+        if evaluator == "flat":
+            self.evaluator: Any = self.compiled.evaluator()
+        elif evaluator == "reference":
+            self.evaluator = ReferenceEvaluator(tree, self.features)
+        else:
+            raise InvalidSpec("evaluator", f"expected 'flat' or 'reference', got {evaluator!r}")
+        self._state = state
+        self._execute = execute
+        self._n = len(self.features)
+        self._safety_keys = self.evaluator.safety_keys
+        base_space = env.observation_space
+        if state is None:
+            check_identity_observation(tree.name, self.features, base_space)
+        slots = [slot for _, slot in self.evaluator.slots]
+        low = np.full(self._n, -np.inf) if feature_low is None else np.asarray(feature_low, dtype=np.float64)
+        high = np.full(self._n, np.inf) if feature_high is None else np.asarray(feature_high, dtype=np.float64)
+        self.observation_space = gym.spaces.Box(
+            np.concatenate([low, [s.low for s in slots]]).astype(np.float32),
+            np.concatenate([high, [s.high for s in slots]]).astype(np.float32),
+            dtype=np.float32,
+        )
+        if action_space is not None:
+            self.action_space = action_space
+        # The base observation can be handed on untouched when nothing is added or converted.
+        self._passthrough = state is None and not slots and base_space.dtype == np.float32
+        self._pending: Any = None  # (weights, CompiledTree) adapted, in force from the next reset
+        self.adapted_weights: dict[str, tuple[float, ...]] = {}
+        """The adapted weights in force this episode (:meth:`set_weights`); empty while the tree's own."""
+
+    def set_weights(self, weights: Mapping[str, Sequence[float]]) -> None:
+        """Adapt the weights of the ``All(weights="auto")`` nodes, from the next episode on.
+
+        Args:
+            weights: per path of a node with ``weights="auto"``, one weight per
+                child, then one per constraint of the node left at its default
+                weight (:mod:`specguard.training.auto_weights`).
+
+        Raises:
+            InvalidSpec: a path without ``weights="auto"``, a wrong count of
+                weights, or the ``"reference"`` evaluator (its weights are the tree's).
+        """
+        if isinstance(self.evaluator, ReferenceEvaluator):
+            raise InvalidSpec(
+                "evaluator", "adapted weights need the 'flat' evaluator; 'reference' is the tree as written"
+            )
+        # Compiled now, so a bad path fails at the call; swapped in at reset, as shaping telescopes and
+        # enter/exit rewards cancel only under weights constant over an episode (docs/semantics.md, "Potential-based
+        # shaping").
+        adapted = {path: tuple(float(w) for w in ws) for path, ws in weights.items()}
+        self._pending = adapted, compile_tree(self.tree, self.features, weights=adapted)
+
+    # -- gymnasium API -------------------------------------------------------
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        if self._pending is not None:
+            (self.adapted_weights, self.compiled), self._pending = self._pending, None
+            self.evaluator = self.compiled.evaluator()
+        obs, info = self.env.reset(seed=seed, options=options)
+        f = _features(obs, self._state, self.features, self.tree.name)
+        ev = self.evaluator
+        ev.reset(f)
+        info["goals"] = ev.goals
+        info["safe"] = ev.safe_info() if self._safety_keys else {}
+        return (obs if self._passthrough else np.array(f + ev.own_state, _FLOAT32)), info
+
+    def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+        # The hot path: every call of a user's training runs it, so it is written out in one function.
+        base_action = action
+        if self._execute is not None:
+            try:
+                base_action = self._execute(action)
+            except Exception as e:
+                raise InitialEnvError(
+                    f"{self.tree.name}: execute() raised {type(e).__name__}: {e} on action {action!r}",
+                    hint="execute(a) maps the agent's action to one the initial env accepts",
+                ) from e
+        obs, base_reward, terminated, truncated, info = self.env.step(base_action)
+        if self._state is None:  # the identity: _features inlined
+            f = obs.tolist()
+            if len(f) != self._n or not _isfinite(sum(f)):
+                _features(obs, None, self.features, self.tree.name)  # raises, naming the observation
+        else:
+            f = _features(obs, self._state, self.features, self.tree.name)
+        ev = self.evaluator
+        reward, ended, _, terms = ev.step(action, f)
+        info["goals"] = ev.goals  # a new dict each step, as are the others
+        info["safe"] = ev.safe_info() if self._safety_keys else {}
+        info["reward_terms"] = terms
+        info["base_reward"] = float(base_reward)
+        # A new array each step (a consumer may keep it, e.g. SB3's terminal_observation); or, when
+        # nothing is added or converted, the base env's own observation untouched.
+        observation = obs if self._passthrough else np.array(f + ev.own_state, _FLOAT32)
+        return observation, reward, bool(terminated or ended), bool(truncated), info
+
+
+class BaselineEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
+    """Reports ``info["goals"]`` and ``info["safe"]`` of a goal tree and changes nothing else.
+
+    The paper's *baseline*: the initial env keeps its own observation, reward
+    and termination, and its episodes are judged by the same goals.
+
+    Args:
+        env: the base (initial) env.
+        tree: the goal tree.
+        features: the feature names.
+        state: ``state(obs*)``; ``None`` for the identity.
+        compiled: ``compile_tree(tree, features)`` when the caller has it; ``None`` compiles the tree here.
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        tree: Node,
+        features: Sequence[str],
+        state: Callable[[Any], Any] | None = None,
+        *,
+        compiled: CompiledTree | None = None,
+    ) -> None:
+        RecordConstructorArgs.__init__(self, tree=tree, features=tuple(features), state=state)
+        gym.Wrapper.__init__(self, env)
+        if not isinstance(tree, Node):
+            raise InvalidSpec("tree", f"expected a goal-tree node (Goal, All, ...), got {tree!r}")
+        self.tree = tree
+        self.features = tuple(features)
+        self.evaluator = _compiled_for(tree, self.features, compiled).evaluator()
+        self._state = state
+        if state is None:
+            check_identity_observation(tree.name, self.features, env.observation_space)
+
+    def _info(self, info: dict[str, Any], members: tuple[bool, ...]) -> dict[str, Any]:
+        info["goals"] = dict(zip(self.evaluator.paths, members))
+        info["safe"] = dict(zip(self.evaluator.safety_keys, self.evaluator.safe))
+        return info
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        obs, info = self.env.reset(seed=seed, options=options)
+        f = _features(obs, self._state, self.features, self.tree.name)
+        return obs, self._info(info, self.evaluator.reset(f))
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        if not math.isfinite(reward):
+            raise EvaluationError(f"{self.tree.name}: the initial env returned a non-finite reward {reward!r}")
+        f = _features(obs, self._state, self.features, self.tree.name)
+        # Own state (stages, counters) follows the episode, though the spec's reward and termination do not
+        # apply; without own state, membership of one state is all there is (no rewards computed for nothing).
+        members = self.evaluator.step(action, f)[2] if self.evaluator.slots else self.evaluator.members(f)
+        return obs, reward, terminated, truncated, self._info(info, members)
+
+
+def preflight(where: str, initial_env: object, tree: object) -> CompiledTree:
+    """The checks of the arguments of ``make_env`` and ``make_baseline_env``, before any env is built.
+
+    One function for both (and every :class:`EnvFactory`): the baseline refuses what the constructed env refuses.
+
+    Args:
+        where: the function the user called, for the messages.
+        initial_env: should be an :class:`InitialEnv`.
+        tree: should be a goal-tree node whose goals name only the initial env's features.
+
+    Returns:
+        ``tree`` compiled over the initial env's features.
+
+    Raises:
+        InitialEnvError: ``initial_env`` is not an :class:`InitialEnv`.
+        InvalidSpec: ``tree`` is not a node, or a weight makes a coefficient overflow.
+        UnknownFeature: a goal names a feature the initial env lacks.
+    """
+    if not isinstance(initial_env, InitialEnv):
+        raise InitialEnvError(f"{where}: expected an InitialEnv as first argument, got {initial_env!r}")
+    if not isinstance(tree, Node):
+        raise InvalidSpec(where, f"expected a goal-tree node (Goal, All, ...) as tree, got {tree!r}")
+    return compile_tree(tree, initial_env.features)
+
+
+class EnvFactory:
+    """Builds the envs of one goal tree over one initial env, compiling the tree once for all of them.
+
+    ``make_env(initial_env, tree, ...)`` is ``EnvFactory(initial_env, tree, ...)()``. A training run that
+    builds several envs of one spec (its vectorised envs and its evaluation env) calls one factory several
+    times: the envs share the compiled tree and its generated code, each with an evaluator (episode state)
+    of its own. The factory holds the tree object itself, so what it compiled is exactly that tree.
+
+    The first call runs :func:`preflight` (a failure is raised again by every later call); every call builds
+    a base env and checks the goals against the bounds of its observation space, before wrapping it.
+
+    Args:
+        initial_env: the initial environment and its mappings.
+        tree: the goal tree.
+        baseline: build :class:`BaselineEnv` envs (the initial env's own reward) rather than :class:`SpecEnv`.
+        evaluator: the :class:`SpecEnv` evaluator, ``"flat"`` or ``"reference"``.
+    """
+
+    def __init__(
+        self, initial_env: InitialEnv, tree: Node, *, baseline: bool = False, evaluator: EvaluatorName = "flat"
+    ) -> None:
+        self.initial_env = initial_env
+        self.tree = tree
+        self.baseline = baseline
+        self.evaluator: EvaluatorName = evaluator
+        self.compiled: CompiledTree | None = None
+        """The compiled tree, once the first call's preflight passed."""
+
+    def __call__(self, **make_kwargs: Any) -> SpecEnv | BaselineEnv:
+        """A new env; ``make_kwargs`` override the base env's ``gymnasium.make`` kwargs.
+
+        Raises:
+            SpecError: the tree or the initial env is invalid; the message names the node path.
+        """
+        if self.compiled is None:
+            self.compiled = preflight("make_baseline_env" if self.baseline else "make_env", self.initial_env, self.tree)
+        compiled, initial_env = self.compiled, self.initial_env
+        base = initial_env.make(**make_kwargs)
+        try:
+            low, high = initial_env.feature_bounds(base.observation_space)  # checks the features fit the observation
+            check_goals(compiled, low, high)  # refuse a goal no state can be in, before training
+            if self.baseline:
+                return BaselineEnv(
+                    base, tree=self.tree, features=initial_env.features, state=initial_env.state, compiled=compiled
+                )
+            return SpecEnv(
+                base,
+                tree=self.tree,
+                features=initial_env.features,
+                state=initial_env.state,
+                execute=initial_env.execute,
+                feature_low=None if np.all(np.isinf(low)) else tuple(low.tolist()),
+                feature_high=None if np.all(np.isinf(high)) else tuple(high.tolist()),
+                action_space=initial_env.action_space,
+                evaluator=self.evaluator,
+                compiled=compiled,
+            )
+        except SpecError:
+            base.close()
+            raise
+
+
+def make_baseline_env(initial_env: InitialEnv, tree: Node, **make_kwargs: Any) -> BaselineEnv:
+    """The initial env with its own reward, reporting the goals of ``tree`` (the paper's baseline).
+
+    It runs the preflight of :func:`make_env` (:func:`preflight`, then the goals against the feature bounds).
+    """
+    return cast(BaselineEnv, EnvFactory(initial_env, tree, baseline=True)(**make_kwargs))
+
+
+def make_env(initial_env: InitialEnv, tree: Node, *, evaluator: EvaluatorName = "flat", **make_kwargs: Any) -> SpecEnv:
+    """Construct the trainable env of ``tree`` over ``initial_env`` (Algorithm 1).
+
+    Args:
+        initial_env: the initial environment and its mappings.
+        tree: the goal tree; its root goal ends the episode.
+        evaluator: ``"flat"`` (default, compiled) or ``"reference"``.
+        **make_kwargs: overrides for the base env's ``gymnasium.make`` kwargs
+            (e.g. ``render_mode="human"``).
+
+    Returns:
+        A :class:`SpecEnv`, a ``gymnasium.Env``. The tree is compiled once
+        (:class:`EnvFactory` builds several envs of one tree on one compilation).
+
+    Raises:
+        SpecError: the tree or the initial env is invalid; the message names the node path.
+    """
+    return cast(SpecEnv, EnvFactory(initial_env, tree, evaluator=evaluator)(**make_kwargs))

@@ -1,0 +1,232 @@
+"""Stored baselines: per goal, each seed's successes and episodes, and the identity of the spec they came from.
+
+``--goal-specs-save NAME`` stores, per (spec, goal), every seed's successes and
+episodes in ``<dir>/NAME.json``: the spec's own seeds and more, up to
+:data:`specguard.stats.sequential.DEFAULT_COMPARE_SEEDS` (8) or the spec's
+``max_seeds``, so that a pull request's few seeds are compared with a
+well-measured baseline. ``--goal-specs-compare NAME`` compares a new run with
+it, by the sequential test of :mod:`specguard.stats.sequential` (extra seeds
+only while a comparison is open) under the family-wise procedure of
+:mod:`specguard.stats.family`.
+
+Safety rates (keys ``path:name``, :mod:`specguard.tree.keys`) are stored and
+compared exactly as goals are, under ``group::path:name``. A goal or safety
+rate that a baseline has no figures for (a baseline saved before it was
+asserted, or before safety rates were measured) is not compared:
+:func:`specguard.pytest_plugin.gate.check_item` notes that instead of failing.
+
+Each stored goal also records its spec's identity
+(:attr:`specguard.cache.fingerprint.SpecFingerprint.spec_key`, the key the cache and
+the plugin's shared results use) and its seeds, so a comparison says whether
+the spec itself changed since the baseline or only its result did, and a spec
+whose identity and runs are the baseline's own is not compared at all
+(:meth:`Baseline.same_runs`).
+
+A save merges by spec, under a lock beside the file (``NAME.json.lock``): it
+reads the stored baseline, replaces the goals of the specs the session ran,
+keeps every other spec's, and says which (:class:`Saved`). So a session that
+ran a subset (``-k``, one file) does not erase the rest, and two sessions
+saving at once both land. A goal of a spec the session ran but did not check
+(``-k`` on one goal) is kept while its spec is unchanged, and dropped, by name,
+once the spec it was measured on is gone.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from specguard.error import BaselineError
+from specguard.utils.files import write_atomic
+
+__all__ = ["Baseline", "BaselineError", "Saved", "load_baseline", "save_baseline", "spec_of_key"]
+
+FORMAT = 3
+FORMATS = (1, 2, 3)  # format 1 stored runs only; 2 added the spec identity; 3 the seeds
+LOCK_TIMEOUT = 60.0  # seconds a save waits for another one to the same baseline
+LISTED = 8  # specs named at most per kind in a save's line
+
+
+Runs = Sequence[tuple[int, int]]  # (successes, episodes) per seed
+
+
+@dataclass(frozen=True)
+class Baseline:
+    """A stored baseline: per goal key, every run's counts, the spec identity they came from, and their seeds."""
+
+    runs: dict[str, list[tuple[int, int]]]
+    specs: dict[str, str]
+    seeds: dict[str, list[int]] = field(default_factory=dict)
+
+    def spec_changed(self, key: str, spec_key: str | None) -> bool:
+        """Whether the goal's spec differs from the one the baseline measured (False when unknown)."""
+        stored = self.specs.get(key)
+        return stored is not None and spec_key is not None and stored != spec_key
+
+    def same_runs(self, key: str, spec_key: str | None, runs: Sequence[tuple[int, int, int]]) -> bool:
+        """Whether ``runs`` (seed, successes, episodes) are the baseline's own: the same spec, seed for seed.
+
+        A pull request that leaves a spec alone gets its runs from the cache the
+        baseline filled; comparing them with themselves would test nothing.
+        """
+        if not runs or spec_key is None or self.specs.get(key) != spec_key or key not in self.seeds:
+            return False
+        stored = {seed: tuple(run) for seed, run in zip(self.seeds[key], self.runs[key])}
+        return all(stored.get(seed) == (k, n) for seed, k, n in runs)
+
+
+def spec_of_key(key: str) -> str:
+    """The spec (the plugin's group) of a stored key ``group::goal``: goal keys never hold ``::``.
+
+    Example:
+        >>> spec_of_key("specs.py::test_swing[fast]::pendulum/up:spin")
+        'specs.py::test_swing[fast]'
+    """
+    return key.rsplit("::", 1)[0]
+
+
+@dataclass(frozen=True)
+class Saved:
+    """What a save did to the stored baseline: specs replaced, added and kept, and goals dropped.
+
+    ``dropped``: goals of a spec the session ran but did not check, stored from
+    an earlier version of that spec (another identity).
+    """
+
+    replaced: list[str]
+    added: list[str]
+    kept: list[str]
+    dropped: list[str] = field(default_factory=list)
+
+    def text(self) -> str:
+        """One line: ``replaced 1 spec (b.py::t), added none, kept 2 others``."""
+        parts = [f"replaced {_names(self.replaced, 'spec')}", f"added {_names(self.added, 'spec')}"]
+        parts.append(f"kept {len(self.kept)} other{'s' if len(self.kept) != 1 else ''}" if self.kept else "kept none")
+        if self.dropped:
+            parts.append(f"dropped {_names(self.dropped, 'goal')} of an earlier version of its spec")
+        return ", ".join(parts)
+
+
+def _names(names: Sequence[str], noun: str) -> str:
+    """``2 specs (a, b)``; ``none``; at most :data:`LISTED` named."""
+    if not names:
+        return "none"
+    shown = ", ".join(names[:LISTED]) + (f", and {len(names) - LISTED} more" if len(names) > LISTED else "")
+    return f"{len(names)} {noun}{'s' if len(names) != 1 else ''} ({shown})"
+
+
+def _entries(
+    rows: Mapping[str, Runs], specs: Mapping[str, str], seeds: Mapping[str, Sequence[int]]
+) -> dict[str, dict[str, Any]]:
+    """The stored form of each goal: its runs, its spec identity (or None), and its seeds when known."""
+    goals: dict[str, Any] = {}
+    for key, runs in rows.items():
+        goals[key] = {"runs": [list(r) for r in runs], "spec": specs.get(key)}
+        if key in seeds:
+            if len(seeds[key]) != len(runs):
+                raise ValueError(f"{key!r}: {len(seeds[key])} seeds for {len(runs)} runs")
+            goals[key]["seeds"] = [int(s) for s in seeds[key]]
+    return goals
+
+
+def _stored(baseline: Baseline) -> dict[str, dict[str, Any]]:
+    """A loaded baseline back in its stored form."""
+    return _entries(baseline.runs, baseline.specs, baseline.seeds)
+
+
+def _merge(old: dict[str, dict[str, Any]], new: dict[str, dict[str, Any]]) -> tuple[dict[str, Any], Saved]:
+    """``old`` with the specs of ``new`` replaced by theirs, and what that did.
+
+    A goal of a replaced spec that ``new`` lacks stays if it was measured on the
+    spec ``new`` stores (the same identity, or none known), else it is dropped.
+    """
+    ran = {spec_of_key(key) for key in new}
+    identity = {spec_of_key(key): entry["spec"] for key, entry in new.items() if entry["spec"] is not None}
+    merged, dropped = dict(new), []
+    for key, entry in old.items():
+        spec = spec_of_key(key)
+        if key in new:
+            continue
+        if spec in ran and entry["spec"] is not None and identity.get(spec) not in (None, entry["spec"]):
+            dropped.append(key)
+        else:
+            merged[key] = entry
+    before = {spec_of_key(key) for key in old}
+    saved = Saved(
+        replaced=sorted(ran & before), added=sorted(ran - before), kept=sorted(before - ran), dropped=sorted(dropped)
+    )
+    return dict(sorted(merged.items())), saved
+
+
+def save_baseline(
+    path: Path,
+    rows: Mapping[str, Runs],
+    specs: Mapping[str, str] | None = None,
+    seeds: Mapping[str, Sequence[int]] | None = None,
+) -> Saved:
+    """Merge ``{key: [(successes, episodes), ...]}`` (each key's spec identity and seeds, when known) into the
+    baseline at ``path`` by spec, under its lock, and write it atomically.
+
+    Returns:
+        What the save replaced, added, kept and dropped, per spec.
+
+    Raises:
+        BaselineError: the stored baseline is corrupt (it is left as it is), or another save held its lock
+            for :data:`LOCK_TIMEOUT` seconds.
+        OSError: the file cannot be written.
+    """
+    from filelock import FileLock, Timeout
+
+    new = _entries(rows, specs or {}, seeds or {})
+    path.parent.mkdir(parents=True, exist_ok=True)
+    lock = FileLock(str(path.with_name(f"{path.name}.lock")), timeout=LOCK_TIMEOUT, thread_local=False)
+    try:
+        with lock:
+            old = _stored(load_baseline(path)) if path.exists() else {}
+            goals, saved = _merge(old, new)
+            write_atomic(path, json.dumps({"format": FORMAT, "goals": goals}, indent=1, sort_keys=True))
+    except Timeout:
+        raise BaselineError(
+            f"baseline {str(path)!r}: another save has held its lock {lock.lock_file!r} for over "
+            f"{LOCK_TIMEOUT:g} s; nothing was saved"
+        ) from None
+    return saved
+
+
+def load_baseline(path: Path) -> Baseline:
+    """Read a baseline written by :func:`save_baseline`.
+
+    Raises:
+        BaselineError: the file is missing or corrupt; the message names it.
+    """
+    if not path.is_file():
+        raise BaselineError(f"baseline {str(path)!r} does not exist; store one first with --goal-specs-save")
+    try:
+        data: Any = json.loads(path.read_text())
+        if data.get("format") not in FORMATS:
+            raise ValueError(f"unknown format {data.get('format')!r}")
+        runs, specs, seeds = {}, {}, {}
+        for key, entry in data["goals"].items():
+            if data["format"] == 1:
+                entry = {"runs": entry, "spec": None}
+            if not isinstance(entry, dict):
+                raise ValueError(f"bad entry for {key!r}: {entry!r}")
+            parsed = [(int(k), int(n)) for k, n in entry["runs"]]
+            if not parsed or any(n < 1 or not 0 <= k <= n for k, n in parsed):
+                raise ValueError(f"bad counts for {key!r}: {entry['runs']!r}")
+            runs[str(key)] = parsed
+            if entry.get("spec") is not None:
+                if not isinstance(entry["spec"], str):
+                    raise ValueError(f"bad spec identity for {key!r}: {entry['spec']!r}")
+                specs[str(key)] = entry["spec"]
+            if entry.get("seeds") is not None:
+                stored = entry["seeds"]
+                if not isinstance(stored, list) or len(stored) != len(parsed) or len(set(stored)) != len(stored):
+                    raise ValueError(f"bad seeds for {key!r}: {stored!r}")
+                seeds[str(key)] = [int(x) for x in stored]
+        return Baseline(runs, specs, seeds)
+    except (ValueError, TypeError, KeyError, AttributeError) as e:
+        raise BaselineError(f"baseline {str(path)!r} is corrupt ({e}); delete it and save a new one") from e

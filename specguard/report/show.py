@@ -1,0 +1,166 @@
+"""Look before you train: a spec as text (tree, reward formula, observation layout, budget), and its plan.
+
+:func:`render_spec` is the one rendering, used by ``specguard show`` and by
+``pytest --goal-specs --goal-specs-show``; it builds the env (to read its
+observation space, and so runs the static checks of :mod:`specguard.construction.checks`)
+but trains nothing. :func:`show_goal_spec_file` shows the goal specs of a
+pytest file, whose fixtures only pytest can resolve, by running pytest on it
+in-process with ``--goal-specs-show``. :func:`plan_text` is the plan of a goal
+item's spec (``--goal-specs-plan``, :mod:`specguard.gate.plan`), and
+:func:`plan_goal_spec_file` the same for ``specguard plan`` on a pytest file.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+from typing import Any
+
+from specguard.spec.algorithms import collect_steps, collection_unit
+from specguard.spec.budget import trained_timesteps
+from specguard.spec.spec import Spec
+from specguard.tree.formula import formula
+from specguard.tree.nodes import Node
+from specguard.utils.text import bounds_text
+
+__all__ = [
+    "SHOWN",
+    "SHOW_PROPERTY",
+    "has_goal_specs",
+    "plan_goal_spec_file",
+    "plan_text",
+    "render_spec",
+    "render_tree",
+    "show_goal_spec_file",
+]
+
+SHOW_PROPERTY = "specguard.show"  # the user property that carries a rendered spec to the summary
+SHOWN = "shown, not trained"  # the skip reason of a goal item under --goal-specs-show
+
+
+def render_tree(tree: Node) -> list[str]:
+    """The tree drawn, then its reward formula."""
+    return [tree.pretty(), formula(tree)]
+
+
+def _layout(spec: Spec) -> list[str]:
+    from specguard.construction.env import make_baseline_env, make_env
+
+    if spec.baseline:
+        env: Any = make_baseline_env(spec.initial_env, spec.tree)
+        try:
+            return [f"observation: the initial env's own, {env.observation_space}"]
+        finally:
+            env.close()
+    env = make_env(spec.initial_env, spec.tree)
+    try:
+        space = env.observation_space
+        names = list(spec.initial_env.features) + [f"{slot.name} {k}" for k, slot in env.evaluator.slots]
+        lines = [f"observation: {len(names)} components (features, then the own state of nodes and annotations)"]
+        width = max(len(n) for n in names)
+        for name, lo, hi in zip(names, space.low.tolist(), space.high.tolist()):
+            lines.append(f"  {name:<{width}}  {bounds_text(lo, hi)}")
+        return lines
+    finally:
+        env.close()
+
+
+def _budget(spec: Spec) -> str:
+    b = spec.budget
+    trained = trained_timesteps(b, spec.algorithm, spec.hyperparameters, spec.n_envs)
+    envs = f"{spec.n_envs} env{'s' if spec.n_envs != 1 else ''}"
+    if trained == b.timesteps:
+        steps = f"{trained} timesteps per seed ({envs})"
+    else:
+        per_env = collect_steps(spec.algorithm, spec.hyperparameters)
+        unit = collection_unit(spec.algorithm)
+        steps = (
+            f"{trained} timesteps per seed ({b.timesteps} asked, rounded up to whole {spec.algorithm} {unit} "
+            f"of {per_env * spec.n_envs} = {per_env} steps x {envs})"
+        )
+    seeds = f"{b.min_seeds} seeds" + (f" (up to {b.max_seeds})" if b.max_seeds != b.min_seeds else "")
+    cap = f", wall clock <= {b.wall_clock_s:g}s" if b.wall_clock_s is not None else ""
+    anytime = (
+        f"; judged at {b.checkpoints} checkpoints, training stops once every threshold is met"
+        if b.checkpoints > 1
+        else ""
+    )
+    return f"budget: {steps}, {seeds}, {b.eval_episodes} eval episodes (up to {b.max_eval_episodes}){cap}{anytime}"
+
+
+def render_spec(spec: Spec, name: str | None = None) -> str:
+    """A spec as text: header, tree, reward formula, observation layout, budget, thresholds, xfail; trains nothing.
+
+    Raises:
+        SpecError: the env cannot be built or the spec is refused
+            (e.g. :class:`specguard.error.UnreachableGoal`).
+    """
+    kind = "baseline: the initial env's own reward" if spec.baseline else "constructed env"
+    lines = [
+        f"== {name or spec.label}",
+        f"{spec.initial_env!r}, {spec.algorithm}, {kind}",
+        *render_tree(spec.tree),
+        *_layout(spec),
+        _budget(spec),
+    ]
+    if spec.thresholds:
+        lines.append("expect: " + ", ".join(f"{p} >= {t:g}" for p, t in spec.thresholds.items()))
+    lines.extend(f"xfail: {path} may miss ({reason})" for path, reason in spec.xfail.items())
+    return "\n".join(lines)
+
+
+def has_goal_specs(path: Path) -> bool:
+    """Whether the Python file ``path`` declares goal specs for pytest (read, not imported): test functions with
+    ``@goal_spec``, or tests made by ``goal_specs(...)``."""
+    try:
+        module = ast.parse(path.read_text(), filename=str(path))
+    except (OSError, SyntaxError, ValueError):
+        return False
+
+    def name(node: ast.expr) -> str | None:
+        target = node.func if isinstance(node, ast.Call) else node
+        return target.attr if isinstance(target, ast.Attribute) else getattr(target, "id", None)
+
+    for node in ast.walk(module):
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+            if any(name(deco) == "goal_spec" for deco in node.decorator_list):
+                return True
+        elif isinstance(node, ast.Call) and name(node) == "goal_specs":
+            return True
+    return False
+
+
+def show_goal_spec_file(target: str) -> int:
+    """Show the goal specs of a pytest file ``PATH[::TEST]``: pytest resolves their fixtures; nothing trains.
+
+    Returns:
+        0 when every spec was shown, else 2 (pytest's report says which failed).
+    """
+    return _look_at_goal_spec_file(target, "--goal-specs-show")
+
+
+def plan_goal_spec_file(target: str, *, compare_seeds: int) -> int:
+    """Print the plan of the goal specs of a pytest file ``PATH[::TEST]`` (``--goal-specs-plan``); nothing trains."""
+    return _look_at_goal_spec_file(target, "--goal-specs-plan", f"--goal-specs-compare-seeds={compare_seeds}")
+
+
+def _look_at_goal_spec_file(target: str, *flags: str) -> int:
+    import pytest
+
+    path, _, test = target.partition("::")
+    args = [f"{path}::{test}" if test else path, "--goal-specs", *flags, "-q", "-p", "no:cacheprovider"]
+    code = pytest.main(args)
+    return 0 if code == pytest.ExitCode.OK else 2
+
+
+def plan_text(spec: Spec, group: str, *, family: int, compare_seeds: int, baseline: Any = None) -> str:
+    """The plan of a goal item's spec (:mod:`specguard.gate.plan`), its baseline's figures where it has them."""
+    from specguard.gate.plan import plan_spec
+    from specguard.report.plan_lines import plan_lines
+
+    runs = None
+    if baseline is not None:
+        keys = {path: f"{group}::{path}" for path in spec.thresholds}
+        runs = {path: baseline.runs[key] for path, key in keys.items() if key in baseline.runs}
+    plan = plan_spec(spec, family=family, compare_seeds=compare_seeds, baseline=runs, label=group)
+    return "\n".join(plan_lines(plan))

@@ -1,0 +1,205 @@
+"""A spec: what to train (initial env + goal tree + algorithm), on what budget, and what to expect.
+
+Example:
+    >>> import specguard as sg
+    >>> from example_specs import pendulum
+    >>> spec = sg.Spec(
+    ...     pendulum.initial_env,
+    ...     pendulum.trees["w"],
+    ...     budget=sg.Budget(timesteps=100_000),
+    ...     expect={"pendulum": 0.8, "position": 0.9},
+    ... )
+    >>> spec.thresholds
+    {'pendulum': 0.8, 'pendulum/position': 0.9}
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from specguard.construction.env import BaselineEnv, EnvFactory, SpecEnv
+from specguard.construction.initial_env import InitialEnv
+from specguard.error import InvalidSpec
+from specguard.falsify.starts import StartSpace, as_start_space
+from specguard.spec.algorithms import ALGORITHMS
+from specguard.spec.budget import Budget
+from specguard.stats.intervals import UNDECIDED_OUTCOMES
+from specguard.tree.keys import check_expect, check_xfail, check_xfail_thresholded, resolve_goal
+from specguard.tree.nodes import Node
+from specguard.validation import check_choice, check_count, check_open_fraction
+
+__all__ = ["Spec"]
+
+
+@dataclass(frozen=True)
+class Spec:
+    """A goal tree over an initial env, trained and judged against per-goal thresholds.
+
+    Args:
+        initial_env: the initial environment.
+        tree: the goal tree.
+        budget: training and evaluation budget.
+        expect: ``{node path or unique node name: minimum success}``, or one
+            number for the root goal (read by :func:`specguard.tree.keys.check_expect`).
+            Empty: measure only, or take the thresholds of ``@goal_spec(expect=...)``.
+        algorithm: a stable-baselines3 algorithm name that fits the action space.
+        hyperparameters: keyword arguments for the algorithm (``n_steps``, ...).
+        n_envs: parallel environments per run (a ``DummyVecEnv``).
+        normalize: wrap the training env in ``VecNormalize``.
+        quorum: runs that must meet each threshold; default every run
+            (``budget.max_seeds``).
+        deterministic: evaluate the policy's deterministic action.
+        confidence: the confidence of the success intervals.
+        undecided: what a goal counts as when it failed only through runs that
+            stayed undecided (none missed, no seed failed): "fail" (default),
+            "xfail" (expected to miss: pytest XFAIL, ``specguard run`` exit 0)
+            or "pass" (with a warning under pytest). Every door reads it
+            here; their ``--undecided`` options override it
+            (:meth:`as_run`).
+        baseline: train on the initial env's own reward, termination and
+            observation, and evaluate the same goals (the paper's baseline).
+        name: a label for reports; defaults to the root's name.
+        xfail: ``{goal: reason}`` (or a list of goals, as for ``@goal_spec``)
+            for thresholded goals the spec is expected to miss (e.g. a
+            negative result of the paper): pytest reports them
+            XFAIL (XPASS once they pass), ``specguard run`` does not count
+            their miss as a failure. Under anytime verdicts their runs are
+            never cut short: a goal not met keeps its run training.
+        starts: the start space the falsifier searches by default
+            (:class:`~specguard.falsify.starts.StartSpace` or its ranges
+            ``{variable: (lo, hi)}``; ``None``: the env's own reset ranges):
+            ``specguard falsify``, :meth:`SpecResult.falsify` and
+            ``falsify=True`` read it. Not part of the spec's identity: it
+            changes no run and no verdict of its goals.
+    """
+
+    initial_env: InitialEnv
+    tree: Node
+    budget: Budget
+    expect: Mapping[str, float] | float = field(default_factory=dict)
+    algorithm: str = "PPO"
+    hyperparameters: Mapping[str, Any] = field(default_factory=dict)
+    n_envs: int = 1
+    normalize: bool = False
+    quorum: int | None = None
+    deterministic: bool = True
+    confidence: float = 0.95
+    undecided: str = "fail"
+    baseline: bool = False
+    name: str | None = None
+    xfail: Mapping[str, str] = field(default_factory=dict)
+    starts: StartSpace | None = None
+
+    def __post_init__(self) -> None:
+        label = f"Spec {self.label!r}"
+        if not isinstance(self.initial_env, InitialEnv):
+            raise InvalidSpec(f"{label}.initial_env", f"expected an InitialEnv, got {self.initial_env!r}")
+        if not isinstance(self.tree, Node):
+            raise InvalidSpec(f"{label}.tree", f"expected a Goal or All node, got {self.tree!r}")
+        if not isinstance(self.budget, Budget):
+            raise InvalidSpec(f"{label}.budget", f"expected a Budget, got {self.budget!r}")
+        if self.algorithm not in ALGORITHMS:
+            raise InvalidSpec(
+                f"{label}.algorithm",
+                f"unknown algorithm {self.algorithm!r}; expected one of {', '.join(ALGORITHMS)}",
+            )
+        if not isinstance(self.hyperparameters, Mapping):
+            raise InvalidSpec(f"{label}.hyperparameters", f"expected a mapping, got {self.hyperparameters!r}")
+        object.__setattr__(self, "n_envs", check_count(label, "n_envs", self.n_envs, "parallel environments per run"))
+        if self.quorum is not None:
+            object.__setattr__(self, "quorum", self._checked_quorum(label))
+        check_open_fraction(label, "confidence", self.confidence)
+        check_choice(label, "undecided", self.undecided, UNDECIDED_OUTCOMES)
+        object.__setattr__(self, "expect", self._resolve_thresholds(label))
+        object.__setattr__(self, "xfail", self._resolve_xfail(label))
+        object.__setattr__(self, "starts", as_start_space(f"{label}.starts", self.starts))
+
+    @property
+    def label(self) -> str:
+        return self.name or str(getattr(self.tree, "name", "?"))
+
+    def env_factory(self) -> EnvFactory:
+        """Builds the envs this spec trains on, compiling its tree once for all of them (one run's envs share one)."""
+        return EnvFactory(self.initial_env, self.tree, baseline=self.baseline)
+
+    def make_env(self, **make_kwargs: Any) -> SpecEnv | BaselineEnv:
+        """The env this spec trains on, built afresh, as Gymnasium's ``EnvSpec.make`` builds a registered env.
+
+        The constructed env (:class:`~specguard.construction.env.SpecEnv`), or for a
+        baseline spec the initial env with goal info (:class:`~specguard.construction.env.BaselineEnv`);
+        ``make_kwargs`` override the base env's ``gymnasium.make`` kwargs (e.g. ``render_mode="rgb_array"``).
+        """
+        return self.env_factory()(**make_kwargs)
+
+    def scaled(self, factor: float, *, checkpoints: int | None = None) -> Spec:
+        """This spec with its training budget multiplied by ``factor`` (the one place budgets are scaled).
+
+        ``checkpoints``, if given, replaces the budget's own (1 trains every
+        run's whole budget; more makes it a ceiling, :mod:`specguard.stats.anytime`).
+        Nothing to change returns the spec itself, so its identity (and cache key) is unchanged.
+        """
+        if factor == 1 and checkpoints in (None, self.budget.checkpoints):
+            return self
+        return dataclasses.replace(self, budget=self.budget.scaled(factor, checkpoints=checkpoints))
+
+    def as_run(
+        self, budget_scale: float = 1.0, *, checkpoints: int | None = None, undecided: str | None = None
+    ) -> Spec:
+        """This spec as a door (``specguard run``, ``pytest --goal-specs``) runs it, with the door's options.
+
+        ``budget_scale`` and ``checkpoints`` as for :meth:`scaled`; ``undecided``,
+        if given, replaces the spec's own. ``None`` keeps the spec's own, so
+        that every door judges a spec the same way unless told otherwise.
+        """
+        spec = self.scaled(budget_scale, checkpoints=checkpoints)
+        if undecided is None or undecided == spec.undecided:
+            return spec
+        return dataclasses.replace(spec, undecided=undecided)
+
+    @property
+    def verdict_confidence(self) -> float:
+        """The confidence each look at a run judges at: ``confidence`` corrected for ``budget.looks`` looks.
+
+        Intervals shown in tables stay at ``confidence``; run verdicts (met,
+        missed, undecided) use this one, so that a run whose true success is
+        its threshold is called met (or missed) with probability at most
+        ``(1 - confidence) / 2`` over all its looks (:mod:`specguard.stats.anytime`).
+        """
+        from specguard.stats.anytime import look_confidence
+
+        return look_confidence(self.confidence, self.budget.looks)
+
+    @property
+    def thresholds(self) -> dict[str, float]:
+        """The thresholds by full node path."""
+        assert isinstance(self.expect, Mapping)
+        return dict(self.expect)
+
+    @property
+    def required_runs(self) -> int:
+        """Runs that must meet each threshold."""
+        assert self.budget.max_seeds is not None
+        return self.quorum if self.quorum is not None else self.budget.max_seeds
+
+    def _checked_quorum(self, label: str) -> int:
+        """A quorum is a count of runs (validation.check_count) that the budget can train."""
+        quorum = check_count(label, "quorum", self.quorum, "runs that must meet each threshold")
+        assert self.budget.max_seeds is not None
+        if quorum > self.budget.max_seeds:
+            raise InvalidSpec(
+                label, f"expected quorum <= budget.max_seeds={self.budget.max_seeds} (the runs trained), got {quorum}"
+            )
+        return quorum
+
+    def _resolve_xfail(self, label: str) -> dict[str, str]:
+        reasons = check_xfail(label, self.xfail)
+        resolved = {resolve_goal(self.tree, k, f"{label}.xfail[{k!r}]"): reason for k, reason in reasons.items()}
+        check_xfail_thresholded(label, resolved, self.thresholds)
+        return resolved
+
+    def _resolve_thresholds(self, label: str) -> dict[str, float]:
+        thresholds = check_expect(label, self.expect)
+        return {resolve_goal(self.tree, k, f"{label}.expect[{k!r}]"): t for k, t in thresholds.items()}

@@ -1,0 +1,114 @@
+"""What one run measured (:class:`RunResult`), as plain data that is checked wherever it comes back.
+
+A run's result crosses two trust boundaries as plain data: back from a worker
+process or cluster worker, and back from the cache. Both read it through
+:meth:`RunResult.from_dict`, which checks every field.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Collection
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+__all__ = ["RunResult", "check_run_result"]
+
+
+@dataclass
+class RunResult:
+    """What one run measured; plain data (``to_dict`` is JSON-serialisable).
+
+    Attributes:
+        spec: the spec's label.
+        seed: the training seed.
+        timesteps: environment steps actually trained.
+        episodes: evaluation episodes.
+        successes: per node path, evaluation episodes whose last state lies in the goal;
+            then per safety key (``path:name``), evaluation episodes without a violation.
+        train_seconds: wall-clock training time.
+        hit_wall_clock: training hit the budget's wall-clock cap.
+        curve: success per goal (and safety rate per safety key) over training
+            episodes (stochastic policy),
+            ``[{"timesteps": t, "episodes": n, "success": {key: rate}}, ...]``;
+            a point where the policy was evaluated (an interim checkpoint, or
+            the end) also has ``"evaluation": {key: rate}`` and
+            ``"evaluation_episodes"``.
+        met_early: every threshold was met at an interim checkpoint, so
+            training stopped there (``timesteps`` is that step) and that
+            checkpoint's evaluation is the run's result (:mod:`specguard.stats.anytime`).
+        weights: per node with ``weights="auto"``, the adapted weights in
+            force when training ended (:mod:`specguard.training.auto_weights`); each
+            curve point also has the ones in force then, under ``"weights"``.
+            Empty when no node adapts its weights.
+    """
+
+    spec: str
+    seed: int
+    timesteps: int
+    episodes: int
+    successes: dict[str, int]
+    train_seconds: float
+    hit_wall_clock: bool = False
+    curve: list[dict[str, Any]] = field(default_factory=list)
+    met_early: bool = False
+    weights: dict[str, list[float]] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: Any, *, seed: int, paths: Collection[str]) -> RunResult:
+        """The run in ``data`` (as :meth:`to_dict` wrote it), after every check of :func:`check_run_result`.
+
+        Raises:
+            ValueError: the first check that failed, in words.
+        """
+        check_run_result(data, seed, paths)
+        return cls(**data)
+
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def check_run_result(result: Any, seed: int, paths: Collection[str]) -> None:
+    """Raise ``ValueError`` naming the first way ``result`` is not a :class:`RunResult` of ``seed`` for ``paths``."""
+    if not isinstance(result, dict):
+        raise ValueError("result is not an object")
+    expected = {f.name for f in dataclasses.fields(RunResult)}
+    if set(result) != expected:
+        raise ValueError(f"result fields {sorted(result)} are not {sorted(expected)}")
+    if result["seed"] != seed or not _is_int(result["seed"]):
+        raise ValueError(f"seed {result['seed']!r} is not {seed}")
+    if not isinstance(result["spec"], str):
+        raise ValueError("spec label is not a string")
+    if not _is_int(result["timesteps"]) or result["timesteps"] < 0:
+        raise ValueError(f"timesteps {result['timesteps']!r} is not an integer >= 0")
+    episodes = result["episodes"]
+    if not _is_int(episodes) or episodes < 1:
+        raise ValueError(f"episodes {episodes!r} is not an integer >= 1")
+    weights = result["weights"]
+    if not isinstance(weights, dict) or not all(
+        isinstance(ws, list) and all(isinstance(w, float) and math.isfinite(w) for w in ws) for ws in weights.values()
+    ):
+        raise ValueError("weights is not an object of lists of finite numbers")
+    successes = result["successes"]
+    if not isinstance(successes, dict):
+        raise ValueError("successes is not an object")
+    missing, extra = sorted(set(paths) - set(successes)), sorted(set(successes) - set(paths))
+    if missing or extra:  # e.g. an entry stored before safety rates were measured
+        parts = (("missing", missing), ("unexpected", extra))
+        diff = "; ".join(f"{what} {', '.join(map(repr, keys))}" for what, keys in parts if keys)
+        raise ValueError(f"successes do not list exactly the tree's goals and safety rates ({diff})")
+    for path, k in successes.items():
+        if not _is_int(k) or not 0 <= k <= episodes:
+            raise ValueError(f"successes[{path!r}] = {k!r} is not an integer in [0, episodes={episodes}]")
+    if not isinstance(result["train_seconds"], (int, float)) or isinstance(result["train_seconds"], bool):
+        raise ValueError("train_seconds is not a number")
+    for flag in ("hit_wall_clock", "met_early"):
+        if not isinstance(result[flag], bool):
+            raise ValueError(f"{flag} is not a boolean")
+    if not isinstance(result["curve"], list) or not all(isinstance(p, dict) for p in result["curve"]):
+        raise ValueError("curve is not a list of points")

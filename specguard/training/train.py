@@ -1,0 +1,260 @@
+"""Training one run (one seed) of a spec and measuring every goal's success (docs/semantics.md, "Success").
+
+A run trains ``spec.algorithm`` for ``spec.budget.timesteps`` steps on the
+constructed env (or, for a baseline spec, on the initial env's own reward),
+then evaluates the policy on episodes whose seeds are disjoint from training:
+training envs are seeded ``seed .. seed + n_envs - 1`` (as ``make_vec_env``
+does), evaluation episode ``i`` of run ``seed`` uses
+``EVAL_SEED_BASE + seed * EVAL_SEED_STRIDE + i``.
+
+A goal succeeds in an episode when the episode's last state lies in it,
+whether the episode terminated or was truncated. A safety annotation
+(``Constraint``, ``Avoid``: ``role == "safety"``) counts the episodes without a
+violation, read from the last step's ``info["safe"]``; its count is stored
+beside the goals' under its key ``path:name`` (:mod:`specguard.tree.keys`), so
+verdicts, intervals, caches and baselines treat both alike.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+
+from specguard.error import InvalidSpec, SpecError, TrainingError
+from specguard.parallel.protocol import Report
+from specguard.spec.algorithms import ALGORITHMS, algorithm_class
+from specguard.spec.spec import Spec
+from specguard.stats.anytime import checkpoint_steps, final_evaluation, interim_look
+from specguard.training.auto_weights import WeightAdapter
+from specguard.training.curve import GoalCurve, count_episode
+from specguard.training.policy import policy as policy_of
+from specguard.training.progress import ProgressEvent, decode_update
+from specguard.training.result import RunResult
+
+__all__ = ["EVAL_SEED_BASE", "EVAL_SEED_STRIDE", "evaluate", "train_run"]
+
+EVAL_SEED_BASE = 1_000_000
+EVAL_SEED_STRIDE = 100_000
+CURVE_POINTS = 10
+
+
+def _policy_action(space: gym.Space[Any], action: Any) -> Any:
+    return int(action) if isinstance(space, gym.spaces.Discrete) else action
+
+
+def evaluate(policy: Callable[[Any], Any], env: gym.Env, episodes: int, seeds: list[int] | range) -> dict[str, int]:
+    """Run ``episodes`` episodes of ``policy`` on ``env`` (which reports ``info["goals"]`` and ``info["safe"]``).
+
+    Returns:
+        Per node path, the number of episodes whose last state lies in the
+        goal; then per safety key (``path:name``), the number of episodes
+        without a violation (the last step's ``info["safe"]``).
+    """
+    counts: dict[str, int] = {}
+    for i in range(episodes):
+        obs, info = env.reset(seed=seeds[i])
+        done = False
+        while not done:
+            obs, _, terminated, truncated, info = env.step(_policy_action(env.action_space, policy(obs)))
+            done = terminated or truncated
+        count_episode(counts, info)
+    return counts
+
+
+Emit = Callable[[str, int | None, str | None], None]
+
+
+@dataclass
+class _Run:
+    """One run being trained: its spec and seed, the model on its training envs, and its evaluation env."""
+
+    spec: Spec
+    seed: int
+    model: Any
+    normalizer: Any  # the training envs' VecNormalize, or None
+    eval_env: gym.Env
+    episode: int = 0  # where the last evaluation was, for an error's message
+
+    @property
+    def label(self) -> str:
+        return f"Spec {self.spec.label!r}, seed {self.seed}"
+
+    def episodes(self, start: int, count: int) -> dict[str, int]:
+        """Evaluation episodes ``start .. start + count - 1`` of the run (its own evaluation seeds)."""
+        self.episode = start
+        first = EVAL_SEED_BASE + self.seed * EVAL_SEED_STRIDE
+        act = policy_of(self.model, self.normalizer, deterministic=self.spec.deterministic)
+        return evaluate(act, self.eval_env, count, range(first + start, first + start + count))
+
+    def failure(self, where: str, e: Exception) -> TrainingError:
+        """The run's error for ``e``, raised by the env or a user function ``where`` the run was."""
+        cause = str(e) if isinstance(e, SpecError) else f"the environment raised {type(e).__name__}: {e}"
+        return TrainingError(f"{self.label}, {where}: {cause}")
+
+
+def _build(spec: Spec, seed: int) -> _Run:
+    """The model on the spec's training envs (normalized if the spec asks), and the evaluation env, one compilation.
+
+    Raises:
+        InvalidSpec: the algorithm does not fit the action space, or SB3 rejects the hyperparameters.
+        TrainingError: building the env failed.
+    """
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    label = f"Spec {spec.label!r}"
+    build = spec.env_factory()  # the training envs and the evaluation env share one compiled tree
+    try:
+        venv = make_vec_env(build, n_envs=spec.n_envs, seed=seed)
+    except SpecError:
+        raise
+    except Exception as e:
+        raise TrainingError(f"{label}, seed {seed}, building the env: {type(e).__name__}: {e}") from e
+    space = type(venv.action_space).__name__
+    if space not in ALGORITHMS[spec.algorithm]:
+        venv.close()
+        raise InvalidSpec(
+            f"{label}.algorithm",
+            f"{spec.algorithm} cannot act in a {space} action space; "
+            f"it handles {', '.join(ALGORITHMS[spec.algorithm])}",
+        )
+    if spec.normalize:
+        venv = VecNormalize(venv)
+    try:
+        algorithm = algorithm_class(spec.algorithm)
+        model = algorithm("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **dict(spec.hyperparameters))
+    except (TypeError, ValueError, AssertionError) as e:
+        venv.close()
+        raise InvalidSpec(f"{label}.hyperparameters", f"{spec.algorithm} rejected them: {e}") from e
+    normalizer = venv if isinstance(venv, VecNormalize) else None
+    return _Run(spec, seed, model, normalizer, build())
+
+
+def _learn(run: _Run, emit: Emit) -> tuple[GoalCurve, WeightAdapter | None, dict[str, Any], float]:
+    """Train the run's budget, looking at its checkpoints; the curve, the adapter, a met look's counts, the seconds.
+
+    Raises:
+        TrainingError: the env or a user function failed while training (the training step named) or in a
+            checkpoint's evaluation (the checkpoint and evaluation episode named).
+    """
+    from specguard.training.callback import GoalCurveCallback
+
+    spec, budget = run.spec, run.spec.budget
+    confidence = spec.verdict_confidence  # corrected for every look (specguard.stats.anytime)
+    looked: dict[str, Any] = {}
+
+    def look(step: int) -> bool:
+        try:
+            counts, episodes, ok = interim_look(run.episodes, budget.eval_episodes, spec.thresholds, confidence)
+        except Exception as e:
+            raise run.failure(f"checkpoint evaluation at step {step}, evaluation episode {run.episode}", e) from e
+        curve.evaluated(step, counts, episodes)
+        if ok:
+            looked.update(counts=counts, episodes=episodes)
+        return ok
+
+    checkpoints = checkpoint_steps(budget.timesteps, budget.checkpoints) if spec.thresholds else []
+    # weights="auto" adapts on the constructed env's reward; a baseline trains on the initial env's own.
+    adapter = None if spec.baseline else WeightAdapter.of(spec.tree)
+    curve = GoalCurve(
+        budget.timesteps // CURVE_POINTS,
+        budget.wall_clock_s,
+        budget.timesteps,
+        emit,
+        checkpoints,
+        look,
+        adapter=adapter,
+    )
+    emit("train", 0, None)
+    start = time.perf_counter()
+    try:
+        run.model.learn(total_timesteps=budget.timesteps, callback=GoalCurveCallback(curve, adapter))
+    except TrainingError:
+        run.eval_env.close()
+        raise
+    except Exception as e:
+        run.eval_env.close()
+        raise run.failure(f"training step {run.model.num_timesteps}", e) from e
+    return curve, adapter, looked, time.perf_counter() - start
+
+
+def _evaluate(run: _Run, curve: GoalCurve, looked: Mapping[str, Any], emit: Emit) -> tuple[dict[str, int], int]:
+    """The run's successes and episodes: a met checkpoint's, else the final evaluation's (recorded in the curve).
+
+    Raises:
+        TrainingError: the env or a user function failed in an evaluation episode (named).
+    """
+    spec = run.spec
+    if run.normalizer is not None:
+        run.normalizer.training = False
+    emit("evaluate", 0, None)
+    try:
+        if curve.met_early:
+            counts, episodes = looked["counts"], looked["episodes"]
+        else:
+            stages, thresholds = spec.budget.evaluation_stages, spec.thresholds
+            counts, episodes = final_evaluation(run.episodes, stages, thresholds, spec.verdict_confidence)
+            curve.evaluated(int(run.model.num_timesteps), counts, episodes)
+        emit("evaluate", episodes, None)
+    except Exception as e:
+        raise run.failure(f"evaluation episode {run.episode}", e) from e
+    finally:
+        run.eval_env.close()
+    return counts, episodes
+
+
+def train_run(
+    spec: Spec,
+    seed: int,
+    progress: Callable[[ProgressEvent], None] | None = None,
+    *,
+    report: Report | None = None,
+) -> tuple[RunResult, Any]:
+    """Train and evaluate one run of ``spec`` with ``seed``: build, learn, evaluate.
+
+    ``progress``, if given, receives a :class:`~specguard.training.progress.ProgressEvent`
+    at each of the learning curve's points (every tenth of the budget), as
+    ``run_spec``'s ``progress`` does (``print_event`` prints it). ``report``, if given,
+    receives ``(phase, step, line)`` as the run moves through building the
+    env, training and evaluation (worker processes pass it to the parent).
+
+    Returns:
+        The result and the trained model (an SB3 ``BaseAlgorithm``).
+
+    Raises:
+        InvalidSpec: the algorithm does not fit the action space, or SB3
+            rejects the hyperparameters (its message, attributed to the spec).
+        TrainingError: the env or a user function failed; the message has the
+            seed and the training step, or the checkpoint and evaluation episode.
+    """
+    import torch
+
+    torch.set_num_threads(1)
+
+    def emit(phase: str, step: int | None, line: str | None) -> None:
+        if report is not None:
+            report(phase, step, line)
+        if progress is not None and line is not None:
+            progress(decode_update(spec.label, seed, line))
+
+    emit("build", None, None)
+    run = _build(spec, seed)
+    curve, adapter, looked, train_seconds = _learn(run, emit)
+    counts, episodes = _evaluate(run, curve, looked, emit)
+    result = RunResult(
+        spec=spec.label,
+        seed=seed,
+        timesteps=int(run.model.num_timesteps),
+        episodes=episodes,
+        successes=counts,
+        train_seconds=train_seconds,
+        hit_wall_clock=curve.hit_wall_clock,
+        curve=curve.points,
+        met_early=curve.met_early,
+        weights={} if adapter is None else adapter.in_force_lists(),
+    )
+    return result, run.model
