@@ -5,12 +5,14 @@ from __future__ import annotations
 import json
 import sys
 import textwrap
+from pathlib import Path
 
 import pytest
 
 from specguard.cli.main import main
 from specguard.error import SpecError
 from specguard.spec.files import load_objects
+from specguard.utils.files import write_atomic
 
 SPEC_FILE = textwrap.dedent(
     """
@@ -246,3 +248,123 @@ def test_falsify_refuses_negative_uniform_draws(spec_file, capsys):
 def test_falsify_refuses_a_bad_start_space_before_training(spec_file, tmp_path, capsys, starts, message):
     code = main(["falsify", f"{spec_file}::easy", "--cache-dir", str(tmp_path / "c"), "--starts", starts])
     assert code == 2 and message in capsys.readouterr().err and not (tmp_path / "c").exists()
+
+
+# -- first touch: help, version, bad input ----------------------------------------------------------
+
+SUBCOMMANDS = ("show", "plan", "run", "reproduce", "falsify")
+
+
+def _python(*args: str, cwd=None, env=None):
+    import subprocess
+
+    return subprocess.run([sys.executable, *args], capture_output=True, text=True, cwd=cwd, env=env, timeout=300)
+
+
+def test_pytest_help_works_with_the_plugin_loaded(tmp_path):
+    import os
+
+    env = {**os.environ, "PYTEST_DISABLE_PLUGIN_AUTOLOAD": "1"}  # the plugin loaded by -p, this checkout's own
+    done = _python("-m", "pytest", "-p", "specguard.pytest_plugin.plugin", "--help", cwd=tmp_path, env=env)
+    assert done.returncode == 0, done.stderr[-2000:]
+    for option in ("--goal-specs-compare", "--goal-specs-report", "--goal-specs-undecided", "--goal-specs-plan"):
+        assert option in done.stdout
+    assert "family-wise 5%" in done.stdout
+
+
+@pytest.mark.parametrize("argv", [["--help"], *[[command, "--help"] for command in SUBCOMMANDS]])
+def test_every_command_s_help_works(argv):
+    done = _python("-m", "specguard", *argv)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "usage: specguard" in done.stdout and done.stderr == ""
+
+
+def test_the_help_names_every_command_and_the_version_is_printed(capsys):
+    from specguard.cli.main import build_parser
+    from specguard.version import __version__
+
+    text = build_parser().format_help()
+    assert "show and run" not in text
+    assert all(command in text for command in SUBCOMMANDS)
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--version"])
+    assert exit_info.value.code == 0
+    assert capsys.readouterr().out.strip() == f"specguard {__version__}"
+
+
+def _one_error_line(err: str) -> str:
+    """The one line naming the culprit (a ``Hint:`` line may follow it), with no traceback."""
+    assert "Traceback" not in err, err
+    lines = [line for line in err.splitlines() if line and not line.startswith("Hint: ")]
+    assert len(lines) == 1, err
+    return lines[0]
+
+
+@pytest.mark.parametrize("command", ["show", "plan", "run"])
+@pytest.mark.parametrize(
+    ("target", "message"),
+    [
+        ("notes.txt", "notes.txt: not a Python file (expected a .py file of specs)"),
+        ("folder", "folder: is a directory; expected a Python file of specs, e.g. folder/specs.py"),
+        ("/dev/null", "/dev/null: not a regular file; expected a Python file of specs"),
+        ("::tiny", "'::tiny': no file named before '::'; expected PATH[::NAME]"),
+        ("nowhere.py", "nowhere.py: no such file"),
+    ],
+)
+def test_a_target_that_is_no_spec_file_is_one_line_naming_it(tmp_path, monkeypatch, capsys, command, target, message):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "notes.txt").write_text("spec = 1\n")
+    (tmp_path / "folder").mkdir()
+    assert main([command, target]) == 2
+    assert _one_error_line(capsys.readouterr().err) == f"specguard: error: {message}"
+
+
+@pytest.mark.parametrize("exit_call", ["os._exit(0)", "os._exit(3)", "sys.exit()", "raise SystemExit('bye')"])
+def test_a_spec_file_that_ends_the_process_at_import_is_an_error_naming_it(tmp_path, exit_call):
+    path = tmp_path / "quits.py"
+    path.write_text(f"import os, sys\n{exit_call}\n")
+    done = _python("-m", "specguard", "plan", str(path))
+    assert done.returncode == 2, (done.returncode, done.stdout, done.stderr)
+    line = _one_error_line(done.stderr)
+    assert line.startswith(f"specguard: error: {path}: importing it called ") and "exit" in line
+
+
+def test_a_json_write_that_fails_at_the_end_warns_and_keeps_the_results(spec_file, tmp_path, monkeypatch, capsys):
+    import specguard.cli.main as cli
+
+    report = tmp_path / "out.json"
+
+    def refuse(path, text, *args, **kwargs):
+        if Path(path) == report:
+            raise PermissionError(13, "Permission denied", str(path))
+        return write_atomic(path, text, *args, **kwargs)
+
+    monkeypatch.setattr(cli, "write_atomic", refuse)
+    argv = ["run", f"{spec_file}::easy", "--workers", "1", "--no-cache", "--quiet", "--json", str(report)]
+    assert main(argv) == 0  # the verdicts' exit status, kept
+    captured = capsys.readouterr()
+    assert "== easy: passed" in captured.out
+    warning = _one_error_line(captured.err)
+    head = f"specguard: warning: --json {report}: could not write it (Permission denied); the results are in "
+    assert warning.startswith(head) and not report.exists()
+    fallback = Path(warning.removeprefix(head))
+    assert json.loads(fallback.read_text())["easy"]["passed"] is True
+    fallback.unlink()
+
+
+def test_a_json_write_that_fails_twice_prints_the_results(spec_file, tmp_path, monkeypatch, capsys):
+    import specguard.cli.main as cli
+
+    def refuse(path, text, *args, **kwargs):
+        raise OSError(28, "No space left on device", str(path))
+
+    monkeypatch.setattr(cli, "write_atomic", refuse)
+    monkeypatch.setattr(cli.tempfile, "mkstemp", lambda *a, **k: refuse("tmp", ""))
+    report = tmp_path / "out.json"
+    argv = ["run", f"{spec_file}::hard", "--workers", "1", "--no-cache", "--quiet", "--json", str(report)]
+    assert main(argv) == 1  # the verdicts' exit status, kept
+    captured = capsys.readouterr()
+    warning = _one_error_line(captured.err)
+    reason = "could not write it (No space left on device)"
+    assert warning == f"specguard: warning: --json {report}: {reason}; the results follow on stdout"
+    assert json.loads(captured.out[captured.out.index("{\n") :])["hard"]["passed"] is False

@@ -1,1 +1,1 @@
-"""The ``specguard`` command line: ``show``, ``run`` and ``reproduce``."""
+"""The ``specguard`` command line: ``show``, ``plan``, ``run``, ``reproduce`` and ``falsify``."""

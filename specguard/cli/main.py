@@ -11,11 +11,23 @@ Markdown table and plots (:mod:`specguard.engine.reproduce`,
 module-level ``Spec`` objects (named by variable) and the values of its
 module-level dicts of specs (named by key); ``show`` also lists goal trees.
 
+``specguard falsify PATH[::NAME]`` searches each trained run's start space for
+starts from which it misses the spec.
+
+``run`` says pytest's words for the same run, per goal and per spec
+(:func:`specguard.engine.spec_result.verdict_word`): ``passed``, ``failed``
+(``FAILED`` on the spec's line), ``xfailed`` (a goal the spec declares in
+``xfail`` missed), ``xpassed`` (it passed), and ``undecided`` (with what it
+counts as).
+
 Exit status of ``run``: 0 when every spec passed (a goal the spec declares in
 ``xfail`` may miss; an undecided goal counts as ``Spec.undecided`` or
 ``--undecided`` says), 1 when one failed, 2 for a usage or spec error (a spec
 with no threshold has nothing to assert: refused before anything trains, as
-``pytest --goal-specs`` refuses it).
+``pytest --goal-specs`` refuses it). A ``--json`` file that cannot be written at
+the end is a warning that says where the results went instead; the exit status
+stays the verdicts'. Bad input (a path that is no Python file of specs, a spec
+file that exits at import, a bad option value) is one line naming it, exit status 2.
 """
 
 from __future__ import annotations
@@ -24,18 +36,23 @@ import argparse
 import json
 import os
 import sys
+import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
-from specguard.error import InvalidSpec, SpecError
-from specguard.spec.files import load_objects
+from specguard.error import ExecutorError, InvalidSpec, SpecError
+from specguard.parallel.executors import check_address
+from specguard.parallel.workers import parse_workers
+from specguard.spec.files import load_objects, spec_path
 from specguard.spec.spec import Spec
+from specguard.stats.anytime import parse_checkpoints
 from specguard.stats.intervals import UNDECIDED_OUTCOMES
 from specguard.tree.keys import require_thresholds
 from specguard.tree.nodes import Node
 from specguard.utils.files import DEFAULT_CACHE_DIR, write_atomic
-from specguard.validation import check_unique, parse_choice, parse_natural
+from specguard.validation import check_unique, parse_choice, parse_count, parse_natural, parse_positive
+from specguard.version import __version__
 
 __all__ = ["main"]
 
@@ -43,7 +60,7 @@ __all__ = ["main"]
 def _show(target: str) -> int:
     from specguard.report.show import has_goal_specs, render_spec, render_tree, show_goal_spec_file
 
-    if has_goal_specs(Path(target.partition("::")[0])):  # a pytest file: only pytest resolves its fixtures
+    if has_goal_specs(spec_path(target)):  # a pytest file: only pytest resolves its fixtures
         return show_goal_spec_file(target)
     for name, obj in load_objects(target, (Spec, Node)).items():
         if isinstance(obj, Spec):
@@ -59,7 +76,7 @@ def _plan(args: argparse.Namespace) -> int:
     from specguard.report.plan_lines import plan_lines
     from specguard.report.show import has_goal_specs, plan_goal_spec_file
 
-    if has_goal_specs(Path(args.target.partition("::")[0])):  # a pytest file: only pytest resolves its fixtures
+    if has_goal_specs(spec_path(args.target)):  # a pytest file: only pytest resolves its fixtures
         return plan_goal_spec_file(args.target, compare_seeds=args.compare_seeds)
     specs = load_objects(args.target)
     family = args.comparisons or max(1, sum(len(spec.thresholds) for spec in specs.values()))
@@ -101,8 +118,31 @@ def _run(args: argparse.Namespace) -> int:
     finally:
         executor.close()
     if json_path is not None:
-        write_atomic(json_path, json.dumps(results, indent=1))
+        _write_results(json_path, json.dumps(results, indent=1))
     return 1 if failed else 0
+
+
+def _write_results(path: Path, text: str) -> None:
+    """Write ``--json``'s results; a write that fails warns in one line and keeps them.
+
+    Kept in a temporary file it names, else printed on stdout; the exit status
+    stays the verdicts' (the training is done: its results are not lost to a full disk).
+    """
+    try:
+        write_atomic(path, text)
+        return
+    except OSError as e:
+        reason = e.strerror or str(e)
+    where = f"specguard: warning: --json {path}: could not write it ({reason}); the results"
+    try:
+        handle, name = tempfile.mkstemp(prefix=f"specguard-{path.stem}-", suffix=".json")
+        with os.fdopen(handle, "w", encoding="utf-8") as f:
+            f.write(text)
+    except OSError:
+        print(f"{where} follow on stdout", file=sys.stderr)
+        print(text)
+        return
+    print(f"{where} are in {name}", file=sys.stderr)
 
 
 def _run_all(args: argparse.Namespace, specs: dict[str, Any], executor: Any) -> tuple[dict[str, Any], bool]:
@@ -122,59 +162,82 @@ def _run_all(args: argparse.Namespace, specs: dict[str, Any], executor: Any) -> 
             progress=None if args.quiet else print_event,
         )
         results[name] = result.to_dict()
-        status = "passed" if result.passed else "missed as expected (xfail)" if result.as_expected else "FAILED"
-        print(f"== {name}: {status} ({result.seconds:.1f}s)")
+        print(f"== {name}: {result.status()} ({result.seconds:.1f}s)")
         print(result.table())
         print()
         failed = failed or not result.as_expected
     return results, failed
 
 
-def _workers(text: str) -> int | str:
-    from specguard.parallel.workers import parse_workers
-
-    try:
-        return parse_workers(text)
-    except InvalidSpec as e:
-        raise argparse.ArgumentTypeError(e.message) from None
+_T = TypeVar("_T")
 
 
-def _executor(text: str) -> str:
-    from specguard.parallel.executors import ExecutorError, check_address
+def _option(parse: Callable[[str], _T]) -> Callable[[str], _T]:
+    """An option's argparse type from its shared check (:mod:`specguard.validation` and the rules built on it).
 
-    try:
-        return check_address(text)
-    except ExecutorError as e:
-        raise argparse.ArgumentTypeError(str(e).removeprefix("executor: ")) from None
+    The check's message (a ``ValueError``'s, or a ``SpecError``'s without where
+    and hint) becomes argparse's usage error: ``argument --NAME: <message>``, exit status 2.
+    """
 
+    def convert(text: str) -> _T:
+        try:
+            return parse(text)
+        except InvalidSpec as e:
+            raise argparse.ArgumentTypeError(e.message) from None
+        except ExecutorError as e:
+            raise argparse.ArgumentTypeError(e.message.removeprefix("executor: ")) from None
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
 
-def _checkpoints(text: str) -> int:
-    from specguard.stats.anytime import parse_checkpoints
-
-    try:
-        return parse_checkpoints(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e)) from None
-
-
-def _undecided(text: str) -> str:
-    try:
-        return parse_choice(text, UNDECIDED_OUTCOMES)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e)) from None
+    convert.__name__ = getattr(parse, "__name__", "value")  # argparse names a type by it
+    return convert
 
 
-def _scale(text: str) -> float:
-    from specguard.validation import parse_positive
+def _parse_undecided(text: str) -> str:
+    return parse_choice(text, UNDECIDED_OUTCOMES)
 
-    try:
-        return parse_positive(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e)) from None
+
+def _parse_spread(text: str) -> float:
+    """A standard deviation of per-seed success: a finite number in (0, 0.5)."""
+    value = parse_positive(text, "a standard deviation of success, below 0.5")
+    if value >= 0.5:
+        raise ValueError(f"expected a standard deviation of success below 0.5, got {text!r}")
+    return value
+
+
+def _parse_case_scale(text: str) -> tuple[str, float]:
+    name, sep, value = text.partition("=")
+    if not sep or not name:
+        raise ValueError(f"expected CASE=X, e.g. lunar_lander=0.5, got {text!r}")
+    return name, parse_positive(value)
+
+
+_workers = _option(parse_workers)
+_executor = _option(check_address)
+_checkpoints = _option(parse_checkpoints)
+_undecided = _option(_parse_undecided)
+_scale = _option(parse_positive)
+_spread = _option(_parse_spread)
+_positive = _option(parse_count)
+_case_scale = _option(_parse_case_scale)
+
+
+def _natural(meaning: str) -> Callable[[str], int]:
+    """An option's type: an integer >= 0 (:func:`specguard.validation.parse_natural`); ``meaning`` names it."""
+
+    def natural(text: str) -> int:
+        return parse_natural(text, meaning)
+
+    return _option(natural)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="specguard", description="Goal-tree specifications for RL: show and run.")
+    parser = argparse.ArgumentParser(
+        prog="specguard",
+        description="Goal-tree specifications for RL: show a spec, plan what its gate can see, run (train and "
+        "judge) it, reproduce the case studies, falsify a trained spec.",
+    )
+    parser.add_argument("--version", action="version", version=f"specguard {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     show = sub.add_parser(
         "show",
@@ -305,46 +368,6 @@ def _add_falsify(sub: Any) -> None:
     )
     fz.add_argument("--cache-dir", default=DEFAULT_CACHE_DIR, help=f"run cache (default: {DEFAULT_CACHE_DIR})")
     fz.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
-
-
-def _spread(text: str) -> float:
-    from specguard.validation import parse_positive
-
-    try:
-        value = parse_positive(text, "a standard deviation of success, below 0.5")
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e)) from None
-    if value >= 0.5:
-        raise argparse.ArgumentTypeError(f"expected a standard deviation of success below 0.5, got {text!r}")
-    return value
-
-
-def _positive(text: str) -> int:
-    from specguard.validation import parse_count
-
-    try:
-        return parse_count(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e)) from None
-
-
-def _natural(meaning: str) -> Callable[[str], int]:
-    """An option's type: an integer >= 0 (:func:`specguard.validation.parse_natural`); ``meaning`` names it."""
-
-    def natural(text: str) -> int:
-        try:
-            return parse_natural(text, meaning)
-        except ValueError as e:
-            raise argparse.ArgumentTypeError(str(e)) from None
-
-    return natural
-
-
-def _case_scale(text: str) -> tuple[str, float]:
-    name, sep, value = text.partition("=")
-    if not sep or not name:
-        raise argparse.ArgumentTypeError(f"expected CASE=X, e.g. lunar_lander=0.5, got {text!r}")
-    return name, _scale(value)
 
 
 def _start_range(text: str) -> tuple[str, tuple[float, float]]:

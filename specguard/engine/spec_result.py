@@ -19,7 +19,39 @@ if TYPE_CHECKING:
     from specguard.falsify.search import Falsification
     from specguard.falsify.starts import StartSpace
 
-__all__ = ["GoalVerdict", "SpecResult"]
+__all__ = ["VERDICT_WORDS", "GoalVerdict", "SpecResult", "verdict_word"]
+
+# The words every door shows for a goal, worst first: pytest's outcomes, and undecided.
+VERDICT_WORDS = ("failed", "undecided", "xfailed", "xpassed", "passed")
+
+
+def verdict_word(counted: str, outcome: GoalOutcome | str, *, expected_miss: bool = False) -> str:
+    """The word every door shows for a goal: pytest's (passed, failed, xfailed, xpassed), or undecided.
+
+    The one rule ``specguard run``'s table and the pytest plugin's summary both follow.
+
+    Args:
+        counted: what the goal counts as: ``"passed"``, ``"failed"`` or ``"xfailed"``
+            (:meth:`SpecResult.counted`; in pytest, the item's outcome).
+        outcome: the goal's :class:`~specguard.stats.intervals.GoalOutcome` (passed, failed, undecided).
+        expected_miss: the spec declares the goal in ``xfail``: passing it is ``xpassed``, as a
+            non-strict ``pytest.mark.xfail`` that passes.
+
+    An undecided goal that counts as passed or failed says ``undecided``
+    (what it counts as decides the exit status); one that counts as xfailed is
+    ``xfailed``, as pytest reports it.
+
+    Example:
+        >>> verdict_word("passed", "passed", expected_miss=True), verdict_word("xfailed", "failed")
+        ('xpassed', 'xfailed')
+        >>> verdict_word("failed", "undecided"), verdict_word("passed", "undecided")
+        ('undecided', 'undecided')
+    """
+    if counted == "passed" and expected_miss:
+        return "xpassed"
+    if GoalOutcome(outcome) is GoalOutcome.UNDECIDED and counted in ("passed", "failed"):
+        return "undecided"
+    return counted
 
 
 @dataclass
@@ -94,6 +126,27 @@ class SpecResult:
         if path in xfail or (outcome is GoalOutcome.UNDECIDED and undecided_as == "xfail"):
             return "xfailed"
         return "failed"
+
+    def word(self, path: str) -> str:
+        """The word shown for goal ``path`` (:func:`verdict_word`): pytest's for the same run, or undecided."""
+        xfail = self.trained.xfail if self.trained is not None else {}
+        return verdict_word(self.counted(path), self.outcome(path), expected_miss=path in xfail)
+
+    def status(self) -> str:
+        """The spec's word at the end: ``FAILED`` when a seed failed, else its goals' worst (:data:`VERDICT_WORDS`).
+
+        ``undecided`` says what it counts as (``Spec.undecided``), which decides the exit status.
+        """
+        if self.errors:
+            return "FAILED"
+        words = [self.word(p) for p in self.goals] or ["passed"]
+        worst = min(words, key=VERDICT_WORDS.index)
+        if worst == "failed":
+            return "FAILED"
+        if worst == "undecided":
+            undecided = [p for p, w in zip(self.goals, words) if w == "undecided"]
+            return f"undecided, counted as {self.counted(undecided[0])}"
+        return worst
 
     @property
     def passed(self) -> bool:
@@ -220,7 +273,7 @@ class SpecResult:
         }
 
     def table(self) -> str:
-        """A per-goal table: pooled success with interval, threshold, runs, verdict.
+        """A per-goal table: pooled success with interval, threshold, runs, verdict (:meth:`word`).
 
         Goals first, then the safety rates, labelled ``path:name (safe)``.
         """
@@ -235,7 +288,7 @@ class SpecResult:
             g = self.goals.get(p)
             met = "-" if g is None else f"{g.runs.count(RunVerdict.MET)}/{len(g.runs)} (need {g.required})"
             threshold = "-" if g is None else f">= {g.threshold:g}"
-            rows.append((label(p), rate, iv, threshold, met, "-" if g is None else g.verdict.value))
+            rows.append((label(p), rate, iv, threshold, met, "-" if g is None else self.word(p)))
         lines = render_table(header, rows)
         for run in self.runs:
             if run.weights:

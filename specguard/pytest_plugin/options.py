@@ -103,26 +103,44 @@ _SETTINGS: list[tuple[str, str, str, Any, str]] = [
 ]
 
 
+def _help(text: str) -> str:
+    """An option's help as argparse reads it: ``%`` written ``%%`` (argparse formats help with ``%``).
+
+    Example:
+        >>> _help("family-wise 5%")
+        'family-wise 5%%'
+    """
+    return text.replace("%", "%%")
+
+
 def add_options(parser: pytest.Parser) -> None:
-    """Register the ``--goal-specs*`` options and their ini settings."""
+    """Register the ``--goal-specs*`` options and their ini settings.
+
+    Every option's help goes through :func:`_help`: one unescaped ``%`` would
+    make ``pytest --help`` crash in every project of the environment.
+    """
     group = parser.getgroup("specguard", "goal specs (specguard)")
-    group.addoption("--goal-specs", action="store_true", default=None, help="train goal specs and check their goals")
+    group.addoption(
+        "--goal-specs", action="store_true", default=None, help=_help("train goal specs and check their goals")
+    )
     group.addoption(
         "--goal-specs-show",
         action="store_true",
         default=False,
-        help="with --goal-specs: print every goal spec's tree, reward formula, observation layout and budget, "
-        "train nothing, and report its items skipped",
+        help=_help(
+            "with --goal-specs: print every goal spec's tree, reward formula, observation layout and budget, "
+            "train nothing, and report its items skipped"
+        ),
     )
     parser.addini("goal_specs", type="bool", default=False, help="run goal specs without --goal-specs")
     for option, ini, kind, default, text in _SETTINGS:
-        group.addoption(option, default=None, help=f"{text} (ini: {ini}, default: {default or 'none'})")
+        group.addoption(option, default=None, help=_help(f"{text} (ini: {ini}, default: {default or 'none'})"))
         parser.addini(ini, type=kind, default=default, help=text)  # type: ignore[arg-type]
     group.addoption(
-        "--goal-specs-no-cache", action="store_true", default=False, help="neither read nor write the cache"
+        "--goal-specs-no-cache", action="store_true", default=False, help=_help("neither read nor write the cache")
     )
     group.addoption(
-        "--goal-specs-save", metavar="NAME", default=None, help="store this session's results as baseline NAME"
+        "--goal-specs-save", metavar="NAME", default=None, help=_help("store this session's results as baseline NAME")
     )
     group.addoption(
         "--goal-specs-compare",
@@ -130,15 +148,19 @@ def add_options(parser: pytest.Parser) -> None:
         nargs="?",
         const="latest",
         default=None,
-        help="fail goals whose success dropped against baseline NAME (default: the latest saved), training more "
-        "seeds while a comparison is open; Holm's procedure over the session's comparisons at family-wise 5%",
+        help=_help(
+            "fail goals whose success dropped against baseline NAME (default: the latest saved), training more "
+            "seeds while a comparison is open; Holm's procedure over the session's comparisons at family-wise 5%"
+        ),
     )
     group.addoption(
         "--goal-specs-plan",
         action="store_true",
         default=False,
-        help="with --goal-specs: print what each spec's gate can see (the chance a run is judged met around each "
-        "threshold; the smallest drop a comparison flags), train nothing, and report its items skipped",
+        help=_help(
+            "with --goal-specs: print what each spec's gate can see (the chance a run is judged met around each "
+            "threshold; the smallest drop a comparison flags), train nothing, and report its items skipped"
+        ),
     )
 
 

@@ -24,10 +24,14 @@ PROPERTY = "specguard"  # the user property that carries a goal item's row
 WARNING = "specguard: warning:"  # a line saying an output was not written
 
 
-def _verdict(report: pytest.TestReport) -> str:
-    if hasattr(report, "wasxfail"):
-        return "xpassed" if report.passed else "xfailed"
-    return report.outcome
+def _verdict(report: pytest.TestReport, outcome: str) -> str:
+    """A goal row's word (:func:`~specguard.engine.spec_result.verdict_word`, as ``specguard run`` shows it)
+    from its item's pytest report and the goal's own outcome (passed, failed, undecided)."""
+    from specguard.engine.spec_result import verdict_word
+
+    expected_miss = hasattr(report, "wasxfail")
+    counted = "xfailed" if expected_miss and not report.passed else report.outcome
+    return verdict_word(counted, outcome, expected_miss=expected_miss)
 
 
 class Recorder:
@@ -46,8 +50,7 @@ class Recorder:
             if key != PROPERTY:
                 continue
             row = json.loads(str(value))
-            verdict = _verdict(report)
-            row["verdict"] = "undecided" if verdict == "passed" and row["outcome"] == "undecided" else verdict
+            row["verdict"] = _verdict(report, row["outcome"])
             self.state.rows.append(row)
 
     def pytest_sessionfinish(self, session: pytest.Session) -> None:

@@ -7,53 +7,111 @@ the values of its module-level dicts of specs (named by key). The CLI's
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
+import os
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
-from typing import Any
+from typing import Any, NoReturn
 
 import cloudpickle
 
 from specguard.error import SpecError
 from specguard.spec.spec import Spec
 
-__all__ = ["import_file", "load_objects"]
+__all__ = ["import_file", "load_objects", "spec_path"]
 
 
 _IMPORTED: dict[tuple[Path, int], ModuleType] = {}
 
 
-def import_file(path: Path) -> ModuleType:
-    """The module of a Python file, imported once per process and version of the file (its specs keep one identity)."""
-    if not path.is_file():
+def spec_path(target: str) -> Path:
+    """The Python file ``PATH[::NAME]`` names, checked: a regular ``.py`` file that exists.
+
+    Raises:
+        SpecError: one line saying what the path is instead (missing, a directory,
+            not a regular file, not a ``.py`` file, or no path at all).
+    """
+    text = target.partition("::")[0]
+    if not text:
+        raise SpecError(f"{target!r}: no file named before '::'; expected PATH[::NAME]")
+    path = Path(text)
+    if path.is_dir():
+        raise SpecError(f"{path}: is a directory; expected a Python file of specs, e.g. {path / 'specs.py'}")
+    if not path.exists():
         raise SpecError(f"{path}: no such file")
+    if not path.is_file():
+        raise SpecError(f"{path}: not a regular file; expected a Python file of specs")
+    if path.suffix != ".py":
+        raise SpecError(f"{path}: not a Python file (expected a .py file of specs)")
+    return path
+
+
+def import_file(path: Path) -> ModuleType:
+    """The module of a Python file, imported once per process and version of the file (its specs keep one identity).
+
+    Raises:
+        SpecError: ``path`` is no Python file (:func:`spec_path`), or importing it raised or tried to end the process.
+    """
+    path = spec_path(str(path))
     key = (path.resolve(), path.stat().st_mtime_ns)
     if key not in _IMPORTED:
         _IMPORTED[key] = _import_file(path)
     return _IMPORTED[key]
 
 
+class _ExitAtImport(BaseException):
+    """``os._exit`` called while a spec file was imported (raised instead of ending the process)."""
+
+    def __init__(self, status: object) -> None:
+        super().__init__(status)
+        self.status = status
+
+
+@contextlib.contextmanager
+def _no_exit() -> Iterator[None]:
+    """While a spec file is imported, ``os._exit`` in this process raises :class:`_ExitAtImport` instead.
+
+    ``sys.exit`` raises ``SystemExit``, which the import catches; ``os._exit``
+    would end the command at once, with no output and exit status 0. A process
+    the file forks keeps the real ``os._exit``.
+    """
+    real, importer = os._exit, os.getpid()
+
+    def guarded(status: int) -> NoReturn:
+        if os.getpid() != importer:
+            real(status)
+        raise _ExitAtImport(status)
+
+    os._exit = guarded
+    try:
+        yield
+    finally:
+        os._exit = real
+
+
 def _import_file(path: Path) -> ModuleType:
-    if not path.is_file():
-        raise SpecError(f"{path}: no such file")
     name = f"specguard_user_{abs(hash(path.resolve()))}"
     for folder in _import_roots(path):  # let the file import its neighbours, and its package by name
         if folder not in sys.path:
             sys.path.insert(0, folder)
     module_spec = importlib.util.spec_from_file_location(name, path)
-    assert module_spec is not None and module_spec.loader is not None
+    if module_spec is None or module_spec.loader is None:  # spec_path checked the suffix: not expected
+        raise SpecError(f"{path}: Python cannot import it as a module")
     module = importlib.util.module_from_spec(module_spec)
     sys.modules[name] = module
+    hint = 'keep scripts\' own runs under `if __name__ == "__main__":`'
     try:
-        module_spec.loader.exec_module(module)
+        with _no_exit():
+            module_spec.loader.exec_module(module)
     except SpecError:
         raise
     except SystemExit as e:  # sys.exit() at import: a spec file may not end the command
-        raise SpecError(
-            f"{path}: importing it called sys.exit({e.code!r})",
-            hint='keep scripts\' own runs under `if __name__ == "__main__":`',
-        ) from None
+        raise SpecError(f"{path}: importing it called sys.exit({e.code!r})", hint=hint) from None
+    except _ExitAtImport as e:
+        raise SpecError(f"{path}: importing it called os._exit({e.status!r})", hint=hint) from None
     except Exception as e:
         raise SpecError(f"{path}: importing it raised {type(e).__name__}: {e}") from e
     # Workers are separate processes: ship this file's functions by value.
@@ -77,7 +135,7 @@ def _import_roots(path: Path) -> list[str]:
 def load_objects(target: str, kinds: tuple[type, ...] = (Spec,)) -> dict[str, Any]:
     """The specs (or other ``kinds``) named by ``PATH[::NAME]``, by name, in file order."""
     path_text, _, wanted = target.partition("::")
-    module = import_file(Path(path_text))
+    module = import_file(spec_path(target))
     found: dict[str, Any] = {}
     for kind in kinds:  # earlier kinds win a shared name: specs["w"] over trees["w"]
         for attr, value in vars(module).items():
