@@ -230,8 +230,8 @@ class InitialEnv:
         """
         kwargs = {**self.make_kwargs, **overrides}
         try:
-            if self.registered is not None:
-                return gym.make(self.registered, **kwargs)
+            if isinstance(self.env, str):  # from the registration taken where the InitialEnv was made
+                return gym.make(self.registered if self.registered is not None else self.env, **kwargs)
             built = self.env(**kwargs)
         except gym.error.DependencyNotInstalled as e:
             raise InitialEnvError(

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
@@ -26,13 +27,13 @@ from specguard.cache.store import Cache
 from specguard.engine.judging import judge, seeds_still_needed
 from specguard.engine.runs import Runs
 from specguard.engine.spec_result import SpecResult
-from specguard.error import SpecError
+from specguard.error import SpecError, SpecWarning
 from specguard.parallel.executors import LOCAL, Executor, make_executor
 from specguard.parallel.workers import resolve_workers
 from specguard.spec.spec import Spec
 from specguard.training.progress import ProgressEvent, print_event
 
-__all__ = ["run_spec", "train_seeds"]
+__all__ = ["check_before_training", "run_spec", "train_seeds"]
 
 Progress = Callable[[ProgressEvent], None]
 
@@ -92,6 +93,7 @@ def run_spec(
             rejected hyperparameters), or cannot be fingerprinted for the cache.
     """
     _refuse_in_spawned_import()
+    check_before_training(spec)
     start = time.perf_counter()
     with _seeds_of(spec, workers, cache_dir, progress, lock_timeout, executor) as (runs, result):
         next_seed = 0
@@ -124,12 +126,26 @@ def train_seeds(
     errors only: no verdicts (these seeds are beyond the spec's quorum).
     """
     _refuse_in_spawned_import()
+    check_before_training(spec)
     start = time.perf_counter()
     with _seeds_of(spec, workers, cache_dir, progress, lock_timeout, executor) as (runs, result):
         runs.run(list(seeds))
         result.runs.sort(key=lambda r: r.seed)
     result.seconds = time.perf_counter() - start
     return result
+
+
+def check_before_training(spec: Spec) -> None:
+    """Build the spec's env once, here: every check of its construction runs in the caller's process, first.
+
+    A spec refused (an unreachable goal, a root goal met at every start) is refused before any seed is
+    submitted, whatever the door (the API, ``specguard run``, ``pytest --goal-specs``); its warnings (a root
+    goal met at some starts) are given once, here, not by every worker.
+
+    Raises:
+        SpecError: the env cannot be built, or its construction refuses the spec.
+    """
+    spec.make_env().close()
 
 
 @contextlib.contextmanager
@@ -149,7 +165,9 @@ def _seeds_of(
     owned = isinstance(executor, str)
     runner = make_executor(executor, workers=n_workers) if isinstance(executor, str) else executor
     try:
-        runs = Runs(spec, result, cache, runner, lock_timeout, say)
+        with warnings.catch_warnings():  # the fingerprint's probes build the env again: warned once, above
+            warnings.simplefilter("ignore", SpecWarning)
+            runs = Runs(spec, result, cache, runner, lock_timeout, say)
         result.spec_key = None if runs.fingerprint is None else runs.fingerprint.spec_key
         result.cache_dir = None if runs.cache is None else runs.cache.root
         yield runs, result
