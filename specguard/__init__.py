@@ -44,6 +44,7 @@ _EXPORTS = {
     "Falsify": "specguard.falsify.check",
     "FingerprintError": "specguard.error",
     "Goal": "specguard.tree.nodes",
+    "GoalMetAtStart": "specguard.error",
     "SpecEnv": "specguard.construction.env",
     "BaselineEnv": "specguard.construction.env",
     "GoalVerdict": "specguard.engine.spec_result",
@@ -54,6 +55,7 @@ _EXPORTS = {
     "Spec": "specguard.spec.spec",
     "SpecError": "specguard.error",
     "SpecResult": "specguard.engine.spec_result",
+    "SpecWarning": "specguard.error",
     "StartSpace": "specguard.falsify.starts",
     "StateMappingError": "specguard.error",
     "UnknownFeature": "specguard.error",
@@ -107,9 +109,11 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.error import CacheWarning as CacheWarning
     from specguard.error import EvaluationError as EvaluationError
     from specguard.error import FingerprintError as FingerprintError
+    from specguard.error import GoalMetAtStart as GoalMetAtStart
     from specguard.error import InitialEnvError as InitialEnvError
     from specguard.error import InvalidSpec as InvalidSpec
     from specguard.error import SpecError as SpecError
+    from specguard.error import SpecWarning as SpecWarning
     from specguard.error import StateMappingError as StateMappingError
     from specguard.error import UnknownFeature as UnknownFeature
     from specguard.error import UnreachableGoal as UnreachableGoal

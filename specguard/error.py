@@ -15,12 +15,14 @@ __all__ = [
     "EvaluationError",
     "ExecutorError",
     "FingerprintError",
+    "GoalMetAtStart",
     "GoalMissed",
     "InitialEnvError",
     "InvalidSpec",
     "NoFrames",
     "PluginWarning",
     "SpecError",
+    "SpecWarning",
     "StateMappingError",
     "TrainingError",
     "UnknownFeature",
@@ -87,6 +89,24 @@ class UnreachableGoal(InvalidSpec):
     Raised before training (by ``make_env`` and ``make_baseline_env``), so a
     spec that could only train for nothing costs nothing. The message names
     the node path, the feature, the box and the bounds.
+    """
+
+
+class GoalMetAtStart(InvalidSpec):
+    """The root goal holds at every sampled start of the env: the spec is met before the agent acts.
+
+    The mirror of :class:`UnreachableGoal`, raised before training (by ``make_env``
+    and ``make_baseline_env``, so at every door of ``run_spec``): reaching the root
+    goal ends an episode, so an env that starts inside it gives one-step episodes
+    and a verdict that passes whatever the policy does. The message names the
+    goal and the share of sampled starts inside it.
+    """
+
+
+class SpecWarning(UserWarning):
+    """A spec that trains, but may not test what it says (a goal met at some starts, or only at the bounds' edge).
+
+    Issued before training, where the env is built; ``run_spec`` issues it once, in the caller's process.
     """
 
 

@@ -74,7 +74,7 @@ def test_a_spec_without_thresholds_has_nothing_to_plan(tmp_path, capsys):
     path.write_text(
         "import specguard as sg\n"
         "env = sg.InitialEnv('CartPole-v1', features=('x', 'v', 'theta', 'omega'))\n"
-        "bare = sg.Spec(env, sg.Goal('centre', x=(-0.5, 0.5)), budget=sg.Budget(timesteps=10))\n"
+        "bare = sg.Spec(env, sg.Goal('right', x=(0.5, 1.5)), budget=sg.Budget(timesteps=10))\n"
     )
     assert main(["plan", str(path)]) == 0
     assert capsys.readouterr().out.startswith("== bare: no thresholds, nothing to judge or compare")
@@ -85,10 +85,10 @@ import pytest
 import specguard as sg
 
 
-@sg.goal_spec(expect={"balance": 0.8, "centre": 0.9})
+@sg.goal_spec(expect={"balance": 0.8, "right": 0.9})
 def test_balance():
     cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
-    tree = sg.All(sg.Goal("centre", x=(-0.5, 0.5)), sg.Goal("upright", theta=(-0.05, 0.05)), name="balance")
+    tree = sg.All(sg.Goal("right", x=(0.5, 1.5)), sg.Goal("upright", theta=(-0.05, 0.05)), name="balance")
     return sg.Spec(cartpole, tree, budget=sg.Budget(timesteps=512))
 """
 
@@ -100,8 +100,8 @@ import specguard as sg
 @sg.goal_spec(falsify=True)
 def test_balance():
     cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
-    tree = sg.All(sg.Goal("centre", x=(-0.5, 0.5)), sg.Goal("upright", theta=(-0.05, 0.05)), name="balance")
-    expect = {"balance": 0.8, "centre": 0.9, "upright": 0.9}
+    tree = sg.All(sg.Goal("right", x=(0.5, 1.5)), sg.Goal("upright", theta=(-0.05, 0.05)), name="balance")
+    expect = {"balance": 0.8, "right": 0.9, "upright": 0.9}
     return sg.Spec(cartpole, tree, expect=expect, budget=sg.Budget(timesteps=512))
 """
 

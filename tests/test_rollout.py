@@ -107,7 +107,7 @@ class Blind(gym.Env):
 
 
 def blind_spec():
-    tree = sg.All(sg.Goal("zero", x=(-0.5, 0.5)), name="blind")
+    tree = sg.All(sg.Goal("right", x=(0.5, 1.0)), name="blind")  # not where it starts (GoalMetAtStart)
     return sg.Spec(sg.InitialEnv(Blind, features=("x",)), tree, budget=sg.Budget(timesteps=64, min_seeds=1))
 
 
@@ -175,7 +175,8 @@ def test_writing_a_gif_prints_nothing_to_stderr(tmp_path):
         from specguard.report.gifs import write_gif
 
         pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
-        spec = sg.Spec(pendulum, sg.Goal("up", x=(0.9, 1.0)), budget=sg.Budget(timesteps=64, eval_episodes=1),
+        up = sg.Goal("up", x=(0.9, 1.0), omega=(-0.1, 0.1))  # met at none of the sampled starts: no SpecWarning
+        spec = sg.Spec(pendulum, up, budget=sg.Budget(timesteps=64, eval_episodes=1),
                        hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1})
         _, model = train_run(spec, seed=0)
         gif = write_gif(model, spec, sys.argv[1], max_frames=5)

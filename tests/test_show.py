@@ -28,7 +28,7 @@ SPECS = textwrap.dedent(
         upright = sg.Goal("upright", theta=(-0.05, 0.05)).annotate(
             sg.Constraint(lambda s, a: abs(s.omega) > 2.0, budget=3, name="no_spin")
         )
-        tree = sg.All(sg.Goal("centre", x=(-0.5, 0.5)), upright, name="balance")
+        tree = sg.All(sg.Goal("right", x=(0.5, 1.5)), upright, name="balance")
         return sg.Spec(cartpole, tree, budget=sg.Budget(timesteps=512))
     """
 )
@@ -37,8 +37,8 @@ EXPECTED = [
     "== test_cartpole_specs.py::test_balance",
     "InitialEnv('CartPole-v1', features=('x', 'v', 'theta', 'omega')), PPO, constructed env",
     "All 'balance'",
-    "├── Goal 'centre': -0.5 <= x <= 0.5",
-    "R = 0.5*R[centre] + 0.5*(R[upright] + P[upright:no_spin])",
+    "├── Goal 'right': 0.5 <= x <= 1.5",
+    "R = 0.5*R[right] + 0.5*(R[upright] + P[upright:no_spin])",
     "observation: 5 components (features, then the own state of nodes and annotations)",
     "  x                                [-4.8, 4.8]",
     "  theta                            [-0.418879, 0.418879]",
@@ -100,7 +100,7 @@ def test_specguard_show_on_a_pytest_goal_spec_file_resolves_its_fixtures(pyteste
 def test_render_spec_is_the_one_rendering():
     cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
     once = sg.Budget(timesteps=4096, checkpoints=1)
-    spec = sg.Spec(cartpole, sg.Goal("centre", x=(-0.5, 0.5)), budget=once, n_envs=2)
+    spec = sg.Spec(cartpole, sg.Goal("right", x=(0.5, 1.5)), budget=once, n_envs=2)
     text = render_spec(spec, "mine")
     assert text.splitlines()[0] == "== mine"
     assert "budget: 4096 timesteps per seed (2 envs), 2 seeds, 30 eval episodes (up to 120)" in text.splitlines()
@@ -112,7 +112,7 @@ def test_render_spec_is_the_one_rendering():
 
 def test_render_spec_names_each_expected_miss_with_its_reason():
     cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
-    tree = sg.All(sg.Goal("centre", x=(-0.5, 0.5)), sg.Goal("upright", theta=(-0.05, 0.05)), name="balance")
+    tree = sg.All(sg.Goal("right", x=(0.5, 1.5)), sg.Goal("upright", theta=(-0.05, 0.05)), name="balance")
     spec = sg.Spec(
         cartpole,
         tree,

@@ -7,6 +7,10 @@ tree; ``make_env`` and ``make_baseline_env`` call it (their preflight,
 :class:`specguard.construction.env.EnvFactory`), so ``run_spec`` refuses an
 impossible spec before training.
 
+One check is dynamic: :func:`check_root_goal_not_met_at_start` judges the
+root goal on :data:`START_SAMPLES` seeded resets of the env (the mirror of an
+unreachable goal: a goal met before the agent acts).
+
 Nodes whose goal is a box (a ``Goal``; an ``All``'s is the intersection of
 its children's) are checked; a node whose goal is not a box (an ``AnyOf``, a
 ``Sequence``) is unbounded here. Every feature has bounds, finite where they are known
@@ -34,14 +38,16 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from specguard.construction.compiled import CompiledTree, compile_tree
-from specguard.error import UnreachableGoal
+from specguard.error import GoalMetAtStart, SpecWarning, UnreachableGoal
 from specguard.tree.nodes import Node
 from specguard.utils.text import bounds_text
 
 __all__ = [
+    "START_SAMPLES",
     "check_goals",
     "check_goals_off_the_edge",
     "check_goals_reachable",
+    "check_root_goal_not_met_at_start",
     "unreachable_reason",
 ]
 
@@ -124,6 +130,7 @@ def check_goals_reachable(compiled: CompiledTree, low: ArrayLike, high: ArrayLik
         warnings.warn(
             f"{compiled.paths[node]}: {found[0]}; {compiled.paths[escape]} is not a box and may still hold "
             "without it (e.g. through another alternative of an OR)",
+            SpecWarning,
             stacklevel=_caller(),  # the caller of make_env
         )
 
@@ -164,6 +171,7 @@ def check_goals_off_the_edge(compiled: CompiledTree, low: ArrayLike, high: Array
             "goals reachable only at the edge of the feature bounds: "
             + "; ".join(names)
             + ". Widen the box into the bounds unless the edge is the point",
+            SpecWarning,
             stacklevel=_caller(),  # the caller of make_env
         )
 
@@ -176,6 +184,49 @@ def check_goals(compiled: CompiledTree, low: ArrayLike, high: ArrayLike) -> None
     """
     check_goals_reachable(compiled, low, high)
     check_goals_off_the_edge(compiled, low, high)
+
+
+START_SAMPLES = 32
+"""Seeded resets (seeds ``0 .. START_SAMPLES - 1``) on which the root goal is judged before training.
+
+A few milliseconds for most envs; enough that a goal met at every one of them is met at (nearly) every start.
+"""
+
+_START_HINT = (
+    "reaching the root goal ends an episode, so it must be reached from outside it: widen the env's starts "
+    "(reset options, or a factory that starts elsewhere), or state a goal the starts do not meet. A goal that "
+    "must hold until the episode ends cannot be stated yet (reach goals only)"
+)
+
+
+def check_root_goal_not_met_at_start(compiled: CompiledTree, inside: int, samples: int) -> None:
+    """The root goal holds at no sampled start (``inside`` of ``samples`` seeded resets were in it).
+
+    Reaching the root goal ends an episode: an env that starts inside it gives
+    one-step episodes whose success owes nothing to the policy.
+
+    Raises:
+        GoalMetAtStart: the root goal holds at every sampled start.
+
+    Warns:
+        SpecWarning: it holds at some of them, with their share.
+    """
+    root = compiled.paths[0]
+    if samples and inside == samples:
+        raise GoalMetAtStart(
+            root,
+            f"the root goal holds at all {inside} of {samples} sampled starts (seeded resets), so every episode "
+            "would end at its first step and the spec would pass without the agent learning anything",
+            _START_HINT,
+        )
+    if inside:
+        warnings.warn(
+            f"{root} holds at {inside} of {samples} sampled starts ({inside / samples:.0%}): the episodes that "
+            "start there end at their first step and count as successes whatever the policy does. "
+            f"Hint: {_START_HINT}",
+            SpecWarning,
+            stacklevel=_caller(),  # the caller of make_env
+        )
 
 
 def unreachable_reason(initial_env: Any, tree: Node, path: str) -> str | None:

@@ -30,7 +30,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.utils import RecordConstructorArgs
 
-from specguard.construction.checks import check_goals
+from specguard.construction.checks import START_SAMPLES, check_goals, check_root_goal_not_met_at_start
 from specguard.construction.compiled import CompiledTree, compile_tree
 from specguard.construction.initial_env import InitialEnv, check_identity_observation
 from specguard.construction.reference import ReferenceEvaluator
@@ -40,7 +40,15 @@ from specguard.tree.nodes import Node
 _FLOAT32 = np.dtype(np.float32)
 _isfinite = math.isfinite
 
-__all__ = ["BaselineEnv", "EnvFactory", "SpecEnv", "make_baseline_env", "make_env", "preflight"]
+__all__ = [
+    "BaselineEnv",
+    "EnvFactory",
+    "SpecEnv",
+    "make_baseline_env",
+    "make_env",
+    "preflight",
+    "starts_in_root_goal",
+]
 
 EvaluatorName = Literal["flat", "reference"]
 
@@ -313,6 +321,30 @@ def preflight(where: str, initial_env: object, tree: object) -> CompiledTree:
     return compile_tree(tree, initial_env.features)
 
 
+def starts_in_root_goal(
+    initial_env: InitialEnv, compiled: CompiledTree, samples: int = START_SAMPLES, **make_kwargs: Any
+) -> int | None:
+    """How many of ``samples`` seeded resets (seeds ``0 .. samples - 1``) start inside the root goal.
+
+    The resets are of a base env of their own, closed after: an env handed out stays as unseeded as a
+    fresh one. None when a start cannot be judged (the env, ``state()`` or a goal's function raised): the
+    env's own reset reports that, with its message, where it happens.
+    """
+    base = initial_env.make(**make_kwargs)
+    evaluator = compiled.evaluator()
+    inside = 0
+    try:
+        for seed in range(samples):
+            obs, _ = base.reset(seed=seed)
+            f = _features(obs, initial_env.state, initial_env.features, compiled.paths[0])
+            inside += evaluator.reset(f)[0]
+    except Exception:
+        return None
+    finally:
+        base.close()
+    return inside
+
+
 class EnvFactory:
     """Builds the envs of one goal tree over one initial env, compiling the tree once for all of them.
 
@@ -322,7 +354,9 @@ class EnvFactory:
     of its own. The factory holds the tree object itself, so what it compiled is exactly that tree.
 
     The first call runs :func:`preflight` (a failure is raised again by every later call); every call builds
-    a base env and checks the goals against the bounds of its observation space, before wrapping it.
+    a base env and checks the goals against the bounds of its observation space, before wrapping it. The
+    first call that gets that far also judges the root goal on seeded resets of an env of its own
+    (:func:`starts_in_root_goal`, :func:`~specguard.construction.checks.check_root_goal_not_met_at_start`).
 
     Args:
         initial_env: the initial environment and its mappings.
@@ -340,6 +374,8 @@ class EnvFactory:
         self.evaluator: EvaluatorName = evaluator
         self.compiled: CompiledTree | None = None
         """The compiled tree, once the first call's preflight passed."""
+        self.starts_checked = False
+        """The root goal was judged on the sampled starts (and not found met at all of them)."""
 
     def __call__(self, **make_kwargs: Any) -> SpecEnv | BaselineEnv:
         """A new env; ``make_kwargs`` override the base env's ``gymnasium.make`` kwargs.
@@ -354,6 +390,11 @@ class EnvFactory:
         try:
             low, high = initial_env.feature_bounds(base.observation_space)  # checks the features fit the observation
             check_goals(compiled, low, high)  # refuse a goal no state can be in, before training
+            if not self.starts_checked:  # and a root goal met before the agent acts
+                inside = starts_in_root_goal(initial_env, compiled, START_SAMPLES, **make_kwargs)
+                if inside is not None:
+                    check_root_goal_not_met_at_start(compiled, inside, START_SAMPLES)
+                self.starts_checked = True
             if self.baseline:
                 return BaselineEnv(
                     base, tree=self.tree, features=initial_env.features, state=initial_env.state, compiled=compiled

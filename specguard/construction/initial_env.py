@@ -16,6 +16,7 @@ Example:
 
 from __future__ import annotations
 
+import importlib
 import keyword
 import math
 from collections import namedtuple
@@ -26,10 +27,11 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.envs.registration import EnvSpec
 
 from specguard.error import InitialEnvError, StateMappingError
 
-__all__ = ["InitialEnv", "check_identity_observation", "state_type"]
+__all__ = ["InitialEnv", "check_identity_observation", "registered_spec", "state_type"]
 
 
 @cache
@@ -82,13 +84,49 @@ def check_identity_observation(where: str, features: tuple[str, ...], space: gym
     )
 
 
+def registered_spec(env_id: str) -> EnvSpec:
+    """The ``EnvSpec`` that ``gymnasium.make(env_id)`` would build, read from the registry of this process.
+
+    ``env_id`` is a registered id (``"Pendulum-v1"``) or Gymnasium's ``"module:Id"``, whose module is
+    imported first (it registers the id), as ``gymnasium.make`` does.
+
+    Example:
+        >>> registered_spec("gymnasium.envs.classic_control:Pendulum-v1").entry_point
+        'gymnasium.envs.classic_control.pendulum:PendulumEnv'
+
+    Raises:
+        InitialEnvError: the module cannot be imported, or the id is not registered.
+    """
+    module, _, name = env_id.rpartition(":")
+    if module:
+        try:
+            importlib.import_module(module)
+        except Exception as e:  # ImportError, or the module's own code failing
+            raise InitialEnvError(
+                f"InitialEnv {env_id!r}: the module {module!r} cannot be imported ({type(e).__name__}: {e})",
+                hint=f"'module:Id' imports the module that registers Id; check that {module!r} is installed "
+                "and importable (python -c 'import " + module + "')",
+            ) from None
+    try:
+        return gym.spec(name)
+    except gym.error.Error as e:
+        where = f" after importing {module!r}" if module else ""
+        raise InitialEnvError(
+            f"InitialEnv {env_id!r}: no such Gymnasium environment id{where} ({e})",
+            hint="import the package that registers it in the spec module, or write 'package:Id'",
+        ) from None
+
+
 @dataclass(frozen=True, init=False)
 class InitialEnv:
     """An initial environment with named features.
 
     Args:
-        env: a registered Gymnasium env id (``"Pendulum-v1"``) or a factory
-            returning a ``gymnasium.Env``.
+        env: a registered Gymnasium env id (``"Pendulum-v1"``; ``"module:Id"``
+            imports ``module`` first, as ``gymnasium.make`` does) or a factory
+            returning a ``gymnasium.Env``. An id is looked up in Gymnasium's
+            registry here, so one that a package registers on import (after
+            ``import minigrid`` in the spec module) builds in every process.
         features: the names of the feature vector's components, in order.
         state: ``state(obs) -> feature vector``; ``None`` for the identity,
             in which case the names label the observation's components.
@@ -113,6 +151,14 @@ class InitialEnv:
     bounds: tuple[tuple[str, float, float], ...]
     action_space: gym.Space[Any] | None
     make_kwargs: Mapping[str, Any] = field(default_factory=dict)
+    registered: EnvSpec | None = None
+    """The id's ``EnvSpec``, taken from Gymnasium's registry where the ``InitialEnv`` was made (None for a factory).
+
+    Every process builds the env from it (``gymnasium.make`` accepts an ``EnvSpec``), so an id that a package
+    registers on import builds in processes that never imported the package: training workers, cluster
+    workers, the falsifier. It is part of the spec's identity: the entry point, kwargs and episode limit
+    that the id names.
+    """
 
     def __init__(
         self,
@@ -126,12 +172,11 @@ class InitialEnv:
         **make_kwargs: Any,
     ) -> None:
         if isinstance(env, str):
-            try:
-                gym.spec(env)
-            except gym.error.Error as e:
-                raise InitialEnvError(f"InitialEnv {env!r}: no such Gymnasium environment id ({e})") from None
+            registered: EnvSpec | None = registered_spec(env)
         elif not callable(env):
             raise InitialEnvError(f"InitialEnv: expected an env id or a factory returning a gymnasium.Env, got {env!r}")
+        else:
+            registered = None
         names = _check_features(features)
         for label, fn in (("state", state), ("execute", execute)):
             if fn is not None and not callable(fn):
@@ -165,6 +210,7 @@ class InitialEnv:
         object.__setattr__(self, "bounds", tuple(parsed_bounds))
         object.__setattr__(self, "action_space", action_space)
         object.__setattr__(self, "make_kwargs", dict(make_kwargs))
+        object.__setattr__(self, "registered", registered)
 
     @staticmethod
     def _label(env: object) -> str:
@@ -184,8 +230,8 @@ class InitialEnv:
         """
         kwargs = {**self.make_kwargs, **overrides}
         try:
-            if isinstance(self.env, str):
-                return gym.make(self.env, **kwargs)
+            if isinstance(self.env, str):  # from the registration taken where the InitialEnv was made
+                return gym.make(self.registered if self.registered is not None else self.env, **kwargs)
             built = self.env(**kwargs)
         except gym.error.DependencyNotInstalled as e:
             raise InitialEnvError(

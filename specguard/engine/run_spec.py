@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,14 +28,14 @@ from specguard.cache.store import Cache
 from specguard.engine.judging import judge, seeds_still_needed
 from specguard.engine.runs import Runs
 from specguard.engine.spec_result import SpecResult
-from specguard.error import SpecError
+from specguard.error import SpecError, SpecWarning
 from specguard.parallel.executors import LOCAL, Executor, make_executor
 from specguard.parallel.workers import resolve_workers
 from specguard.spec.spec import Spec
 from specguard.training.progress import ProgressEvent, print_event
 from specguard.utils.files import DEFAULT_CACHE_DIR
 
-__all__ = ["RunOptions", "run_spec", "run_with", "train_seeds"]
+__all__ = ["RunOptions", "check_before_training", "run_spec", "run_with", "train_seeds"]
 
 Progress = Callable[[ProgressEvent], None]
 
@@ -113,6 +114,7 @@ def run_spec(
 def run_with(spec: Spec, options: RunOptions) -> SpecResult:
     """:func:`run_spec` with its options as one :class:`RunOptions` value."""
     _refuse_in_spawned_import()
+    check_before_training(spec)
     start = time.perf_counter()
     with _seeds_of(spec, options) as (runs, result):
         next_seed = 0
@@ -136,12 +138,26 @@ def train_seeds(spec: Spec, seeds: Sequence[int], options: RunOptions = RunOptio
     errors only: no verdicts (these seeds are beyond the spec's quorum).
     """
     _refuse_in_spawned_import()
+    check_before_training(spec)
     start = time.perf_counter()
     with _seeds_of(spec, options) as (runs, result):
         runs.run(list(seeds))
         result.runs.sort(key=lambda r: r.seed)
     result.seconds = time.perf_counter() - start
     return result
+
+
+def check_before_training(spec: Spec) -> None:
+    """Build the spec's env once, here: every check of its construction runs in the caller's process, first.
+
+    A spec refused (an unreachable goal, a root goal met at every start) is refused before any seed is
+    submitted, whatever the door (the API, ``specguard run``, ``pytest --goal-specs``); its warnings (a root
+    goal met at some starts) are given once, here, not by every worker.
+
+    Raises:
+        SpecError: the env cannot be built, or its construction refuses the spec.
+    """
+    spec.make_env().close()
 
 
 @contextlib.contextmanager
@@ -155,7 +171,9 @@ def _seeds_of(spec: Spec, options: RunOptions) -> Iterator[tuple[Runs, SpecResul
     owned = isinstance(executor, str)
     runner = make_executor(executor, workers=n_workers) if isinstance(executor, str) else executor
     try:
-        runs = Runs(spec, result, cache, runner, options.lock_timeout, say)
+        with warnings.catch_warnings():  # the fingerprint's probes build the env again: warned once, above
+            warnings.simplefilter("ignore", SpecWarning)
+            runs = Runs(spec, result, cache, runner, options.lock_timeout, say)
         result.spec_key = None if runs.fingerprint is None else runs.fingerprint.spec_key
         result.cache_dir = None if runs.cache is None else runs.cache.root
         yield runs, result

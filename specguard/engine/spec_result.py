@@ -275,7 +275,8 @@ class SpecResult:
     def table(self) -> str:
         """A per-goal table: pooled success with interval, threshold, runs, verdict (:meth:`word`).
 
-        Goals first, then the safety rates, labelled ``path:name (safe)``.
+        Goals first, then the safety rates, labelled ``path:name (safe)``; then, when some evaluation
+        episodes started inside the root goal, how many.
         """
         paths = [p for r in self.runs[:1] for p in r.successes] or list(self.goals)
         paths.sort(key=lambda p: kind(p) != GOAL)  # stable: each kind keeps its order
@@ -290,6 +291,14 @@ class SpecResult:
             threshold = "-" if g is None else f">= {g.threshold:g}"
             rows.append((label(p), rate, iv, threshold, met, "-" if g is None else self.word(p)))
         lines = render_table(header, rows)
+        started = sum(r.started_in_goal for r in self.runs)
+        if started:
+            root = self.trained.tree.name if self.trained is not None else next(iter(paths), "?")
+            episodes = sum(r.episodes for r in self.runs)
+            lines.append(
+                f"{started} of {episodes} evaluation episodes started inside the root goal {root!r}: "
+                "met before the policy acted"
+            )
         for run in self.runs:
             if run.weights:
                 lines.append(f"seed {run.seed} adapted weights: {weights_text(run.weights)}")

@@ -42,6 +42,9 @@ class RunResult:
             force when training ended (:mod:`specguard.training.auto_weights`); each
             curve point also has the ones in force then, under ``"weights"``.
             Empty when no node adapts its weights.
+        started_in_goal: of the ``episodes``, those whose first state (at reset) was
+            already in the root goal: met before the policy acted (the root goal
+            judged on sampled starts before training, :mod:`specguard.construction.checks`).
     """
 
     spec: str
@@ -54,6 +57,7 @@ class RunResult:
     curve: list[dict[str, Any]] = field(default_factory=list)
     met_early: bool = False
     weights: dict[str, list[float]] = field(default_factory=dict)
+    started_in_goal: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -89,6 +93,9 @@ def check_run_result(result: Any, seed: int, paths: Collection[str]) -> None:
     episodes = result["episodes"]
     if not _is_int(episodes) or episodes < 1:
         raise ValueError(f"episodes {episodes!r} is not an integer >= 1")
+    started = result["started_in_goal"]
+    if not _is_int(started) or not 0 <= started <= episodes:
+        raise ValueError(f"started_in_goal {started!r} is not an integer in [0, episodes={episodes}]")
     weights = result["weights"]
     if not isinstance(weights, dict) or not all(
         isinstance(ws, list) and all(isinstance(w, float) and math.isfinite(w) for w in ws) for ws in weights.values()

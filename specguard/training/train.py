@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import gymnasium as gym
@@ -46,8 +46,17 @@ def _policy_action(space: gym.Space[Any], action: Any) -> Any:
     return int(action) if isinstance(space, gym.spaces.Discrete) else action
 
 
-def evaluate(policy: Callable[[Any], Any], env: gym.Env, episodes: int, seeds: list[int] | range) -> dict[str, int]:
+def evaluate(
+    policy: Callable[[Any], Any],
+    env: gym.Env,
+    episodes: int,
+    seeds: list[int] | range,
+    started: list[bool] | None = None,
+) -> dict[str, int]:
     """Run ``episodes`` episodes of ``policy`` on ``env`` (which reports ``info["goals"]`` and ``info["safe"]``).
+
+    ``started``, if given, receives per episode whether its first state (at reset) was in the root goal
+    (the first of ``info["goals"]``).
 
     Returns:
         Per node path, the number of episodes whose last state lies in the
@@ -57,6 +66,8 @@ def evaluate(policy: Callable[[Any], Any], env: gym.Env, episodes: int, seeds: l
     counts: dict[str, int] = {}
     for i in range(episodes):
         obs, info = env.reset(seed=seeds[i])
+        if started is not None:
+            started.append(bool(next(iter(info["goals"].values()))))
         done = False
         while not done:
             obs, _, terminated, truncated, info = env.step(_policy_action(env.action_space, policy(obs)))
@@ -78,6 +89,7 @@ class _Run:
     normalizer: Any  # the training envs' VecNormalize, or None
     eval_env: gym.Env
     episode: int = 0  # where the last evaluation was, for an error's message
+    started: dict[int, bool] = field(default_factory=dict)  # evaluation episode -> it started in the root goal
 
     @property
     def label(self) -> str:
@@ -88,7 +100,15 @@ class _Run:
         self.episode = start
         first = EVAL_SEED_BASE + self.seed * EVAL_SEED_STRIDE
         act = policy_of(self.model, self.normalizer, deterministic=self.spec.deterministic)
-        return evaluate(act, self.eval_env, count, range(first + start, first + start + count))
+        started: list[bool] = []
+        counts = evaluate(act, self.eval_env, count, range(first + start, first + start + count), started)
+        # The evaluation counted is the last one run (a met checkpoint's, or the final one): keep each latest.
+        self.started.update(zip(range(start, start + count), started))
+        return counts
+
+    def started_in_goal(self, episodes: int) -> int:
+        """Of evaluation episodes ``0 .. episodes - 1``, those that started in the root goal."""
+        return sum(self.started.get(i, False) for i in range(episodes))
 
     def failure(self, where: str, e: Exception) -> TrainingError:
         """The run's error for ``e``, raised by the env or a user function ``where`` the run was."""
@@ -256,5 +276,6 @@ def train_run(
         curve=curve.points,
         met_early=curve.met_early,
         weights={} if adapter is None else adapter.in_force_lists(),
+        started_in_goal=run.started_in_goal(episodes),
     )
     return result, run.model
