@@ -32,7 +32,7 @@ from gymnasium.utils import RecordConstructorArgs
 
 from specguard.construction.checks import START_SAMPLES, check_goals, check_root_goal_not_met_at_start
 from specguard.construction.compiled import CompiledTree, compile_tree
-from specguard.construction.initial_env import InitialEnv, check_identity_observation
+from specguard.construction.initial_env import InitialEnv, check_identity_observation, read_env_features
 from specguard.construction.reference import ReferenceEvaluator
 from specguard.error import EvaluationError, InitialEnvError, InvalidSpec, SpecError, StateMappingError
 from specguard.tree.nodes import Node
@@ -82,6 +82,52 @@ def _features(obs: Any, state: Callable[[Any], Any] | None, features: tuple[str,
     return f
 
 
+class FeatureReader:
+    """The features of one reset or step: ``state(obs)``'s, then those read from ``info`` and from the env.
+
+    Args:
+        where: the tree's name, for messages.
+        features: every feature name; the first ones are ``state``'s, the last ones ``from_info``'s and
+            ``from_env``'s.
+        state: ``state(obs)``; ``None`` for the identity (or no feature from the observation).
+        from_info, from_env: as :attr:`InitialEnv.from_info` and :attr:`InitialEnv.from_env`.
+    """
+
+    def __init__(
+        self,
+        where: str,
+        features: tuple[str, ...],
+        state: Callable[[Any], Any] | None,
+        from_info: Sequence[tuple[str, str]] = (),
+        from_env: Sequence[tuple[str, Callable[[Any], Any]]] = (),
+    ) -> None:
+        self.where = where
+        self.from_info = tuple(from_info)
+        self.from_env = tuple(from_env)
+        self.observed = features[: len(features) - len(self.from_info) - len(self.from_env)]
+        """The features of the observation (``state``'s, or its components)."""
+        self.state = state
+        self.extra = bool(self.from_info or self.from_env)
+        """Whether some feature is read from ``info`` or the env."""
+
+    @classmethod
+    def of(cls, where: str, initial_env: InitialEnv) -> FeatureReader:
+        """The reader of ``initial_env``'s features."""
+        return cls(where, initial_env.features, initial_env.state, initial_env.from_info, initial_env.from_env)
+
+    def check(self, space: gym.Space[Any]) -> None:
+        """With the identity ``state``, the observation's features label its components one to one."""
+        if self.state is None and self.observed:
+            check_identity_observation(self.where, self.observed, space)
+
+    def __call__(self, obs: Any, info: Mapping[str, Any], env: gym.Env, step: int) -> list[float]:
+        """The feature vector after a reset (``step`` 0) or the ``step``-th step of an episode."""
+        f = _features(obs, self.state, self.observed, self.where) if self.observed else []
+        if self.extra:
+            f += read_env_features(self.where, self.from_info, self.from_env, info, env, step)
+        return f
+
+
 class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
     """Wraps an initial env into the environment Algorithm 1 constructs from ``tree``.
 
@@ -109,6 +155,8 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
             unbounded (see :meth:`InitialEnv.feature_bounds`).
         action_space: ``A_G``; ``None`` for the base env's.
         evaluator: ``"flat"`` (compiled, fast) or ``"reference"`` (Algorithm 1 as written).
+        from_info, from_env: the features read from ``info`` and from the env, the last of
+            ``features`` (:attr:`InitialEnv.from_info`, :attr:`InitialEnv.from_env`).
         compiled: ``compile_tree(tree, features)`` when the caller has it (envs of one
             tree share it, :class:`EnvFactory`); ``None`` compiles the tree here.
     """
@@ -125,6 +173,8 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         action_space: gym.Space[Any] | None = None,
         evaluator: EvaluatorName = "flat",
         *,
+        from_info: Sequence[tuple[str, str]] = (),
+        from_env: Sequence[tuple[str, Callable[[Any], Any]]] = (),
         compiled: CompiledTree | None = None,
     ) -> None:
         RecordConstructorArgs.__init__(  # not ``compiled``: the spec re-creates the env from the tree
@@ -137,6 +187,8 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
             feature_high=feature_high,
             action_space=action_space,
             evaluator=evaluator,
+            from_info=tuple(from_info),
+            from_env=tuple(from_env),
         )
         gym.Wrapper.__init__(self, env)
         if not isinstance(tree, Node):
@@ -153,10 +205,12 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         self._state = state
         self._execute = execute
         self._n = len(self.features)
+        self._read = FeatureReader(tree.name, self.features, state, from_info, from_env)
+        self._identity = state is None and not self._read.extra  # the observation is the features
+        self._t = 0  # steps since the reset, for messages
         self._safety_keys = self.evaluator.safety_keys
         base_space = env.observation_space
-        if state is None:
-            check_identity_observation(tree.name, self.features, base_space)
+        self._read.check(base_space)
         slots = [slot for _, slot in self.evaluator.slots]
         low = np.full(self._n, -np.inf) if feature_low is None else np.asarray(feature_low, dtype=np.float64)
         high = np.full(self._n, np.inf) if feature_high is None else np.asarray(feature_high, dtype=np.float64)
@@ -168,7 +222,7 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         if action_space is not None:
             self.action_space = action_space
         # The base observation can be handed on untouched when nothing is added or converted.
-        self._passthrough = state is None and not slots and base_space.dtype == np.float32
+        self._passthrough = self._identity and not slots and base_space.dtype == np.float32
         self._pending: Any = None  # (weights, CompiledTree) adapted, in force from the next reset
         self.adapted_weights: dict[str, tuple[float, ...]] = {}
         """The adapted weights in force this episode (:meth:`set_weights`); empty while the tree's own."""
@@ -204,7 +258,8 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
             (self.adapted_weights, self.compiled), self._pending = self._pending, None
             self.evaluator = self.compiled.evaluator()
         obs, info = self.env.reset(seed=seed, options=options)
-        f = _features(obs, self._state, self.features, self.tree.name)
+        self._t = 0
+        f = self._read(obs, info, self.env, 0)
         ev = self.evaluator
         ev.reset(f)
         info["goals"] = ev.goals
@@ -223,12 +278,13 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
                     hint="execute(a) maps the agent's action to one the initial env accepts",
                 ) from e
         obs, base_reward, terminated, truncated, info = self.env.step(base_action)
-        if self._state is None:  # the identity: _features inlined
+        self._t += 1
+        if self._identity:  # _features inlined
             f = obs.tolist()
             if len(f) != self._n or not _isfinite(sum(f)):
                 _features(obs, None, self.features, self.tree.name)  # raises, naming the observation
         else:
-            f = _features(obs, self._state, self.features, self.tree.name)
+            f = self._read(obs, info, self.env, self._t)
         ev = self.evaluator
         reward, ended, _, terms = ev.step(action, f)
         info["goals"] = ev.goals  # a new dict each step, as are the others
@@ -252,6 +308,7 @@ class BaselineEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         tree: the goal tree.
         features: the feature names.
         state: ``state(obs*)``; ``None`` for the identity.
+        from_info, from_env: the features read from ``info`` and from the env (see :class:`SpecEnv`).
         compiled: ``compile_tree(tree, features)`` when the caller has it; ``None`` compiles the tree here.
     """
 
@@ -262,18 +319,22 @@ class BaselineEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         features: Sequence[str],
         state: Callable[[Any], Any] | None = None,
         *,
+        from_info: Sequence[tuple[str, str]] = (),
+        from_env: Sequence[tuple[str, Callable[[Any], Any]]] = (),
         compiled: CompiledTree | None = None,
     ) -> None:
-        RecordConstructorArgs.__init__(self, tree=tree, features=tuple(features), state=state)
+        RecordConstructorArgs.__init__(
+            self, tree=tree, features=tuple(features), state=state, from_info=tuple(from_info), from_env=tuple(from_env)
+        )
         gym.Wrapper.__init__(self, env)
         if not isinstance(tree, Node):
             raise InvalidSpec("tree", f"expected a goal-tree node (Goal, All, ...), got {tree!r}")
         self.tree = tree
         self.features = tuple(features)
         self.evaluator = _compiled_for(tree, self.features, compiled).evaluator()
-        self._state = state
-        if state is None:
-            check_identity_observation(tree.name, self.features, env.observation_space)
+        self._read = FeatureReader(tree.name, self.features, state, from_info, from_env)
+        self._read.check(env.observation_space)
+        self._t = 0
 
     def _info(self, info: dict[str, Any], members: tuple[bool, ...]) -> dict[str, Any]:
         info["goals"] = dict(zip(self.evaluator.paths, members))
@@ -282,14 +343,16 @@ class BaselineEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         obs, info = self.env.reset(seed=seed, options=options)
-        f = _features(obs, self._state, self.features, self.tree.name)
+        self._t = 0
+        f = self._read(obs, info, self.env, 0)
         return obs, self._info(info, self.evaluator.reset(f))
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
         if not math.isfinite(reward):
             raise EvaluationError(f"{self.tree.name}: the initial env returned a non-finite reward {reward!r}")
-        f = _features(obs, self._state, self.features, self.tree.name)
+        self._t += 1
+        f = self._read(obs, info, self.env, self._t)
         # Own state (stages, counters) follows the episode, though the spec's reward and termination do not
         # apply; without own state, membership of one state is all there is (no rewards computed for nothing).
         members = self.evaluator.step(action, f)[2] if self.evaluator.slots else self.evaluator.members(f)
@@ -332,12 +395,12 @@ def starts_in_root_goal(
     """
     base = initial_env.make(**make_kwargs)
     evaluator = compiled.evaluator()
+    read = FeatureReader.of(compiled.paths[0], initial_env)
     inside = 0
     try:
         for seed in range(samples):
-            obs, _ = base.reset(seed=seed)
-            f = _features(obs, initial_env.state, initial_env.features, compiled.paths[0])
-            inside += evaluator.reset(f)[0]
+            obs, info = base.reset(seed=seed)
+            inside += evaluator.reset(read(obs, info, base, 0))[0]
     except Exception:
         return None
     finally:
@@ -397,7 +460,13 @@ class EnvFactory:
                 self.starts_checked = True
             if self.baseline:
                 return BaselineEnv(
-                    base, tree=self.tree, features=initial_env.features, state=initial_env.state, compiled=compiled
+                    base,
+                    tree=self.tree,
+                    features=initial_env.features,
+                    state=initial_env.state,
+                    from_info=initial_env.from_info,
+                    from_env=initial_env.from_env,
+                    compiled=compiled,
                 )
             return SpecEnv(
                 base,
@@ -409,6 +478,8 @@ class EnvFactory:
                 feature_high=None if np.all(np.isinf(high)) else tuple(high.tolist()),
                 action_space=initial_env.action_space,
                 evaluator=self.evaluator,
+                from_info=initial_env.from_info,
+                from_env=initial_env.from_env,
                 compiled=compiled,
             )
         except SpecError:

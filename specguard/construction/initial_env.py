@@ -23,6 +23,7 @@ from collections import namedtuple
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cache
+from numbers import Real
 from typing import Any
 
 import gymnasium as gym
@@ -31,7 +32,7 @@ from gymnasium.envs.registration import EnvSpec
 
 from specguard.error import InitialEnvError, StateMappingError
 
-__all__ = ["InitialEnv", "check_identity_observation", "registered_spec", "state_type"]
+__all__ = ["InitialEnv", "check_identity_observation", "read_env_features", "registered_spec", "state_type"]
 
 
 @cache
@@ -44,9 +45,14 @@ def state_type(features: tuple[str, ...]) -> Any:
     return namedtuple("State", features)  # type: ignore[misc]
 
 
-def _check_features(features: object) -> tuple[str, ...]:
-    if isinstance(features, str) or not isinstance(features, Sequence) or not features:
-        raise InitialEnvError(f"InitialEnv features: expected a non-empty sequence of feature names, got {features!r}")
+def _check_features(features: object, others: tuple[str, ...] = ()) -> tuple[str, ...]:
+    """The observation's feature names, then ``others`` (``from_info``'s and ``from_env``'s): all the features."""
+    if isinstance(features, str) or not isinstance(features, Sequence) or not (features or others):
+        raise InitialEnvError(
+            f"InitialEnv features: expected a non-empty sequence of feature names, got {features!r}"
+            + (" (and no from_info= or from_env= features)" if not others else "")
+        )
+    features = (*features, *others)
     for f in features:
         if not isinstance(f, str) or not f.isidentifier() or keyword.iskeyword(f) or f.startswith("_"):
             raise InitialEnvError(
@@ -82,6 +88,102 @@ def check_identity_observation(where: str, features: tuple[str, ...], space: gym
         f"{where}: the identity state() needs a flat Box observation of {n} features {features}, "
         f"one per component, but {seen}\nHint: {hint}"
     )
+
+
+def _check_from_info(label: str, from_info: object) -> tuple[tuple[str, str], ...]:
+    """``from_info`` as ``((feature, info key), ...)``: ``{feature: key}``, or keys that name their features."""
+    if from_info is None:
+        return ()
+    if isinstance(from_info, Mapping):
+        pairs = list(from_info.items())
+    elif isinstance(from_info, Sequence) and not isinstance(from_info, str):
+        pairs = [(k, k) for k in from_info]
+    else:
+        raise InitialEnvError(
+            f"InitialEnv {label}: from_info: expected {{feature: info key}} or a sequence of info keys, "
+            f"got {from_info!r}"
+        )
+    for feature, key in pairs:
+        if not isinstance(key, str) or not key:
+            raise InitialEnvError(
+                f"InitialEnv {label}: from_info: expected feature {feature!r} to name an info key (a string), "
+                f"got {key!r}"
+            )
+    return tuple(pairs)
+
+
+def _check_from_env(label: str, from_env: object) -> tuple[tuple[str, Callable[[Any], Any]], ...]:
+    """``from_env`` as ``((feature, fn), ...)``, each ``fn`` callable as ``fn(env.unwrapped)``."""
+    if from_env is None:
+        return ()
+    if not isinstance(from_env, Mapping):
+        raise InitialEnvError(f"InitialEnv {label}: from_env: expected {{feature: fn(env)}}, got {from_env!r}")
+    for feature, fn in from_env.items():
+        if not callable(fn):
+            raise InitialEnvError(
+                f"InitialEnv {label}: from_env: expected feature {feature!r} to be callable as fn(env.unwrapped), "
+                f"got {fn!r}"
+            )
+    return tuple(from_env.items())
+
+
+def _feature_value(where: str, feature: str, source: str, value: object, when: str) -> float:
+    """A value read for a feature as a float: a finite real number or a bool (numpy's too), nothing else."""
+    if isinstance(value, (bool, np.bool_)):
+        return float(value)
+    if isinstance(value, Real) and math.isfinite(value):
+        return float(value)
+    raise StateMappingError(
+        f"{where}: feature {feature!r} {source} {value!r} {when}: expected a finite real number or a bool",
+        hint="a feature is one number; read a part of a composite value with from_env=fn(env) or state(obs)",
+    )
+
+
+def read_env_features(
+    where: str,
+    from_info: tuple[tuple[str, str], ...],
+    from_env: tuple[tuple[str, Callable[[Any], Any]], ...],
+    info: Mapping[str, Any],
+    env: gym.Env,
+    step: int,
+) -> list[float]:
+    """The features read from ``info`` and from ``env.unwrapped``, in declaration order.
+
+    Args:
+        where: the tree or env, for messages.
+        from_info, from_env: :attr:`InitialEnv.from_info` and :attr:`InitialEnv.from_env`.
+        info: the base env's ``info`` of this reset or step.
+        env: the base env (its ``unwrapped`` is what ``from_env``'s functions receive).
+        step: the steps since the reset (0: the reset itself), for messages.
+
+    Raises:
+        StateMappingError: a missing ``info`` key, a function that raised, or a value that is not a
+            finite real number or a bool, naming the feature and ``when``.
+    """
+    when = f"at step {step}" if step else "at reset"
+    out = []
+    for feature, key in from_info:
+        if key not in info:
+            raise StateMappingError(
+                f"{where}: feature {feature!r} reads info[{key!r}], but the info {when} has no such key "
+                f"(its keys: {', '.join(map(repr, info)) or 'none'})",
+                hint="check the key against the env's documentation, or read the value with from_env=fn(env)",
+            )
+        out.append(_feature_value(where, feature, f"reads info[{key!r}] =", info[key], when))
+    if from_env:
+        unwrapped = env.unwrapped
+        for feature, fn in from_env:
+            try:
+                value = fn(unwrapped)
+            except Exception as e:
+                raise StateMappingError(
+                    f"{where}: feature {feature!r} reads from_env[{feature!r}](env), which raised "
+                    f"{type(e).__name__}: {e} {when} "
+                    f"(it receives the unwrapped env, a {type(unwrapped).__name__})",
+                    hint="from_env={feature: fn} calls fn(env.unwrapped) after every reset and step",
+                ) from e
+            out.append(_feature_value(where, feature, f"reads from_env[{feature!r}](env) =", value, when))
+    return out
 
 
 def registered_spec(env_id: str) -> EnvSpec:
@@ -127,29 +229,61 @@ class InitialEnv:
             returning a ``gymnasium.Env``. An id is looked up in Gymnasium's
             registry here, so one that a package registers on import (after
             ``import minigrid`` in the spec module) builds in every process.
-        features: the names of the feature vector's components, in order.
+        features: the names of the features ``state`` computes from the
+            observation, in order (may be empty when ``from_info`` or
+            ``from_env`` give every feature).
         state: ``state(obs) -> feature vector``; ``None`` for the identity,
             in which case the names label the observation's components.
+        from_info: features read from the base env's ``info`` after every
+            reset and step: ``{feature: info key}``, or a sequence of keys
+            that name their features (``("crashed",)``). A bool counts as
+            0 or 1.
+        from_env: features read from the env itself: ``{feature: fn}``, with
+            ``fn(env.unwrapped)`` called after every reset and step (e.g.
+            ``lambda env: env.agent_pos[0]``).
         execute: ``execute(action) -> base action``; ``None`` for the identity.
         bounds: ``{feature: (lo, hi)}`` for features whose range is known but
             not given by the base observation space (e.g. a feature computed
-            by ``state``); others default to the base space (identity ``state``)
-            or to an unbounded interval.
+            by ``state`` or read by ``from_info`` or ``from_env``); others
+            default to the base space (identity ``state``) or to an unbounded
+            interval.
         action_space: the agent's action space ``A_G`` when ``execute`` changes
             it; defaults to the base env's action space.
         **make_kwargs: keyword arguments for ``gymnasium.make`` (or the factory).
 
+    The features are those of ``state``, then ``from_info``'s, then
+    ``from_env``'s, in that order: :attr:`features` names them all, the goals
+    name any of them, and the constructed env's observation carries them all,
+    so it stays Markov when the observation alone would not be.
+
     Raises:
         InitialEnvError: an unknown env id, bad feature names, or a mapping
             that is not callable.
+
+    Example:
+        >>> import specguard as sg
+        >>> cart = sg.InitialEnv(
+        ...     "CartPole-v1",
+        ...     features=("x", "v", "theta", "omega"),
+        ...     from_env={"steps": lambda env: env.steps_beyond_terminated or 0},
+        ... )
+        >>> cart.features
+        ('x', 'v', 'theta', 'omega', 'steps')
     """
 
     env: str | Callable[..., gym.Env]
     features: tuple[str, ...]
+    """Every feature: ``state``'s (:attr:`observed`), then ``from_info``'s, then ``from_env``'s."""
     state: Callable[[Any], Any] | None
     execute: Callable[[Any], Any] | None
     bounds: tuple[tuple[str, float, float], ...]
     action_space: gym.Space[Any] | None
+    observed: tuple[str, ...] = ()
+    """The features ``state`` computes from the observation (the identity: its components)."""
+    from_info: tuple[tuple[str, str], ...] = ()
+    """``(feature, info key)`` per feature read from ``info``."""
+    from_env: tuple[tuple[str, Callable[[Any], Any]], ...] = ()
+    """``(feature, fn)`` per feature read as ``fn(env.unwrapped)``."""
     make_kwargs: Mapping[str, Any] = field(default_factory=dict)
     registered: EnvSpec | None = None
     """The id's ``EnvSpec``, taken from Gymnasium's registry where the ``InitialEnv`` was made (None for a factory).
@@ -163,10 +297,12 @@ class InitialEnv:
     def __init__(
         self,
         env: str | Callable[..., gym.Env],
-        features: Sequence[str],
+        features: Sequence[str] = (),
         state: Callable[[Any], Any] | None = None,
         execute: Callable[[Any], Any] | None = None,
         *,
+        from_info: Mapping[str, str] | Sequence[str] | None = None,
+        from_env: Mapping[str, Callable[[Any], Any]] | None = None,
         bounds: Mapping[str, tuple[float, float]] | None = None,
         action_space: gym.Space[Any] | None = None,
         **make_kwargs: Any,
@@ -177,7 +313,15 @@ class InitialEnv:
             raise InitialEnvError(f"InitialEnv: expected an env id or a factory returning a gymnasium.Env, got {env!r}")
         else:
             registered = None
-        names = _check_features(features)
+        info_pairs = _check_from_info(self._label(env), from_info)
+        env_pairs = _check_from_env(self._label(env), from_env)
+        names = _check_features(features, tuple(f for f, _ in (*info_pairs, *env_pairs)))
+        observed = names[: len(names) - len(info_pairs) - len(env_pairs)]
+        if state is not None and not observed:
+            raise InitialEnvError(
+                f"InitialEnv {self._label(env)}: state is given but features= names no features for it to compute",
+                hint="name state()'s features in features=, or leave state out when from_info/from_env give them all",
+            )
         for label, fn in (("state", state), ("execute", execute)):
             if fn is not None and not callable(fn):
                 raise InitialEnvError(f"InitialEnv {self._label(env)}: expected {label} to be callable, got {fn!r}")
@@ -205,6 +349,9 @@ class InitialEnv:
             parsed_bounds.append((f, lo, hi))
         object.__setattr__(self, "env", env)
         object.__setattr__(self, "features", names)
+        object.__setattr__(self, "observed", observed)
+        object.__setattr__(self, "from_info", info_pairs)
+        object.__setattr__(self, "from_env", env_pairs)
         object.__setattr__(self, "state", state)
         object.__setattr__(self, "execute", execute)
         object.__setattr__(self, "bounds", tuple(parsed_bounds))
@@ -258,8 +405,8 @@ class InitialEnv:
             StateMappingError: with the identity ``state``, the observation
                 space is not a flat ``Box`` with one component per feature.
         """
-        if self.state is None:
-            check_identity_observation(f"InitialEnv {self.label}", self.features, observation_space)
+        if self.state is None and self.observed:
+            check_identity_observation(f"InitialEnv {self.label}", self.observed, observation_space)
 
     def feature_bounds(self, observation_space: gym.Space[Any]) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper bounds of every feature, finite wherever they are known.
@@ -271,9 +418,10 @@ class InitialEnv:
         n = len(self.features)
         lo = np.full(n, -np.inf)
         hi = np.full(n, np.inf)
-        if self.state is None and isinstance(observation_space, gym.spaces.Box):
-            lo[:] = observation_space.low
-            hi[:] = observation_space.high
+        m = len(self.observed)
+        if self.state is None and m and isinstance(observation_space, gym.spaces.Box):
+            lo[:m] = observation_space.low
+            hi[:m] = observation_space.high
         index = {f: i for i, f in enumerate(self.features)}
         for f, b_lo, b_hi in self.bounds:
             lo[index[f]], hi[index[f]] = b_lo, b_hi
@@ -285,5 +433,10 @@ class InitialEnv:
             for k, v in (("state", self.state), ("execute", self.execute))
             if v is not None
         )
+        if self.from_info:
+            extra += f", from_info={dict(self.from_info)!r}"
+        if self.from_env:
+            fns = ", ".join(f"{f!r}: {getattr(fn, '__qualname__', fn)!s}" for f, fn in self.from_env)
+            extra += f", from_env={{{fns}}}"
         kwargs = "".join(f", {k}={v!r}" for k, v in self.make_kwargs.items())
-        return f"InitialEnv({self.label}, features={self.features!r}{extra}{kwargs})"
+        return f"InitialEnv({self.label}, features={self.observed!r}{extra}{kwargs})"
