@@ -199,8 +199,8 @@ def test_strategy_draws_valid_avoids(avoid):
 
 
 def test_constructed_envs_pass_both_checkers():
-    tree = sg.Goal("upright", theta=(-0.05, 0.05)).annotate(
-        Avoid({"x": (1.0, None)}, budget=3, name="right"),
+    tree = sg.Goal("right", x=(0.5, 1.5)).annotate(  # a root goal no CartPole start is in (GoalMetAtStart)
+        Avoid({"x": (2.0, None)}, budget=3, name="far_right"),
         Avoid(AnyOf(sg.Goal("spin_l", omega=(None, -1.0)), sg.Goal("spin_r", omega=(1.0, None)), name="spin")),
     )
     both_checkers(tree)
