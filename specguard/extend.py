@@ -193,6 +193,15 @@ class Annotation:
         """Its state after the step ``(s, a, s')``."""
         return q
 
+    def last_state(self, s: Any, q: tuple[float, ...], action: Any) -> tuple[float, ...]:
+        """Its state once the episode has ended in ``s``, reached by ``action`` (docs/semantics.md, "The last state").
+
+        The last state has no action of its own: an annotation judged on ``(s, a)`` judges it here, with the
+        action that led to it; the change is paid as ``reward(s, q, action, s, q')``. Default: ``q``, nothing
+        judged (right for an annotation judged on ``s'``, which judged the last state on the step into it).
+        """
+        return q
+
     def potential(self, s: Any, q: tuple[float, ...]) -> float:
         """``Phi``: the reward of a trajectory sums to ``Phi(last) - Phi(first)``."""
         return 0.0

@@ -50,7 +50,8 @@ class Avoid(Annotation):
       observation, ``budget`` at the start of an episode;
     * a step ``(s, a, s')`` violates when ``s'`` is in ``region`` (judged on the
       next state, not on ``(s, a)`` as a ``Constraint`` is; the first state
-      ``s_0`` is never a violation); each violation lowers the counter by 1;
+      ``s_0`` is never a violation; the last state is judged by the step into
+      it, so ``last_state`` judges nothing more); each violation lowers the counter by 1;
     * reward: ``-1`` per violation (the potential is the counter), weighted by
       ``weight``, which defaults to 1 and is outside the ``1/N`` normalisation;
     * termination: the episode ends when the counter reaches 0;

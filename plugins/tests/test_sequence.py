@@ -127,11 +127,12 @@ def test_childrens_constraints_and_avoids_stay_in_force():
     info0, steps = replay(tree, [[0.0], [6.0], [0.0], [6.0]])
     assert info0["safe"] == {"seq/a:constraint": True, "seq/a:avoid": True}
     # step 1 enters the region (avoid: s'), step 2 leaves it from x=6 (constraint: s): one each,
-    # step 3 enters again: the avoid counter reaches 0 and ends the episode.
+    # step 3 enters again: the avoid counter reaches 0 and ends the episode, whose last state x=6 the
+    # constraint judges too (with the action that led to it).
     assert [s[4]["reward_terms"]["seq/a:avoid"] for s in steps] == [-1.0, 0.0, -1.0]
-    assert [s[4]["reward_terms"]["seq/a:constraint"] for s in steps] == [0.0, -1.0, 0.0]
-    assert rewards(steps) == [-1.0, -1.0, -1.0]
-    assert [s[0] for s in steps] == [[6.0, 2.0, 1.0, 0.0], [0.0, 1.0, 1.0, 0.0], [6.0, 1.0, 0.0, 0.0]]
+    assert [s[4]["reward_terms"]["seq/a:constraint"] for s in steps] == [0.0, -1.0, -1.0]
+    assert rewards(steps) == [-1.0, -1.0, -2.0]
+    assert [s[0] for s in steps] == [[6.0, 2.0, 1.0, 0.0], [0.0, 1.0, 1.0, 0.0], [6.0, 0.0, 0.0, 0.0]]
     assert [s[2] for s in steps] == [False, False, True]
     assert steps[-1][4]["safe"] == {"seq/a:constraint": False, "seq/a:avoid": False}
 

@@ -7,9 +7,11 @@ reward term, with the weights folded into constants:
   feature namedtuple and the distances of a first state; with ``init`` it also
   writes the initial own state into the list ``z`` (otherwise it reads it, to
   restore an observation);
-* ``step(f, m, s, q, z, a)``: one transition to features ``f`` from the
+* ``step(f, m, s, q, z, a, last)``: one transition to features ``f`` from the
   previous memberships ``m``, namedtuple ``s``, distances ``q``, own state
-  ``z`` (updated in place) and action ``a``;
+  ``z`` (updated in place) and action ``a``; when the episode ends at ``f``
+  (the spec ends it, or ``last``), the last state is judged too, never
+  with ``last`` None;
 * ``safe(z)``: per safety annotation, whether the episode is free of
   violations; ``safe_info(z)``: the same as a dict by key.
 
@@ -32,7 +34,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from specguard.construction.reference import FLOAT_MAX, call_definition
-from specguard.extend import Context, Node, Slot
+from specguard.extend import Annotation, Context, Node, Slot
 from specguard.validation import check_truth
 
 __all__ = ["FlatTree", "build_namespace", "number", "source_of", "text"]
@@ -169,7 +171,7 @@ def _start_source(tree: FlatTree) -> str:
 
 
 def _step_source(tree: FlatTree) -> str:
-    lines = ["def step(f, m, s, q, z, a):", *_member_lines(tree, stepping=True)]
+    lines = ["def step(f, m, s, q, z, a, last):", *_member_lines(tree, stepping=True)]
     ends = ["m0"]
     names: list[str] = []
     distances = 0
@@ -213,6 +215,10 @@ def _step_source(tree: FlatTree) -> str:
     else:
         lines += _termination_lines(tree)
         end = "m0 or x0"
+    judged = _last_state_lines(tree)
+    if judged:  # the episode ends at s2: its state is judged too (docs/semantics.md, "The last state")
+        lines += [f"    e = {end}", "    if last or (e and last is not None):", *judged]
+        end = "e"
     distance_names = [f"d{j}" for j in range(distances)]
     if distance_names:
         checks = " and ".join(f"0.0 <= {d} <= {number(FLOAT_MAX)}" for d in distance_names)
@@ -224,6 +230,39 @@ def _step_source(tree: FlatTree) -> str:
     pairs = ", ".join(f"{text(t.key)}: {name}" for t, name in zip(tree.terms, names))
     lines.append(f"    return r, {end}, {_members(tree)}, s2, {_tuple(distance_names)}, {{{pairs}}}")
     return "\n".join(lines) + "\n"
+
+
+def _last_state_lines(tree: FlatTree) -> list[str]:
+    """The judgement of the last state ``s2`` (reached by ``a``) when the episode ends; empty if none judges it.
+
+    A counter judged on ``(s, a)`` judges ``(s2, a)`` once more, unless spent; a general annotation that
+    defines ``last_state`` is asked. A change is added to the annotation's term, and may end the episode.
+    """
+    lines = []
+    for k, t in enumerate(tree.terms):
+        comment = f"  # {text(t.key)}"
+        if t.kind == "counter" and not t.on_next_state:
+            lines += [
+                f"        if z[{t.slot}] > 0.0:{comment}",
+                f"            w{k} = _fn{k}(s2, a)",
+                f"            if w{k} is not True and w{k} is not False:",
+                f"                w{k} = _truth{k}(w{k})",
+                f"            if w{k}:",
+                f"                z[{t.slot}] -= 1.0",
+                f"                t{k} = t{k} + {number(-t.coef)}",
+                f"                e = e or z[{t.slot}] <= 0.0",
+            ]
+        elif t.kind == "annotation" and t.slot >= 0 and _judges_last_state(t.annotation):
+            lines += [
+                f"        g{k}b, e{k}b = _ann{k}.last(s2, a, z){comment}",
+                f"        t{k} = t{k} + {number(t.coef)} * g{k}b",
+                f"        e = e or e{k}b",
+            ]
+    return lines
+
+
+def _judges_last_state(annotation: Any) -> bool:
+    return type(annotation).last_state is not Annotation.last_state
 
 
 def _termination_lines(tree: FlatTree) -> list[str]:
@@ -401,6 +440,17 @@ class _GeneralAnnotation:
         q2 = tuple(float(v) for v in call_definition(key, "next_state()", a.next_state, s, q, act, s2)) if q else q
         z[self.start : self.stop] = q2
         reward = float(call_definition(key, "reward()", a.reward, s, q, act, s2, q2))
+        return reward, bool(call_definition(key, "terminates()", a.terminates, q2))
+
+    def last(self, s: Any, act: Any, z: list[float]) -> tuple[float, bool]:
+        """The last state ``s``, reached by ``act``, judged: the reward of the change (0 if none), and termination."""
+        a, key = self.a, self.key
+        q = tuple(z[self.start : self.stop])
+        q2 = tuple(float(v) for v in call_definition(key, "last_state()", a.last_state, s, q, act))
+        if q2 == q:
+            return 0.0, False
+        z[self.start : self.stop] = q2
+        reward = float(call_definition(key, "reward()", a.reward, s, q, act, s, q2))
         return reward, bool(call_definition(key, "terminates()", a.terminates, q2))
 
     def safe(self, z: list[float]) -> bool:

@@ -187,7 +187,7 @@ class CompiledTree:
         return np.asarray(self.reward_terms(states, actions, next_states).sum(axis=1))
 
     def step_batch(
-        self, observations: np.ndarray, actions: Any, next_states: np.ndarray
+        self, observations: np.ndarray, actions: Any, next_states: np.ndarray, last: Sequence[bool] | None = None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Each transition evaluated alone, from its observation: what a Markov env must reproduce.
 
@@ -195,6 +195,8 @@ class CompiledTree:
             observations: ``(B, features + slots)`` observations of the constructed env.
             actions: ``B`` actions.
             next_states: ``(B, features...)`` the next states' features (extra columns ignored).
+            last: ``B`` flags: the base env ended the episode in the next state, which is judged
+                (:meth:`Evaluator.step`); ``None``: no base env ended one.
 
         Returns:
             ``(rewards, terminated, goals, next_own)``: the rewards ``(B,)``, the
@@ -206,9 +208,10 @@ class CompiledTree:
         n = len(self.features)
         rewards, ended, goals, own = [], [], [], []
         ev = self.evaluator()
-        for row, a, f2 in zip(obs.tolist(), list(actions), s2.tolist()):
+        ends = [False] * len(obs) if last is None else [bool(v) for v in last]
+        for row, a, f2, base_end in zip(obs.tolist(), list(actions), s2.tolist(), ends, strict=True):
             ev.restore(row[:n], row[n:])
-            r, end, m2, _ = ev.step(a, f2)
+            r, end, m2, _ = ev.step(a, f2, base_end)
             rewards.append(r)
             ended.append(end)
             goals.append(m2)
@@ -234,7 +237,7 @@ class CompiledTree:
         out = []
         for row, a, f2 in zip(s.tolist(), list(actions), s2.tolist()):
             ev.restore(row[:n], row[n : n + len(self.slots)])
-            out.append(list(ev.step(a, f2)[3].values()))
+            out.append(list(ev.step(a, f2, None)[3].values()))
         return np.asarray(out, dtype=np.float64).reshape(len(s), len(self.terms))
 
     def _apply(self, t: _Term, s: np.ndarray, actions: Any = None) -> np.ndarray:
@@ -530,8 +533,14 @@ class Evaluator:
         """:attr:`safe` by safety key, a new dict (the env's ``info["safe"]``)."""
         return self._safe_info(self.own_state)
 
-    def step(self, action: Any, f: Sequence[float]) -> tuple[float, bool, tuple[bool, ...], dict[str, float]]:
+    def step(
+        self, action: Any, f: Sequence[float], last: bool | None = False
+    ) -> tuple[float, bool, tuple[bool, ...], dict[str, float]]:
         """Advance by one transition to features ``f``.
+
+        When the episode ends at ``f`` (the spec ends it, or ``last``: the base env terminated or truncated),
+        the last state is judged too (docs/semantics.md, "The last state"), in this step's terms; with
+        ``last`` None never (the transition's own reward, as :meth:`CompiledTree.reward_terms` gives it).
 
         Returns:
             The reward, whether the spec ends the episode (root goal reached, a
@@ -540,7 +549,7 @@ class Evaluator:
         """
         own = self.own_state[:]  # the episode state changes only once the step succeeded
         try:
-            r, ended, m2, goals, s2, q2, terms = self._step(f, self._m, self._s, self._q, own, action)
+            r, ended, m2, goals, s2, q2, terms = self._step(f, self._m, self._s, self._q, own, action, last)
         except EvaluationError:
             raise
         except Exception as e:

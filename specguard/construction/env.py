@@ -286,7 +286,7 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         else:
             f = self._read(obs, info, self.env, self._t)
         ev = self.evaluator
-        reward, ended, _, terms = ev.step(action, f)
+        reward, ended, _, terms = ev.step(action, f, terminated or truncated)  # the last state is judged too
         info["goals"] = ev.goals  # a new dict each step, as are the others
         info["safe"] = ev.safe_info() if self._safety_keys else {}
         info["reward_terms"] = terms
@@ -355,7 +355,11 @@ class BaselineEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         f = self._read(obs, info, self.env, self._t)
         # Own state (stages, counters) follows the episode, though the spec's reward and termination do not
         # apply; without own state, membership of one state is all there is (no rewards computed for nothing).
-        members = self.evaluator.step(action, f)[2] if self.evaluator.slots else self.evaluator.members(f)
+        members = (
+            self.evaluator.step(action, f, terminated or truncated)[2]
+            if self.evaluator.slots
+            else self.evaluator.members(f)
+        )
         return obs, reward, terminated, truncated, self._info(info, members)
 
 

@@ -62,6 +62,8 @@ class Requirements:
         roles: the role of each reward term (``"core"``, ``"shaping"``, ``"safety"``), by key.
         goals: every node's goal, by path (``info["goals"]``).
         violations: the safety annotations' violation counts, by key.
+        last: the judgement of the state ``x`` an episode ended in, reached by action ``a``
+            (docs/semantics.md, "The last state"): the own states it changes, and their weighted reward terms.
     """
 
     goal: Callable[[ExtendedState], bool]
@@ -73,6 +75,7 @@ class Requirements:
     roles: Mapping[str, str]
     goals: Mapping[str, Callable[[ExtendedState], bool]]
     violations: Mapping[str, Callable[[ExtendedState], int]]
+    last: Callable[[ExtendedState, Any], tuple[dict[str, tuple[float, ...]], Terms]]
 
 
 def distance_value(key: str, fn: Callable[[Any], Any], s: Any) -> float:
@@ -152,6 +155,15 @@ def _operator(path: str, node: Node, kids: Sequence[Requirements]) -> Requiremen
             states[path] = tuple(float(v) for v in q2)
         return states
 
+    def last(x: ExtendedState, a: Any) -> tuple[dict[str, tuple[float, ...]], Terms]:
+        states: dict[str, tuple[float, ...]] = {}
+        out: Terms = {}
+        for w, k in zip(weights, kids):  # weighted by role, as the children's rewards are
+            changed, terms = k.last(x, a)
+            states.update(changed)
+            out.update({key: w.of(k.roles[key]) * v for key, v in terms.items()})
+        return states, out
+
     slots = tuple(e for k in kids for e in k.slots) + tuple((path, slot) for slot in node.state_slots())
     roles = {key: role for k in kids for key, role in k.roles.items()}
     if node.own_reward:
@@ -161,7 +173,7 @@ def _operator(path: str, node: Node, kids: Sequence[Requirements]) -> Requiremen
     for k in kids:
         goals.update(k.goals)
         violations.update(k.violations)
-    return Requirements(goal, reward, terminal, initial, transition, slots, roles, goals, violations)
+    return Requirements(goal, reward, terminal, initial, transition, slots, roles, goals, violations, last)
 
 
 def _annotation(key: str, w: float, a: Annotation, req: Requirements) -> Requirements:
@@ -193,12 +205,22 @@ def _annotation(key: str, w: float, a: Annotation, req: Requirements) -> Require
             )
         return states
 
+    def last(x: ExtendedState, act: Any) -> tuple[dict[str, tuple[float, ...]], Terms]:
+        states, out = req.last(x, act)
+        if has_state:
+            q0 = q(x)
+            q2 = tuple(float(v) for v in call_definition(key, "last_state()", a.last_state, x.s, q0, act))
+            if q2 != q0:  # judged: the change is paid as a step from s to s
+                states[key] = q2
+                out[key] = w * float(call_definition(key, "reward()", a.reward, x.s, q0, act, x.s, q2))
+        return states, out
+
     slots = req.slots + tuple((key, slot) for slot in a.state_slots())
     roles = {**req.roles, key: a.role}
     violations = dict(req.violations)
     if a.role == "safety":
         violations[key] = lambda x: int(a.violations(q(x)))
-    return Requirements(req.goal, reward, terminal, initial, transition, slots, roles, req.goals, violations)
+    return Requirements(req.goal, reward, terminal, initial, transition, slots, roles, req.goals, violations, last)
 
 
 def process(node: Node, path: str | None = None, *, root: bool = True) -> Requirements:
@@ -221,6 +243,7 @@ def process(node: Node, path: str | None = None, *, root: bool = True) -> Requir
         core.roles,
         core.goals,
         core.violations,
+        lambda x, a: _weighted(core.last(x, a), core_w),
     )
     for a, w in zip(node.annotations, ann_w):
         req = _annotation(annotation_key(path, a), w, a, req)
@@ -237,8 +260,14 @@ def process(node: Node, path: str | None = None, *, root: bool = True) -> Requir
             req.roles,
             req.goals,
             req.violations,
+            req.last,
         )
     return req
+
+
+def _weighted(last: tuple[dict[str, tuple[float, ...]], Terms], w: float) -> tuple[dict[str, tuple[float, ...]], Terms]:
+    states, terms = last
+    return states, {k: w * v for k, v in terms.items()}
 
 
 class ReferenceEvaluator:
@@ -306,12 +335,27 @@ class ReferenceEvaluator:
         """:attr:`safe` by safety key."""
         return dict(zip(self.safety_keys, self.safe))
 
-    def step(self, action: Any, f: Sequence[float]) -> tuple[float, bool, tuple[bool, ...], Terms]:
-        """Advance by one transition to features ``f``: reward, spec termination, goals, weighted terms."""
+    def step(
+        self, action: Any, f: Sequence[float], last: bool | None = False
+    ) -> tuple[float, bool, tuple[bool, ...], Terms]:
+        """Advance by one transition to features ``f``: reward, spec termination, goals, weighted terms.
+
+        When the episode ends at ``f`` (the spec ends it, or ``last``: the base env terminated or truncated),
+        the last state is judged too (docs/semantics.md, "The last state"), in this step's terms; with
+        ``last`` None never (the transition's own reward, as :meth:`CompiledTree.reward_terms` gives it).
+        """
         x = self._x
         assert x is not None, "reset() first"
         s2 = self.state_cls._make(f)
         x2 = ExtendedState(s2, self.req.transition(x, action, s2))
         terms = self.req.reward(x, action, x2)
+        ended = self.req.terminal(x2)
+        if last or (ended and last is not None):
+            changed, extra = self.req.last(x2, action)
+            if changed:
+                x2 = ExtendedState(s2, {**x2.states, **changed})
+                for key, v in extra.items():
+                    terms[key] += v
+                ended = self.req.terminal(x2)
         self._x = x2
-        return float(sum(terms.values())), self.req.terminal(x2), self._members(x2), terms
+        return float(sum(terms.values())), ended, self._members(x2), terms

@@ -196,12 +196,15 @@ def check_markov(cls: type, max_examples: int = MAX_EXAMPLES) -> None:
             env["own state"] = after.obs[n:].tolist()
             where = f"{step_name(t)}, evaluated alone from the observation {before.obs.tolist()}"
             for attempt in ("", " a second time"):  # the second evaluation sees whatever the first one left
-                alone = _alone(compile_tree(cloudpickle.loads(pristine), FEATURES), before.obs, action, after.obs[:n])
+                fresh = compile_tree(cloudpickle.loads(pristine), FEATURES)
+                alone = _alone(fresh, before.obs, action, after.obs[:n], after.truncated)
                 diffs = _differences(env, alone, "env", "alone", 1e-6)
                 if diffs:
                     raise Broken(f"{where}{attempt}: " + "; ".join(diffs))
             # The same transition on the tree the env ran: state kept in the nodes shows up here.
-            diffs = _differences(_alone(used, before.obs, action, after.obs[:n]), alone, "used", "fresh", TOL)
+            diffs = _differences(
+                _alone(used, before.obs, action, after.obs[:n], after.truncated), alone, "used", "fresh", TOL
+            )
             if diffs:
                 raise Broken(
                     f"{where}, differs on the tree the env used and on a fresh copy of it: " + "; ".join(diffs)
@@ -210,9 +213,9 @@ def check_markov(cls: type, max_examples: int = MAX_EXAMPLES) -> None:
     run_property(check_markov, cls, max_examples, body)
 
 
-def _alone(compiled: CompiledTree, obs: np.ndarray, action: int, features: np.ndarray) -> dict[str, Any]:
-    """One transition evaluated alone by ``step_batch``, as the env reports it."""
-    rewards, ended, goals, own = compiled.step_batch(obs[None, :], [action], features[None, :])
+def _alone(compiled: CompiledTree, obs: np.ndarray, action: int, features: np.ndarray, last: bool) -> dict[str, Any]:
+    """One transition evaluated alone by ``step_batch``, as the env reports it (``last``: the base env ended it)."""
+    rewards, ended, goals, own = compiled.step_batch(obs[None, :], [action], features[None, :], [last])
     return {
         "reward": float(rewards[0]),
         "terminated": bool(ended[0]),
@@ -375,8 +378,9 @@ def check_flat_matches_reference(cls: type, max_examples: int = MAX_EXAMPLES) ->
     """The flat (compiled) and the reference evaluators agree at every step on everything the env reports.
 
     Reward, termination, goals, reward terms, own state and safety flags,
-    along the whole trajectory (past the end of the episode too); a declared
-    box or fast form must say what the methods say.
+    along the whole trajectory (past the end of the episode too), whose last
+    state is judged as the last state of an episode the base env ended; a
+    declared box or fast form must say what the methods say.
     """
 
     def body(case: Example) -> None:
@@ -385,8 +389,9 @@ def check_flat_matches_reference(cls: type, max_examples: int = MAX_EXAMPLES) ->
         ref = ReferenceEvaluator(case.tree, FEATURES)
         sides = ((flat, flat.reset(case.trajectory[0])), (ref, ref.reset(case.trajectory[0])))
         _agree(0, *(_seen(ev, None, False, goals, {}) for ev, goals in sides))
+        end = min(len(case.actions), len(case.trajectory) - 1)
         for t, (a, f) in enumerate(zip(case.actions, case.trajectory[1:]), 1):
-            steps = [(ev, ev.step(a, f)) for ev in (flat, ref)]
+            steps = [(ev, ev.step(a, f, t == end)) for ev in (flat, ref)]
             _agree(t, *(_seen(ev, r, end, goals, terms) for ev, (r, end, goals, terms) in steps))
 
     run_property(check_flat_matches_reference, cls, max_examples, body)

@@ -226,6 +226,7 @@ class Step(NamedTuple):
     reward: Any
     terminated: bool
     info: dict[str, Any]
+    truncated: bool = False
 
 
 def play(env: SpecEnv, actions: Sequence[int]) -> list[Step]:
@@ -234,7 +235,7 @@ def play(env: SpecEnv, actions: Sequence[int]) -> list[Step]:
     steps = [Step(obs, None, False, info)]
     for a in actions:
         obs, reward, terminated, truncated, info = env.step(a)
-        steps.append(Step(obs, reward, terminated, info))
+        steps.append(Step(obs, reward, terminated, info, truncated))
         if terminated or truncated:
             break
     return steps

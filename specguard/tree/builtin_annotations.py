@@ -119,7 +119,8 @@ class Constraint(Annotation):
     """A safety constraint: a violation counter with a budget (docs/semantics.md, "Constraint penalties").
 
     Args:
-        fn: ``fn(s, a) -> bool``, true for a violating state-action pair.
+        fn: ``fn(s, a) -> bool``, true for a violating state-action pair. The state an episode ends
+            in is judged too, with the action that led to it (docs/semantics.md, "The last state").
         budget: ``delta >= 1``, the violations allowed in an episode; the
             episode ends when the counter ``delta - violations`` reaches 0.
         weight: the penalty's weight; defaults to 1 and is not part of the
@@ -153,6 +154,12 @@ class Constraint(Annotation):
     def next_state(self, s: Any, q: tuple[float, ...], action: Any, s2: Any) -> tuple[float, ...]:
         violated = check_truth(None, self.fn(s, action))  # the evaluator names the key, as the flat one does
         return (q[0] - 1.0,) if violated else q  # judged on (s, a), as R_pen is
+
+    def last_state(self, s: Any, q: tuple[float, ...], action: Any) -> tuple[float, ...]:
+        # The last state s_T, with the action a_{T-1} that led to it; a spent counter stays at 0.
+        if q[0] <= 0.0 or not check_truth(None, self.fn(s, action)):
+            return q
+        return (q[0] - 1.0,)
 
     def potential(self, s: Any, q: tuple[float, ...]) -> float:
         return q[0]  # R_pen = -1 per violation = s_C' - s_C
