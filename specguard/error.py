@@ -14,6 +14,7 @@ __all__ = [
     "CacheWarning",
     "EvaluationError",
     "ExecutorError",
+    "ExitAtImport",
     "FingerprintError",
     "GoalMetAtStart",
     "GoalMissed",
@@ -185,6 +186,18 @@ class GoalMissed(AssertionError):
 
 class Broken(Exception):
     """Raised by a contract property with what breaks the invariant; ``contract.trees.run_property`` adds the rest."""
+
+
+class ExitAtImport(BaseException):
+    """``os._exit`` called while a spec file was imported, raised instead of ending the process.
+
+    A ``BaseException``, as ``SystemExit`` is: the spec file's own ``except Exception`` cannot swallow it.
+    :func:`specguard.spec.files.import_file` turns it into a :class:`SpecError` naming the file.
+    """
+
+    def __init__(self, status: object) -> None:
+        super().__init__(status)
+        self.status = status
 
 
 class NoFrames(Exception):

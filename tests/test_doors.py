@@ -157,7 +157,9 @@ def test_every_door_counts_an_undecided_goal_as_the_spec_says(
     run = pytester.runpytest_subprocess(
         "-p", "no:cacheprovider", "--goal-specs", "--goal-specs-workers=1", f"--goal-specs-cache-dir={tmp_path / 'p'}"
     )
-    run.assert_outcomes(**{COUNTS_AS[undecided][1]: 1}, **({"warnings": 1} if undecided == "pass" else {}))
+    # Warnings: a passed undecided goal's, and (once, not again by the cache key's probes) the SpecWarning that the
+    # root goal holds at 3 of the 32 seeded starts (Pendulum upright within 15 degrees).
+    run.assert_outcomes(**{COUNTS_AS[undecided][1]: 1}, **({"warnings": 2} if undecided == "pass" else {}))
 
 
 def test_the_doors_options_override_the_specs_undecided_the_same_way(tmp_path: Path, pytester: pytest.Pytester):

@@ -152,9 +152,10 @@ def test_evaluate_counts_an_episode_ended_by_its_constraint_as_unsafe():
         sg.Constraint(lambda s, a: s.x > 0.5, budget=3, name="hot"),
     )
     env = sg.make_env(replay_initial(), tree)
-    # Episode 1 is ended by "two" after one step (before s = 1); episodes 2 and 3 run 3 steps and meet "hot".
+    # Episode 1 is ended by "two" after one step, at s = 1: its last state, which "hot" judges too (every state is
+    # judged, the last included); episodes 2 and 3 run 3 steps and meet "hot".
     counts = evaluate(scripted([2, 0, 0, 0, 0, 0, 0]), env, episodes=3, seeds=SEEDS)
-    assert counts == {"far": 0, "far:two": 2, "far:hot": 1}
+    assert counts == {"far": 0, "far:two": 2, "far:hot": 0}
 
 
 def test_training_curve_records_safety_rates():

@@ -18,7 +18,7 @@ from typing import Any, NoReturn
 
 import cloudpickle
 
-from specguard.error import SpecError
+from specguard.error import ExitAtImport, SpecError
 from specguard.spec.spec import Spec
 
 __all__ = ["import_file", "load_objects", "spec_path"]
@@ -62,17 +62,9 @@ def import_file(path: Path) -> ModuleType:
     return _IMPORTED[key]
 
 
-class _ExitAtImport(BaseException):
-    """``os._exit`` called while a spec file was imported (raised instead of ending the process)."""
-
-    def __init__(self, status: object) -> None:
-        super().__init__(status)
-        self.status = status
-
-
 @contextlib.contextmanager
 def _no_exit() -> Iterator[None]:
-    """While a spec file is imported, ``os._exit`` in this process raises :class:`_ExitAtImport` instead.
+    """While a spec file is imported, ``os._exit`` in this process raises :class:`ExitAtImport` instead.
 
     ``sys.exit`` raises ``SystemExit``, which the import catches; ``os._exit``
     would end the command at once, with no output and exit status 0. A process
@@ -83,7 +75,7 @@ def _no_exit() -> Iterator[None]:
     def guarded(status: int) -> NoReturn:
         if os.getpid() != importer:
             real(status)
-        raise _ExitAtImport(status)
+        raise ExitAtImport(status)
 
     os._exit = guarded
     try:
@@ -110,7 +102,7 @@ def _import_file(path: Path) -> ModuleType:
         raise
     except SystemExit as e:  # sys.exit() at import: a spec file may not end the command
         raise SpecError(f"{path}: importing it called sys.exit({e.code!r})", hint=hint) from None
-    except _ExitAtImport as e:
+    except ExitAtImport as e:
         raise SpecError(f"{path}: importing it called os._exit({e.status!r})", hint=hint) from None
     except Exception as e:
         raise SpecError(f"{path}: importing it raised {type(e).__name__}: {e}") from e

@@ -22,14 +22,20 @@ TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 PENDULUM = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
 # Upright: a policy trained for 128 steps misses it from nearly every start.
 UPRIGHT = sg.All(sg.Goal("position", x=(0.966, 1.0), y=(-0.259, 0.259)), sg.Goal("slow", omega=(-8, 8)), name="up")
-# Anywhere: met by every state, so nothing can falsify it.
-ANYWHERE = sg.All(sg.Goal("position", x=(-1.0, 1.0)), sg.Goal("slow", omega=(-8, 8)), name="anywhere")
+# Anywhere: every episode enters it at its first step, whatever the policy and the start, so nothing can falsify it
+# (a root goal met at the start itself is refused before training: GoalMetAtStart).
+from specguard.testing import ReplayEnv
+STEPS = [[0.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]]  # x, y, omega: omega enters [0.5, 8] at the first step
+STEP_IN = sg.InitialEnv(lambda: ReplayEnv(STEPS), features=("x", "y", "omega"))
+ANYWHERE = sg.All(sg.Goal("position", x=(-1.0, 1.0)), sg.Goal("slow", omega=(0.5, 8)), name="anywhere")
+EVERYWHERE = sg.StartSpace({"x": (-1.0, 1.0)}, set_state=lambda env, values: env.reset()[0])
 SEARCH = dict(examples=4, uniform=8)
 
 
 def tiny(tree):
     budget = sg.Budget(timesteps=128, min_seeds=1, eval_episodes=4, checkpoints=1)
-    return sg.Spec(PENDULUM, tree, budget=budget, hyperparameters=TINY)
+    initial = STEP_IN if tree is ANYWHERE else PENDULUM
+    return sg.Spec(initial, tree, budget=budget, hyperparameters=TINY)
 """
 
 
@@ -49,7 +55,7 @@ def test_a_counterexample_fails_the_falsify_item_with_its_report(pytester):
             return tiny(UPRIGHT)
 
 
-        @sg.goal_spec(expect={"slow": 0.0}, falsify=sg.Falsify(**SEARCH))
+        @sg.goal_spec(expect={"slow": 0.0}, falsify=sg.Falsify(EVERYWHERE, **SEARCH))
         def test_anywhere():
             return tiny(ANYWHERE)
         """,
@@ -80,7 +86,8 @@ def test_a_failure_rate_above_max_rate_fails_and_one_allowed_passes(pytester):
             return tiny(UPRIGHT)
 
 
-        @sg.goal_spec(expect={"slow": 0.0}, falsify=sg.Falsify(max_rate=0.5, **SEARCH))  # 0 of 8 failed: at most 37%
+        # 0 of 8 failed: at most 37%
+        @sg.goal_spec(expect={"slow": 0.0}, falsify=sg.Falsify(EVERYWHERE, max_rate=0.5, **SEARCH))
         def test_anywhere():
             return tiny(ANYWHERE)
         """,
