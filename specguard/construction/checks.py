@@ -7,9 +7,11 @@ tree; ``make_env`` and ``make_baseline_env`` call it (their preflight,
 :class:`specguard.construction.env.EnvFactory`), so ``run_spec`` refuses an
 impossible spec before training.
 
-One check is dynamic: :func:`check_root_goal_not_met_at_start` judges the
-root goal on :data:`START_SAMPLES` seeded resets of the env (the mirror of an
-unreachable goal: a goal met before the agent acts).
+One check is dynamic: :func:`check_starts` judges the root goal on
+:data:`START_SAMPLES` seeded resets of the env. A reach goal met at them is met
+before the agent acts (:func:`check_root_goal_not_met_at_start`, the mirror of an
+unreachable goal); a goal that must hold until the end and holds at none of them
+fails before the agent acts (:func:`check_root_goal_holds_at_start`).
 
 Nodes whose goal is a box (a ``Goal``; an ``All``'s is the intersection of
 its children's) are checked; a node whose goal is not a box (an ``AnyOf``, a
@@ -47,7 +49,9 @@ __all__ = [
     "check_goals",
     "check_goals_off_the_edge",
     "check_goals_reachable",
+    "check_root_goal_holds_at_start",
     "check_root_goal_not_met_at_start",
+    "check_starts",
     "unreachable_reason",
 ]
 
@@ -195,8 +199,25 @@ A few milliseconds for most envs; enough that a goal met at every one of them is
 _START_HINT = (
     "reaching the root goal ends an episode, so it must be reached from outside it: widen the env's starts "
     "(reset options, or a factory that starts elsewhere), or state a goal the starts do not meet. A goal that "
-    "must hold until the episode ends cannot be stated yet (reach goals only)"
+    "must hold until the episode ends is sg.Always(goal, name=...): it ends nothing and is judged at the last state"
 )
+_HOLD_HINT = (
+    "a goal that must hold until the end (sg.Always) holds at every state of the episode, the first included: "
+    "widen it to take in the env's starts, or state a reach goal (the goal alone, without Always) if it is to be "
+    "reached rather than kept"
+)
+
+
+def check_starts(compiled: CompiledTree, inside: int, samples: int) -> None:
+    """The root goal judged at the sampled starts (``inside`` of ``samples`` seeded resets were in it).
+
+    A reach goal by :func:`check_root_goal_not_met_at_start`, a goal that holds until the end
+    by :func:`check_root_goal_holds_at_start`.
+    """
+    if compiled.reach:
+        check_root_goal_not_met_at_start(compiled, inside, samples)
+    else:
+        check_root_goal_holds_at_start(compiled, inside, samples)
 
 
 def check_root_goal_not_met_at_start(compiled: CompiledTree, inside: int, samples: int) -> None:
@@ -224,6 +245,36 @@ def check_root_goal_not_met_at_start(compiled: CompiledTree, inside: int, sample
             f"{root} holds at {inside} of {samples} sampled starts ({inside / samples:.0%}): the episodes that "
             "start there end at their first step and count as successes whatever the policy does. "
             f"Hint: {_START_HINT}",
+            SpecWarning,
+            stacklevel=_caller(),  # the caller of make_env
+        )
+
+
+def check_root_goal_holds_at_start(compiled: CompiledTree, inside: int, samples: int) -> None:
+    """A root goal that must hold until the end holds at some sampled start (``inside`` of ``samples``).
+
+    It must hold at every state, the first included: an episode that starts
+    outside it has failed before the policy acts.
+
+    Raises:
+        UnreachableGoal: it holds at no sampled start, so every episode fails whatever the policy does.
+
+    Warns:
+        SpecWarning: it fails at some of them, with their share.
+    """
+    root, outside = compiled.paths[0], samples - inside
+    if samples and outside == samples:
+        raise UnreachableGoal(
+            root,
+            f"the root goal must hold until the end (from the first state on), and it holds at none of {samples} "
+            "sampled starts (seeded resets), so every episode would fail before the agent acts",
+            _HOLD_HINT,
+        )
+    if samples and outside:
+        warnings.warn(
+            f"{root} must hold until the end and fails at {outside} of {samples} sampled starts "
+            f"({outside / samples:.0%}): the episodes that start there fail whatever the policy does. "
+            f"Hint: {_HOLD_HINT}",
             SpecWarning,
             stacklevel=_caller(),  # the caller of make_env
         )
