@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import warnings
 
+import gymnasium as gym
 import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
-from test_met_at_start import TINY, always_inside, never_inside, share_inside, sometimes_inside
+from test_met_at_start import TINY, Drift, share_inside
 
 import specguard as sg
 from specguard import strategies as sgst
@@ -25,6 +26,13 @@ from specguard.extend import until_end
 from specguard.testing import ReplayEnv
 
 EVALUATORS = ("flat", "reference")
+
+
+def _limited(start_low: float):  # Drift ends its episodes at 20 steps itself; a TimeLimit declares it
+    return lambda: gym.wrappers.TimeLimit(Drift(start_low), 20)
+
+
+always_inside, sometimes_inside, never_inside = _limited(0.6), _limited(0.0), _limited(-1.0)
 INSIDE = sg.Goal("inside", x=(-1.0, 1.0))
 BALANCE = sg.Always(INSIDE, name="balance")
 
@@ -199,3 +207,15 @@ def test_a_spec_trains_on_it_and_its_table_counts_the_episodes_that_started_outs
     assert f"{outside} of {run.episodes} evaluation episodes started outside the root goal 'stay'" in result.table()
     assert "started inside" not in result.table()
     assert run.successes["stay"] <= run.started_in_goal  # an episode that started outside cannot succeed
+
+
+def test_an_env_without_an_episode_limit_is_warned_about():
+    endless = sg.InitialEnv(lambda: Drift(0.6), features=("x",))  # ends at 20 steps, but declares no limit
+    tree = sg.Always(sg.Goal("up", x=(0.5, None)), name="stay")
+    with pytest.warns(SpecWarning, match="no episode limit"):
+        sg.make_env(endless, tree).close()
+    limited = sg.InitialEnv(always_inside, features=("x",))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sg.make_env(limited, tree).close()
+        sg.make_env(sg.InitialEnv(never_inside, features=("x",)), sg.Goal("far", x=(1.5, None))).close()  # reach

@@ -30,7 +30,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.utils import RecordConstructorArgs
 
-from specguard.construction.checks import START_SAMPLES, check_goals, check_starts
+from specguard.construction.checks import START_SAMPLES, check_episode_limit, check_goals, check_starts
 from specguard.construction.compiled import CompiledTree, compile_tree
 from specguard.construction.initial_env import InitialEnv, check_identity_observation, read_env_features
 from specguard.construction.reference import ReferenceEvaluator
@@ -457,10 +457,11 @@ class EnvFactory:
         try:
             low, high = initial_env.feature_bounds(base.observation_space)  # checks the features fit the observation
             check_goals(compiled, low, high)  # refuse a goal no state can be in, before training
-            if not self.starts_checked:  # and a root goal met before the agent acts
+            if not self.starts_checked:  # and a root goal met (or, held until the end, failed) before the agent acts
                 inside = starts_in_root_goal(initial_env, compiled, START_SAMPLES, **make_kwargs)
                 if inside is not None:
                     check_starts(compiled, inside, START_SAMPLES)
+                check_episode_limit(compiled, base)
                 self.starts_checked = True
             if self.baseline:
                 return BaselineEnv(
