@@ -46,11 +46,11 @@ from specguard.utils.text import bounds_text
 
 __all__ = [
     "START_SAMPLES",
+    "check_episode_limit",
     "check_goals",
     "check_goals_off_the_edge",
     "check_goals_reachable",
     "check_root_goal_holds_at_start",
-    "check_episode_limit",
     "check_root_goal_not_met_at_start",
     "check_starts",
     "episode_limit",
