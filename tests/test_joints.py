@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -10,8 +11,7 @@ import pytest
 from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
 
 from specguard.error import InvalidSpec, UnknownFeature
-from specguard.falsify.joints import joint_names
-from specguard.falsify.starts import START_OPTION, StartSpace
+from specguard.falsify.starts import START_OPTION, StartSpace, start_variables
 
 
 def start(env, values):
@@ -31,7 +31,7 @@ def reset_state(env_id):
 
 def test_inverted_pendulum_names_its_slider_and_hinge_and_is_observed_in_the_state_set():
     env = gym.make("InvertedPendulum-v5")
-    assert joint_names(env) == ("slider", "hinge", "slider_vel", "hinge_vel")
+    assert start_variables(env) == ("slider", "hinge", "slider_vel", "hinge_vel")
     values = {"slider": 0.5, "hinge": -0.15, "slider_vel": 1.0, "hinge_vel": -2.0}
     wrapped, obs = start(env, values)
     np.testing.assert_array_equal(env.unwrapped.data.qpos, [0.5, -0.15])
@@ -53,7 +53,7 @@ def test_variables_left_out_keep_what_the_reset_gave():
 def test_reacher_sets_its_arm_and_its_target_and_observes_them():
     qpos, qvel, _ = reset_state("Reacher-v5")
     env = gym.make("Reacher-v5")
-    assert joint_names(env) == (
+    assert start_variables(env) == (
         *("joint0", "joint1", "target_x", "target_y"),
         *("joint0_vel", "joint1_vel", "target_x_vel", "target_y_vel"),
     )
@@ -71,7 +71,7 @@ def test_reacher_sets_its_arm_and_its_target_and_observes_them():
 
 def test_hopper_sets_its_height_a_joint_and_a_velocity():
     env = gym.make("Hopper-v5")
-    assert joint_names(env)[:6] == ("rootx", "rootz", "rooty", "thigh_joint", "leg_joint", "foot_joint")
+    assert start_variables(env)[:6] == ("rootx", "rootz", "rooty", "thigh_joint", "leg_joint", "foot_joint")
     _, obs = start(env, {"rootz": 1.5, "thigh_joint": -0.3, "rootx_vel": 2.0})
     # Hopper observes qpos without rootx, then qvel (clipped to +-10).
     assert obs[0] == 1.5 and obs[2] == -0.3 and obs[5] == 2.0
@@ -101,7 +101,8 @@ def test_a_space_naming_no_joint_searches_the_envs_reset_seeds_and_says_why():
     starts = StartSpace().resolve(gym.make("InvertedPendulum-v5"))
     assert starts.how == "reset seeds" and starts.names == ("seed",)
     assert starts.note == (
-        "StartSpace for InvertedPendulum-v5: no ranges were given for its variables, so reset seeds are searched instead"
+        "StartSpace for InvertedPendulum-v5: no ranges were given for its variables, "
+        "so reset seeds are searched instead"
     )
 
 
@@ -140,7 +141,7 @@ CLASH = """
 class Toy(MujocoEnv):
     """A MuJoCo env over the model at ``path``: observes ``qpos`` and ``qvel``; no actuators."""
 
-    metadata = {"render_modes": ["human", "rgb_array", "depth_array", "rgbd_tuple"], "render_fps": 500}
+    metadata: ClassVar[dict] = {"render_modes": ["human", "rgb_array", "depth_array", "rgbd_tuple"], "render_fps": 500}
 
     def __init__(self, path, **kwargs):
         space = gym.spaces.Box(-np.inf, np.inf, (1,), np.float64)  # replaced once the model is loaded
@@ -181,7 +182,7 @@ def test_free_and_ball_joints_name_their_coordinates_and_unnamed_joints_their_in
     positions += ("joint1_qw", "joint1_qx", "joint1_qy", "joint1_qz", "joint2")
     velocities = ("float_vel_x", "float_vel_y", "float_vel_z", "float_vel_rx", "float_vel_ry", "float_vel_rz")
     velocities += ("joint1_vel_rx", "joint1_vel_ry", "joint1_vel_rz", "joint2_vel")
-    assert joint_names(toy) == positions + velocities
+    assert start_variables(toy) == positions + velocities
     assert len(positions) == toy.model.nq and len(velocities) == toy.model.nv
     _, obs = start(toy, {"float_z": 2.0, "float_vel_rz": 0.5, "joint1_qx": 1.0, "joint2": 0.7, "joint1_vel_ry": -1.0})
     qpos, qvel = toy.data.qpos, toy.data.qvel

@@ -74,6 +74,7 @@ def test_the_report_writes_the_counterexamples_gif_without_a_display(pytester, c
     result.stdout.fnmatch_lines(["FAILED test_specs.py::test_balance[[]falsify[]] - falsified:"])
     gif = pytester.path / "report" / "test_specs.py__test_balance-falsify-seed0.gif"
     assert gif.exists(), out
+    assert f"seed 0: counterexample episode: {gif.relative_to(pytester.path)} (balance, " in out
     with Image.open(gif) as image:
         assert image.format == "GIF" and image.n_frames > 1
         image.seek(0)
@@ -110,7 +111,7 @@ def test_a_factory_without_render_mode_renders_off_screen_and_leaves_mujoco_gl_u
     assert gif.written, gif.text
     assert gif.frames > 1 and "missed: balance" in gif.text
     with Image.open(gif.path) as image:
-        assert image.format == "GIF" and image.n_frames == gif.frames
+        assert image.format == "GIF" and image.n_frames > 1
     assert "MUJOCO_GL" not in os.environ and "PYOPENGL_PLATFORM" not in os.environ
 
 

@@ -45,7 +45,7 @@ import numpy as np
 from specguard.error import InvalidSpec
 from specguard.falsify.starts import Range, Setter, env_label
 
-__all__ = ["joint_names", "joint_setter", "mujoco_env"]
+__all__ = ["joint_setter", "mujoco_env"]
 
 _FREE, _BALL = 0, 1  # mujoco.mjtJoint.mjJNT_FREE, mjJNT_BALL (slide 2, hinge 3: one qpos, one qvel entry)
 _QUATERNION = ("qw", "qx", "qy", "qz")
@@ -112,16 +112,6 @@ def _position_bounds(model: Any, joint: int, kind: int, variable: str) -> Range:
         lo, hi = (float(v) for v in model.jnt_range[joint])
         return lo, hi
     return _UNBOUNDED
-
-
-def joint_names(env: gym.Env) -> tuple[str, ...]:
-    """The start variables of a MuJoCo ``env`` (positions, then velocities); ``()`` for any other env.
-
-    This is the list an unknown name is refused with: ``specguard falsify`` on a
-    MuJoCo spec with ``--starts nothing=0:1`` prints it too.
-    """
-    setter = joint_setter(env)
-    return setter.names if setter is not None else ()
 
 
 def joint_setter(env: gym.Env) -> Setter | None:

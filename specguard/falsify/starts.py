@@ -62,6 +62,7 @@ __all__ = [
     "Starts",
     "as_start_space",
     "setter_for",
+    "start_variables",
 ]
 
 Range = tuple[float, float]
@@ -194,6 +195,18 @@ def setter_for(env: gym.Env) -> Setter | None:
 
     builtin = BUILTIN_SETTERS.get(type(env.unwrapped).__name__)
     return builtin if builtin is not None else joint_setter(env)
+
+
+def start_variables(env: gym.Env) -> tuple[str, ...]:
+    """The names a start space may give ranges for on ``env``: its state variables, then its physical
+    parameters; ``()`` where its state cannot be set (a hook's names are its own).
+
+    Example:
+        >>> start_variables(gym.make("Pendulum-v1"))
+        ('theta', 'omega', 'g', 'm', 'l')
+    """
+    setter = setter_for(env)
+    return () if setter is None else (*setter.names, *setter.parameters)
 
 
 def env_label(env: gym.Env) -> str:
