@@ -155,7 +155,7 @@ def test_a_policy_among_the_hyperparameters_is_refused_with_a_hint_to_the_field(
     assert e.value.hint == "use Spec(..., policy=...)"
 
 
-def test_the_policy_trains(tmp_path):
+def test_the_policy_trains():
     from stable_baselines3.common.policies import ActorCriticPolicy
 
     class Marked(ActorCriticPolicy):
