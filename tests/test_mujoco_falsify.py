@@ -85,7 +85,7 @@ def test_the_report_writes_the_counterexamples_gif_without_a_display(pytester, c
 class Still:
     """A model whose action is always 0: the pole falls from any start off upright."""
 
-    def predict(self, obs, deterministic=True):
+    def predict(self, obs, state=None, episode_start=None, deterministic=False):  # SB3's signature
         return np.zeros(1, dtype=np.float32), None
 
 

@@ -112,7 +112,7 @@ def blind_spec():
 
 
 class Model:
-    def predict(self, obs, deterministic=True):
+    def predict(self, obs, state=None, episode_start=None, deterministic=False):  # SB3's signature
         return np.int64(0), None
 
 

@@ -44,13 +44,15 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
 from specguard.error import InvalidSpec, UnknownFeature
+from specguard.falsify.joints import joint_setter
+from specguard.falsify.setter import Range, Setter, env_label
 from specguard.validation import check_finite, check_flag, check_text
 
 __all__ = [
@@ -65,51 +67,10 @@ __all__ = [
     "start_variables",
 ]
 
-Range = tuple[float, float]
 SEED_RANGE: Range = (0.0, float(2**31 - 1))
 """The reset seeds searched for an env whose state cannot be set."""
 START_OPTION = "specguard_start"
 """The ``reset(options=...)`` key under which :class:`StartWrapper` receives a start."""
-
-
-@dataclass(frozen=True)
-class Setter:
-    """How one kind of env is put in a start state.
-
-    Attributes:
-        names: the state variables, in order.
-        bounds: per variable, the range any start must lie in (``+-inf`` for none).
-        default: per variable, the env's own reset range (the start space's default); a variable
-            without one is searched only where the space names it, else keeps what reset gave.
-        apply: ``apply(env, values) -> observation``: sets ``env.unwrapped``'s state.
-        parameters: physical parameters a start space may also range over, by
-            name: the attribute of ``env.unwrapped`` each sets (any value > 0).
-        settle: ``settle(unwrapped)`` after parameters are set: recomputes what the env derives from them.
-    """
-
-    names: tuple[str, ...]
-    bounds: Mapping[str, Range]
-    default: Mapping[str, Range]
-    apply: Callable[[gym.Env, Mapping[str, float]], Any]
-    parameters: Mapping[str, str] = field(default_factory=dict)
-    settle: Callable[[Any], None] | None = None
-
-    def with_parameters(self, names: tuple[str, ...]) -> Callable[[gym.Env, Mapping[str, float]], Any]:
-        """``apply`` that also sets the parameters ``names`` from the values, before the state."""
-        if not names:
-            return self.apply
-        attributes = {n: self.parameters[n] for n in names}
-        settle, apply = self.settle, self.apply
-
-        def apply_all(env: gym.Env, values: Mapping[str, float]) -> Any:
-            u = env.unwrapped
-            for name, attribute in attributes.items():
-                setattr(u, attribute, float(values[name]))
-            if settle is not None:
-                settle(u)
-            return apply(env, values)
-
-        return apply_all
 
 
 def _settle_cartpole(u: Any) -> None:
@@ -191,8 +152,6 @@ def setter_for(env: gym.Env) -> Setter | None:
 
     ``None``: the env's state cannot be set.
     """
-    from specguard.falsify.joints import joint_setter
-
     builtin = BUILTIN_SETTERS.get(type(env.unwrapped).__name__)
     return builtin if builtin is not None else joint_setter(env)
 
@@ -207,12 +166,6 @@ def start_variables(env: gym.Env) -> tuple[str, ...]:
     """
     setter = setter_for(env)
     return () if setter is None else (*setter.names, *setter.parameters)
-
-
-def env_label(env: gym.Env) -> str:
-    """The env's id, or its unwrapped class's name: for messages."""
-    spec = getattr(env, "spec", None)
-    return getattr(spec, "id", None) or type(env.unwrapped).__name__
 
 
 # -- checks: each a small named function, raising with the actual values ------------------------------

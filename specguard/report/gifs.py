@@ -22,9 +22,9 @@ from pathlib import Path
 from typing import Any
 
 from specguard.cache.models import load_model
-from specguard.error import InitialEnvError, NoFrames
+from specguard.error import InitialEnvError, NoFrames, NoOffscreen
 from specguard.falsify.starts import START_OPTION, StartSpace
-from specguard.report.offscreen import HOW, NoOffscreen, is_mujoco, offscreen
+from specguard.report.offscreen import HOW, is_mujoco, offscreen
 from specguard.spec.spec import Spec
 from specguard.training.policy import policy
 from specguard.training.rollout import episode

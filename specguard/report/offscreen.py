@@ -25,7 +25,9 @@ from contextlib import contextmanager
 
 import gymnasium as gym
 
-__all__ = ["BACKENDS", "ENABLE", "HOW", "NoOffscreen", "headless", "is_mujoco", "offscreen", "working_backend"]
+from specguard.error import NoOffscreen
+
+__all__ = ["BACKENDS", "ENABLE", "HOW", "headless", "is_mujoco", "offscreen", "working_backend"]
 
 BACKENDS = ("egl", "osmesa")
 """The off-screen backends tried, in order: EGL (Mesa's software renderer without a GPU), then OSMesa."""
@@ -46,10 +48,6 @@ with mujoco.Renderer(model, 16, 16) as renderer:
     renderer.update_scene(data)
     assert renderer.render().shape == (16, 16, 3)
 """
-
-
-class NoOffscreen(RuntimeError):
-    """A MuJoCo env cannot render here: no display, ``MUJOCO_GL`` unset, and no backend of :data:`BACKENDS` works."""
 
 
 def is_mujoco(env: gym.Env) -> bool:
