@@ -33,6 +33,7 @@ from specguard.version import __version__
 
 _EXPORTS = {
     "All": "specguard.tree.nodes",
+    "Always": "specguard.tree.nodes",
     "Annotation": "specguard.extend",
     "Budget": "specguard.spec.budget",
     "Cache": "specguard.cache.store",
@@ -130,4 +131,5 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.tree.builtin_annotations import Distance as Distance
     from specguard.tree.formula import formula as formula
     from specguard.tree.nodes import All as All
+    from specguard.tree.nodes import Always as Always
     from specguard.tree.nodes import Goal as Goal

@@ -87,6 +87,9 @@ class UnknownFeature(InvalidSpec):
 class UnreachableGoal(InvalidSpec):
     """A goal's box lies outside the known bounds of its features: no state can ever be in it.
 
+    Also a root goal that must hold until the end (``Always``) and holds at no
+    sampled start: every episode fails it before the agent acts.
+
     Raised before training (by ``make_env`` and ``make_baseline_env``), so a
     spec that could only train for nothing costs nothing. The message names
     the node path, the feature, the box and the bounds.

@@ -18,6 +18,8 @@ node keeps no episode state of its own, the evaluators hold it):
 * **core reward**: :meth:`Node.reward`, telescoping to :meth:`Node.potential`;
   how the children's rewards enter the node's (:meth:`Node.child_weights`);
 * **termination**: :meth:`Node.terminates`, given the children's (it must include them);
+  whether the goal, at the root, ends the episode when reached (a *reach* goal, the
+  paper's) or is judged when the episode ends (:meth:`Node.until_end`, ``Always``);
 * **description**: :meth:`Node.describe`, exact and deterministic.
 
 Example: an "at least k of the children" operator.
@@ -79,6 +81,7 @@ __all__ = [
     "component_weights",
     "goal_test",
     "set_fields",
+    "until_end",
 ]
 
 Box = Mapping[str, tuple[float, float]]
@@ -366,6 +369,17 @@ class Node:
         """
         return any(ended)
 
+    def until_end(self, children: tuple[bool, ...]) -> bool:
+        """Whether the goal must hold until the episode ends, given whether each child's must (``children``).
+
+        docs/semantics.md, "Goals that hold until the end": a *reach* goal (``False``, the paper's) ends
+        the episode when the root's is reached; a goal that holds until the end (``True``, ``Always``) ends
+        nothing and is judged at the episode's last state. Default: a leaf is a reach goal, and an operator
+        holds until the end when every child does, so an ``All`` with a reach child is reached (``A`` until
+        ``B``). A union (``AnyOf``) holds until the end when any child does.
+        """
+        return bool(children) and all(children)
+
     # -- description ---------------------------------------------------------
 
     def describe(self) -> str:
@@ -556,6 +570,22 @@ def adapted_annotations(node: Node) -> tuple[int, ...]:
 def annotation_key(path: str, annotation: Annotation) -> str:
     """The key of an annotation's reward term and safety rate: ``path:name``."""
     return f"{path}{ANNOTATION_SEPARATOR}{annotation.name}"
+
+
+def until_end(tree: Node) -> bool:
+    """Whether ``tree``'s goal holds until the end (judged at the last state) rather than ending the episode.
+
+    :meth:`Node.until_end` of the tree, children first.
+
+    Example:
+        >>> import specguard as sg
+        >>> upright = sg.Goal("upright", theta=(-0.2, 0.2))
+        >>> until_end(upright), until_end(sg.Always(upright, name="balance"))
+        (False, True)
+        >>> until_end(sg.All(sg.Always(upright, name="balance"), sg.Goal("home", x=(0.9, None)), name="carry"))
+        False
+    """
+    return bool(tree.until_end(tuple(until_end(c) for c in tree.children)))
 
 
 def goal_test(node: Node) -> Callable[[Any], bool]:

@@ -49,9 +49,9 @@ _plugins: dict[str, type] | None = None
 
 def _builtins() -> dict[str, type]:
     from specguard.tree.builtin_annotations import Constraint, Distance
-    from specguard.tree.nodes import All, Goal
+    from specguard.tree.nodes import All, Always, Goal
 
-    return {c.__name__: c for c in (Goal, All, Distance, Constraint)}
+    return {c.__name__: c for c in (Goal, All, Always, Distance, Constraint)}
 
 
 def _is_extension(value: object) -> bool:

@@ -14,7 +14,7 @@ from specguard.contract import checks as contract
 from specguard.testing import check_operator, parametrize_with_checks
 
 
-@parametrize_with_checks([sg.All, sg.Goal, sg.Distance, sg.Constraint])
+@parametrize_with_checks([sg.All, sg.Always, sg.Goal, sg.Distance, sg.Constraint])
 def test_builtins_keep_the_contract(operator, check):
     check(operator)
 

@@ -130,6 +130,11 @@ class AnyOf(Node):
         m = abs(max(margins, default=1.0))
         return m if self.contains(ctx) else -max(m, MARGIN_FLOOR)
 
+    def until_end(self, children: tuple[bool, ...]) -> bool:
+        # A union with a goal that must hold until the end is judged at the end too: were it a reach goal,
+        # an episode starting in that child's goal would end at its first step (docs/semantics.md).
+        return any(children)
+
     def describe(self) -> str:
         return f"AnyOf {self.name!r}{weights_text(self.weights)}"
 

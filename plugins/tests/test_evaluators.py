@@ -20,7 +20,10 @@ State = namedtuple("State", FEATURES)
 
 def plugin_trees(**kwargs):
     return sgst.trees(
-        FEATURES, operators=(sg.All, AnyOf, Sequence), annotations=(sg.Distance, sg.Constraint, Avoid), **kwargs
+        FEATURES,
+        operators=(sg.All, sg.Always, AnyOf, Sequence),
+        annotations=(sg.Distance, sg.Constraint, Avoid),
+        **kwargs,
     )
 
 

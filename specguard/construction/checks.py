@@ -7,9 +7,11 @@ tree; ``make_env`` and ``make_baseline_env`` call it (their preflight,
 :class:`specguard.construction.env.EnvFactory`), so ``run_spec`` refuses an
 impossible spec before training.
 
-One check is dynamic: :func:`check_root_goal_not_met_at_start` judges the
-root goal on :data:`START_SAMPLES` seeded resets of the env (the mirror of an
-unreachable goal: a goal met before the agent acts).
+One check is dynamic: :func:`check_starts` judges the root goal on
+:data:`START_SAMPLES` seeded resets of the env. A reach goal met at them is met
+before the agent acts (:func:`check_root_goal_not_met_at_start`, the mirror of an
+unreachable goal); a goal that must hold until the end and holds at none of them
+fails before the agent acts (:func:`check_root_goal_holds_at_start`).
 
 Nodes whose goal is a box (a ``Goal``; an ``All``'s is the intersection of
 its children's) are checked; a node whose goal is not a box (an ``AnyOf``, a
@@ -44,10 +46,14 @@ from specguard.utils.text import bounds_text
 
 __all__ = [
     "START_SAMPLES",
+    "check_episode_limit",
     "check_goals",
     "check_goals_off_the_edge",
     "check_goals_reachable",
+    "check_root_goal_holds_at_start",
     "check_root_goal_not_met_at_start",
+    "check_starts",
+    "episode_limit",
     "unreachable_reason",
 ]
 
@@ -195,8 +201,25 @@ A few milliseconds for most envs; enough that a goal met at every one of them is
 _START_HINT = (
     "reaching the root goal ends an episode, so it must be reached from outside it: widen the env's starts "
     "(reset options, or a factory that starts elsewhere), or state a goal the starts do not meet. A goal that "
-    "must hold until the episode ends cannot be stated yet (reach goals only)"
+    "must hold until the episode ends is sg.Always(goal, name=...): it ends nothing and is judged at the last state"
 )
+_HOLD_HINT = (
+    "a goal that must hold until the end (sg.Always) holds at every state of the episode, the first included: "
+    "widen it to take in the env's starts, or state a reach goal (the goal alone, without Always) if it is to be "
+    "reached rather than kept"
+)
+
+
+def check_starts(compiled: CompiledTree, inside: int, samples: int) -> None:
+    """The root goal judged at the sampled starts (``inside`` of ``samples`` seeded resets were in it).
+
+    A reach goal by :func:`check_root_goal_not_met_at_start`, a goal that holds until the end
+    by :func:`check_root_goal_holds_at_start`.
+    """
+    if compiled.reach:
+        check_root_goal_not_met_at_start(compiled, inside, samples)
+    else:
+        check_root_goal_holds_at_start(compiled, inside, samples)
 
 
 def check_root_goal_not_met_at_start(compiled: CompiledTree, inside: int, samples: int) -> None:
@@ -227,6 +250,69 @@ def check_root_goal_not_met_at_start(compiled: CompiledTree, inside: int, sample
             SpecWarning,
             stacklevel=_caller(),  # the caller of make_env
         )
+
+
+def check_root_goal_holds_at_start(compiled: CompiledTree, inside: int, samples: int) -> None:
+    """A root goal that must hold until the end holds at some sampled start (``inside`` of ``samples``).
+
+    It must hold at every state, the first included: an episode that starts
+    outside it has failed before the policy acts.
+
+    Raises:
+        UnreachableGoal: it holds at no sampled start, so every episode fails whatever the policy does.
+
+    Warns:
+        SpecWarning: it fails at some of them, with their share.
+    """
+    root, outside = compiled.paths[0], samples - inside
+    if samples and outside == samples:
+        raise UnreachableGoal(
+            root,
+            f"the root goal must hold until the end (from the first state on), and it holds at none of {samples} "
+            "sampled starts (seeded resets), so every episode would fail before the agent acts",
+            _HOLD_HINT,
+        )
+    if samples and outside:
+        warnings.warn(
+            f"{root} must hold until the end and fails at {outside} of {samples} sampled starts "
+            f"({outside / samples:.0%}): the episodes that start there fail whatever the policy does. "
+            f"Hint: {_HOLD_HINT}",
+            SpecWarning,
+            stacklevel=_caller(),  # the caller of make_env
+        )
+
+
+def episode_limit(env: Any) -> int | None:
+    """The env's episode step limit: the outermost ``TimeLimit``'s among its wrappers, else its spec's, else None."""
+    inner = env
+    while inner is not None:
+        limit = getattr(inner, "_max_episode_steps", None)
+        if isinstance(limit, int) and not isinstance(limit, bool) and limit > 0:
+            return limit
+        inner = getattr(inner, "env", None)
+    spec = getattr(env, "spec", None)
+    limit = getattr(spec, "max_episode_steps", None)
+    return limit if isinstance(limit, int) and not isinstance(limit, bool) and limit > 0 else None
+
+
+def check_episode_limit(compiled: CompiledTree, env: Any) -> None:
+    """A root goal that holds until the end has an episode limit to end its episodes (a ``TimeLimit``).
+
+    Such a goal ends nothing: the episode ends only where the initial env ends it.
+
+    Warns:
+        SpecWarning: the env declares no step limit, so an episode the env never ends would not end.
+    """
+    if compiled.reach or episode_limit(env) is not None:
+        return
+    warnings.warn(
+        f"{compiled.paths[0]} must hold until the end, which only the initial env decides, and the env declares "
+        "no episode limit (no TimeLimit): its episodes end only where it terminates or truncates them itself, and "
+        "one it never ends hangs training and evaluation. Hint: pass max_episode_steps=N to sg.InitialEnv (it goes "
+        "to gymnasium.make), or wrap your factory's env in gymnasium.wrappers.TimeLimit",
+        SpecWarning,
+        stacklevel=_caller(),  # the caller of make_env
+    )
 
 
 def unreachable_reason(initial_env: Any, tree: Node, path: str) -> str | None:

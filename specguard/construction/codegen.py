@@ -68,6 +68,8 @@ class FlatTree(Protocol):
     def slots(self) -> tuple[tuple[str, Slot], ...]: ...
     @property
     def slot_start(self) -> tuple[int, ...]: ...
+    @property
+    def reach(self) -> bool: ...
 
 
 def number(x: float) -> str:
@@ -172,7 +174,7 @@ def _start_source(tree: FlatTree) -> str:
 
 def _step_source(tree: FlatTree) -> str:
     lines = ["def step(f, m, s, q, z, a, last):", *_member_lines(tree, stepping=True)]
-    ends = ["m0"]
+    ends = ["m0"] if tree.reach else []  # the root goal reached ends the episode, unless it holds until the end
     names: list[str] = []
     distances = 0
     for k, t in enumerate(tree.terms):
@@ -211,10 +213,10 @@ def _step_source(tree: FlatTree) -> str:
             names.append(f"t{k}")
             lines.append(f"    t{k} = {term}")
     if all(tree.fast):
-        end = " or ".join(ends)
+        end = " or ".join(ends) or "False"
     else:
         lines += _termination_lines(tree)
-        end = "m0 or x0"
+        end = " or ".join([*ends[:1], "x0"])
     judged = _last_state_lines(tree)
     if judged:  # the episode ends at s2: its state is judged too (docs/semantics.md, "The last state")
         lines += [f"    e = {end}", "    if last or (e and last is not None):", *judged]

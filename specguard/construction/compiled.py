@@ -51,6 +51,7 @@ from specguard.extend import (
     adapted_annotations,
     annotation_key,
     component_weights,
+    until_end,
 )
 from specguard.validation import check_truth, child_path
 
@@ -136,6 +137,14 @@ class CompiledTree:
     def all_fast(self) -> bool:
         """Whether every node and annotation compiled to a closed form (no own state beyond counters)."""
         return all(self.fast) and all(t.kind in ("member", "distance", "counter", "zero") for t in self.terms)
+
+    @property
+    def reach(self) -> bool:
+        """Whether reaching the root goal ends the episode (a reach goal), rather than holding until the end.
+
+        docs/semantics.md, "Goals that hold until the end" (:func:`specguard.extend.until_end`).
+        """
+        return not until_end(self.nodes[0])
 
     @property
     def stateful(self) -> bool:

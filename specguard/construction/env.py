@@ -30,7 +30,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.utils import RecordConstructorArgs
 
-from specguard.construction.checks import START_SAMPLES, check_goals, check_root_goal_not_met_at_start
+from specguard.construction.checks import START_SAMPLES, check_episode_limit, check_goals, check_starts
 from specguard.construction.compiled import CompiledTree, compile_tree
 from specguard.construction.initial_env import InitialEnv, check_identity_observation, read_env_features
 from specguard.construction.reference import ReferenceEvaluator
@@ -423,7 +423,7 @@ class EnvFactory:
     The first call runs :func:`preflight` (a failure is raised again by every later call); every call builds
     a base env and checks the goals against the bounds of its observation space, before wrapping it. The
     first call that gets that far also judges the root goal on seeded resets of an env of its own
-    (:func:`starts_in_root_goal`, :func:`~specguard.construction.checks.check_root_goal_not_met_at_start`).
+    (:func:`starts_in_root_goal`, :func:`~specguard.construction.checks.check_starts`).
 
     Args:
         initial_env: the initial environment and its mappings.
@@ -457,10 +457,11 @@ class EnvFactory:
         try:
             low, high = initial_env.feature_bounds(base.observation_space)  # checks the features fit the observation
             check_goals(compiled, low, high)  # refuse a goal no state can be in, before training
-            if not self.starts_checked:  # and a root goal met before the agent acts
+            if not self.starts_checked:  # and a root goal met (or, held until the end, failed) before the agent acts
                 inside = starts_in_root_goal(initial_env, compiled, START_SAMPLES, **make_kwargs)
                 if inside is not None:
-                    check_root_goal_not_met_at_start(compiled, inside, START_SAMPLES)
+                    check_starts(compiled, inside, START_SAMPLES)
+                check_episode_limit(compiled, base)
                 self.starts_checked = True
             if self.baseline:
                 return BaselineEnv(

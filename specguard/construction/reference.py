@@ -21,7 +21,7 @@ from typing import Any, NamedTuple
 
 from specguard.construction.initial_env import state_type
 from specguard.error import EvaluationError
-from specguard.extend import Annotation, Context, Node, Slot, annotation_key, component_weights
+from specguard.extend import Annotation, Context, Node, Slot, annotation_key, component_weights, until_end
 from specguard.validation import child_path
 
 __all__ = [
@@ -247,8 +247,8 @@ def process(node: Node, path: str | None = None, *, root: bool = True) -> Requir
     )
     for a, w in zip(node.annotations, ann_w):
         req = _annotation(annotation_key(path, a), w, a, req)
-    # Step 3: the root goal ends the episode, for all actions.
-    if root:
+    # Step 3: the root goal ends the episode, for all actions (unless it holds until the end).
+    if root and not until_end(node):
         inner, goal = req.terminal, req.goal
         req = Requirements(
             req.goal,

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from specguard.error import SpecError
+from specguard.extend import until_end
 from specguard.spec.spec import Spec
 from specguard.stats.intervals import GoalOutcome, QuorumVerdict, RunVerdict, success_interval
 from specguard.training.result import RunResult
@@ -292,9 +293,15 @@ class SpecResult:
             rows.append((label(p), rate, iv, threshold, met, "-" if g is None else self.word(p)))
         lines = render_table(header, rows)
         started = sum(r.started_in_goal for r in self.runs)
-        if started:
-            root = self.trained.tree.name if self.trained is not None else next(iter(paths), "?")
-            episodes = sum(r.episodes for r in self.runs)
+        episodes = sum(r.episodes for r in self.runs)
+        root = self.trained.tree.name if self.trained is not None else next(iter(paths), "?")
+        if self.trained is not None and until_end(self.trained.tree):
+            if episodes - started:  # a goal that must hold from the first state on
+                lines.append(
+                    f"{episodes - started} of {episodes} evaluation episodes started outside the root goal "
+                    f"{root!r}, which must hold until the end: failed before the policy acted"
+                )
+        elif started:
             lines.append(
                 f"{started} of {episodes} evaluation episodes started inside the root goal {root!r}: "
                 "met before the policy acted"

@@ -49,6 +49,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from specguard.extend import until_end
 from specguard.falsify.robustness import Judgement, feature_scales, judge_end, own_states, reached_early
 from specguard.falsify.starts import START_OPTION, Starts, StartSpace
 from specguard.stats.intervals import success_interval
@@ -186,7 +187,7 @@ class EpisodeRunner:
         judgement = judge_end(
             self.tree, self.keys, s, own_states(ev.slots, ev.own_state), info["goals"], info["safe"], self.scales
         )
-        if terminated and self.max_steps:
+        if terminated and self.max_steps and not until_end(self.tree):  # a reach goal: how early it was reached
             judgement = reached_early(judgement, self.tree.name, steps, self.max_steps)
         last = {f: float(v) for f, v in zip(s._fields, s, strict=True)}
         return Outcome(start, judgement, steps, "terminated" if terminated else "truncated", last)

@@ -32,6 +32,7 @@ from specguard.extend import (
     ChildWeights,
     Context,
     Node,
+    Slot,
     check_child_weights,
     component_weights,
     set_fields,
@@ -42,7 +43,7 @@ from specguard.validation import ANNOTATION_SEPARATOR, PATH_SEPARATOR, check_nam
 if TYPE_CHECKING:
     from hypothesis.strategies import SearchStrategy
 
-__all__ = ["All", "Annotation", "Constraint", "Distance", "Goal", "Node", "component_weights"]
+__all__ = ["All", "Always", "Annotation", "Constraint", "Distance", "Goal", "Node", "component_weights"]
 
 # Re-exported: modules written before the extension API import these from here.
 AUTO: Literal["auto"] = "auto"  # All(weights=AUTO): adapted during training (specguard.training.auto_weights)
@@ -272,3 +273,66 @@ class All(Node):
         kids = ", ".join(map(repr, self.nodes))
         weights = "" if self.weights is None else f", weights={self.weights!r}"
         return f"All({kids}, name={self.name!r}{weights}){self._annotations_repr()}"
+
+
+@dataclass(frozen=True, init=False, repr=False)
+class Always(Node):
+    """A goal that must hold until the episode ends: every child's goal, at every state of the episode.
+
+    Its own state ``held`` (0 or 1, in the observation) is whether every child's
+    goal has held at every state so far; the goal is ``held`` and every child's
+    goal now. Entering it ends nothing: at the root, the episode runs to the
+    initial env's own end (termination or truncation) and is judged at its last
+    state. Its core reward is its membership difference, so leaving pays ``-1``
+    once and nothing is ever paid back; the children's goal rewards are not added
+    (its own replaces them), their distances and penalties count as they would
+    alone (docs/semantics.md, "Goals that hold until the end").
+
+    Under ``All``, beside a reach goal, it reads "until": ``All(Always(A), B)``
+    is reached when ``B`` is, with ``A`` held at every state before.
+
+    Args:
+        *children: the goals that must hold, at least one, with distinct names.
+        name: the node's name.
+
+    Example:
+        >>> balance = Always(Goal("upright", theta=(-0.2, 0.2)), name="balance")
+        >>> print(balance)
+        Always 'balance'
+        └── Goal 'upright': -0.2 <= theta <= 0.2
+    """
+
+    kind: ClassVar[str] = "Always"
+    name: str
+    nodes: tuple[Node, ...]
+    annotations: tuple[Annotation, ...]
+
+    def __init__(self, *children: Node, name: str) -> None:
+        self.init_node(name, children)
+
+    # -- the extension protocol (docs/semantics.md, "Goals that hold until the end") --
+
+    def child_weights(self) -> tuple[ChildWeights, ...]:
+        return (ChildWeights(core=0.0, shaping=1.0, safety=1.0),) * len(self.nodes)  # it pays for its goal itself
+
+    def state_slots(self) -> tuple[Slot, ...]:
+        return (Slot("held", 0.0, 1.0),)
+
+    def initial_state(self, ctx: Context) -> tuple[float, ...]:
+        return (1.0 if all(ctx.inside) else 0.0,)
+
+    def next_state(self, before: Context, action: object, s2: object, inside2: tuple[bool, ...]) -> tuple[float, ...]:
+        return (1.0 if before.q[0] >= 1.0 and all(inside2) else 0.0,)
+
+    def contains(self, ctx: Context) -> bool:
+        return ctx.q[0] >= 1.0 and all(ctx.inside)
+
+    def until_end(self, children: tuple[bool, ...]) -> bool:
+        return True  # judged at the last state, whatever its children are
+
+    def describe(self) -> str:
+        return f"Always {self.name!r}"
+
+    def __repr__(self) -> str:
+        kids = ", ".join(map(repr, self.nodes))
+        return f"Always({kids}, name={self.name!r}){self._annotations_repr()}"
