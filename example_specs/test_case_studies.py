@@ -1,4 +1,4 @@
-"""The paper's four case studies, and a CartPole spec beyond them, as goal specs.
+"""The paper's four case studies, and specs beyond them (CartPole, MiniGrid, InvertedPendulum), as goal specs.
 
 Run them with ``pytest --goal-specs example_specs``. Every spec, its
 thresholds and the goals it is expected to miss are declared once, in its
@@ -18,7 +18,7 @@ from collections.abc import Iterable, Mapping
 import pytest
 
 import specguard as sg
-from example_specs import acrobot, cartpole, lunar_lander, mountain_car, pendulum
+from example_specs import acrobot, cartpole, inverted_pendulum, lunar_lander, minigrid_empty, mountain_car, pendulum
 
 paper = pytest.mark.paper
 
@@ -33,3 +33,5 @@ test_acrobot = sg.goal_specs(acrobot.specs, marks=opt_in(acrobot.specs))
 test_mountain_car = sg.goal_specs(mountain_car.specs, marks=opt_in(mountain_car.specs))
 test_lunar_lander = sg.goal_specs(lunar_lander.specs, marks=opt_in(lunar_lander.specs, also=["baseline"]))
 test_cartpole = sg.goal_specs(cartpole.specs)
+test_minigrid = sg.goal_specs(minigrid_empty.specs)
+test_inverted_pendulum = sg.goal_specs(inverted_pendulum.specs)
