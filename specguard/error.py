@@ -21,6 +21,7 @@ __all__ = [
     "InitialEnvError",
     "InvalidSpec",
     "NoFrames",
+    "NoOffscreen",
     "PluginWarning",
     "SpecError",
     "SpecWarning",
@@ -205,3 +206,10 @@ class ExitAtImport(BaseException):
 
 class NoFrames(Exception):
     """An env's ``render()`` gave no RGB frame, so a GIF cannot be written (the report notes it and goes on)."""
+
+
+class NoOffscreen(RuntimeError):
+    """A MuJoCo env cannot render here: no display, ``MUJOCO_GL`` unset, and no off-screen backend works.
+
+    Raised by :mod:`specguard.report.offscreen`; the GIF code turns it into the report's one-line note.
+    """

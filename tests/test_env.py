@@ -471,3 +471,54 @@ def test_factory_make_and_execute_errors_are_spec_errors_naming_the_culprit(init
         env = sg.make_env(initial(), sg.Goal("g", x=(0.9, 1.0)))
         env.reset(seed=0)
         env.step(np.zeros(1, dtype=np.float32))
+
+
+# -- action masks ----------------------------------------------------------------------------
+
+
+class MaskedCartPole(gym.Wrapper):
+    """CartPole whose masks allow only pushing left while the cart is right of the middle."""
+
+    def __init__(self):
+        super().__init__(gym.make("CartPole-v1"))
+
+    def action_masks(self):
+        return np.array([True, self.unwrapped.state[0] <= 0])
+
+
+CARTPOLE_FEATURES = ("x", "v", "theta", "omega")
+FAR = sg.Goal("far", x=(2.0, 2.4))
+
+
+def test_the_constructed_env_gives_the_initial_envs_masks_through_any_wrapper():
+    from sb3_contrib.common.maskable.utils import get_action_masks, is_masking_supported
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from specguard.construction.env import action_masks_problem
+
+    env = sg.make_env(sg.InitialEnv(MaskedCartPole, features=CARTPOLE_FEATURES), FAR)
+    obs, _ = env.reset(seed=0)
+    assert action_masks_problem(env) is None
+    assert list(env.action_masks()) == [True, bool(obs[0] <= 0)]
+    venv = make_vec_env(lambda: sg.make_env(sg.InitialEnv(MaskedCartPole, features=CARTPOLE_FEATURES), FAR), 2)
+    obs = venv.reset()
+    assert is_masking_supported(venv)  # as sb3-contrib reads them: through SB3's Monitor and the vec env
+    assert get_action_masks(venv).tolist() == [[True, bool(x <= 0)] for x in obs[:, 0]]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "problem"),
+    [
+        ({}, r"the initial env \(CartPoleEnv\) has no action_masks\(\) method"),
+        ({"execute": lambda a: 1 - a}, r"the agent's actions go through execute\(\)"),
+    ],
+)
+def test_an_env_without_masks_for_the_agents_actions_says_why(kwargs, problem):
+    from specguard.construction.env import action_masks_problem
+
+    factory = MaskedCartPole if kwargs else (lambda: gym.make("CartPole-v1"))
+    env = sg.make_env(sg.InitialEnv(factory, features=CARTPOLE_FEATURES, **kwargs), FAR)
+    env.reset(seed=0)
+    assert re.match(problem, action_masks_problem(env))
+    with pytest.raises(sg.InitialEnvError, match=rf"far: no action masks: {problem}"):
+        env.action_masks()

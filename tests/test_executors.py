@@ -20,10 +20,10 @@ DRIVER = "SPECGUARD_TEST_DRIVER_PID"
 
 def spec(initial=None, **kwargs):
     kwargs.setdefault("budget", sg.Budget(timesteps=256, min_seeds=2, eval_episodes=3, checkpoints=1))
+    kwargs.setdefault("hyperparameters", TINY)
     return sg.Spec(
         initial or pendulum.initial_env,
         pendulum.trees["b"],
-        hyperparameters=TINY,
         expect={"stabilization": 0.0},
         **kwargs,
     )
@@ -149,7 +149,8 @@ def test_errors_on_the_cluster_are_the_same_one_line_per_seed(cluster):
 
 def test_spec_errors_found_on_the_cluster_reach_the_caller(cluster):
     with pytest.raises(sg.InvalidSpec, match=r"Spec 'pendulum'.algorithm: DQN cannot act in a Box action space"):
-        sg.run_spec(spec(algorithm="DQN"), executor=cluster.scheduler_address, cache_dir=None, progress=None)
+        dqn = spec(algorithm="DQN", hyperparameters={})
+        sg.run_spec(dqn, executor=cluster.scheduler_address, cache_dir=None, progress=None)
 
 
 GOAL_SPEC = """

@@ -112,7 +112,7 @@ def blind_spec():
 
 
 class Model:
-    def predict(self, obs, deterministic=True):
+    def predict(self, obs, state=None, episode_start=None, deterministic=False):  # SB3's signature
         return np.int64(0), None
 
 
@@ -122,13 +122,31 @@ def test_an_env_without_rgb_array_frames_gives_a_note(tmp_path):
     assert not (tmp_path / "blind.gif").exists()
 
 
-def test_an_env_that_cannot_take_a_render_mode_gives_a_note(tmp_path):
+def test_a_factory_without_render_mode_is_told_to_render_rgb_array_frames(trained, tmp_path):
+    spec, _, model = trained
+
+    def make_cartpole():  # takes no render_mode
+        return gym.make("CartPole-v1")
+
+    made = sg.Spec(sg.InitialEnv(make_cartpole, features=spec.initial_env.features), spec.tree, budget=spec.budget)
+    gif = write_gif(model, made, tmp_path / "factory.gif")
+    assert gif.written and gif.frames > 1
+    with Image.open(gif.path) as image:
+        assert image.format == "GIF" and image.n_frames > 1
+    (steps,) = rollout(model, spec)  # the same episode as the env made with render_mode
+    assert f"{len(steps)} steps;" in gif.text
+
+
+def test_a_factory_without_render_mode_whose_env_lists_no_rgb_array_mode_gives_a_note(tmp_path):
     spec = blind_spec()
     spec = sg.Spec(
         sg.InitialEnv(lambda: Blind(), features=("x",)), spec.tree, budget=spec.budget
-    )  # the factory takes no render_mode
+    )  # the factory takes no render_mode, and Blind lists no render mode
     gif = write_gif(Model(), spec, tmp_path / "blind.gif")
-    assert not gif.written and "cannot be made to render rgb_array" in gif.text
+    assert not gif.written and gif.text == (
+        "no GIF of spec 'blind': its env does not render rgb_array frames "
+        "(its factory takes no render_mode, and Blind lists render modes [])"
+    )
 
 
 def test_a_render_that_raises_gives_a_note(tmp_path, monkeypatch):

@@ -83,7 +83,7 @@ def test_a_failing_seed_keeps_the_others(tmp_path):
 
 def test_spec_errors_from_workers_reach_the_caller(tmp_path):
     with pytest.raises(sg.InvalidSpec, match=r"Spec 'pendulum'.algorithm: DQN cannot act in a Box action space"):
-        sg.run_spec(spec(algorithm="DQN"), workers=1, cache_dir=None, progress=None)
+        sg.run_spec(spec(algorithm="DQN", hyperparameters={}), workers=1, cache_dir=None, progress=None)
 
 
 def test_workers():

@@ -50,14 +50,38 @@ def test_evaluate_counts_the_last_state_of_each_episode():
     assert counts == {"root": 3, "root/up": 3, "root/any": 3}
 
 
+def test_evaluate_tells_an_episode_policy_as_each_episode_starts():
+    initial = sg.InitialEnv(lambda: ReplayEnv([[0.0], [1.0], [0.0], [1.0]]), features=("x",))
+    env = sg.make_env(initial, sg.Goal("up", x=(0.5, None)))
+
+    class Counting:
+        """Acts 0; its action is the number of steps since it was last told an episode started."""
+
+        def __init__(self):
+            self.starts, self.steps = [], []
+
+        def start(self, envs):
+            self.starts.append(list(envs))
+            self.steps.append(0)
+
+        def __call__(self, observations, rows=None):
+            self.steps[-1] += 1
+            return 0
+
+    policy = Counting()
+    evaluate(policy, env, episodes=3, seeds=range(3))
+    assert policy.starts == [[env]] * 3 and policy.steps == [1, 1, 1]  # each episode reaches "up" in one step
+
+
 def test_algorithm_must_fit_the_action_space():
     with pytest.raises(sg.InvalidSpec, match=r"Spec 'pendulum'.algorithm: DQN cannot act in a Box action space"):
-        train_run(tiny_spec(algorithm="DQN"), seed=0)
+        train_run(tiny_spec(algorithm="DQN", hyperparameters={}), seed=0)
 
 
 def test_hyperparameters_sb3_rejects_are_attributed_to_the_spec():
-    with pytest.raises(sg.InvalidSpec, match=r"Spec 'pendulum'.hyperparameters: PPO rejected them: .*n_stepz"):
-        train_run(tiny_spec(hyperparameters={"n_stepz": 64}), seed=0)
+    # A value SB3 refuses (names it does not take are refused by the Spec: tests/test_algorithms.py).
+    with pytest.raises(sg.InvalidSpec, match=r"Spec 'pendulum'.hyperparameters: PPO rejected them: .*batch_size"):
+        train_run(tiny_spec(hyperparameters={**TINY, "batch_size": 1}), seed=0)
 
 
 class Exploding(gym.Wrapper):

@@ -181,7 +181,8 @@ class _Encoder:
         tag = library_module(cls.__module__)
         if tag is not None:
             return ["class", cls.__module__, cls.__qualname__, tag]
-        skip = {"__dict__", "__weakref__", "__module__", "__qualname__"}
+        # Not what the class computes: its namespace's bookkeeping, and an abstract base's cache of subclass checks.
+        skip = {"__dict__", "__weakref__", "__module__", "__qualname__", "_abc_impl"}
         body = [
             [k, self.encode(v, f"{where} ({cls.__qualname__}.{k})")]
             for k, v in sorted(vars(cls).items())

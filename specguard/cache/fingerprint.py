@@ -45,6 +45,7 @@ from typing import Any
 from specguard.cache.canonical import digest
 from specguard.cache.probe import probe
 from specguard.cache.versions import versions
+from specguard.spec.algorithms import SB3, algorithm_class, default_policy
 
 __all__ = ["SpecFingerprint", "fingerprint_spec"]
 
@@ -85,10 +86,25 @@ def _fields(obj: Any, exclude: frozenset[str]) -> dict[str, Any]:
     return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj) if f.name not in exclude}
 
 
+def _algorithm_fields(spec: Any, fields: dict[str, Any]) -> dict[str, Any]:
+    """``fields`` with the algorithm by identity and version, and the policy only where it is not the default.
+
+    stable-baselines3's algorithms stay their names (its version is in every key already); any other algorithm is
+    its class: an installed one by module, qualified name and its distribution's version (sb3-contrib's), the user's
+    own by its code, as any class in a spec. A run of the default policy keeps the key it had before specs had one.
+    """
+    out = dict(fields)
+    if out["policy"] == default_policy(spec.algorithm):
+        del out["policy"]
+    if not (isinstance(spec.algorithm, str) and spec.algorithm in SB3):
+        out["algorithm"] = algorithm_class(spec.algorithm)
+    return out
+
+
 def _compute(spec: Any) -> SpecFingerprint:
     where = f"Spec {spec.label!r}"
-    full = _fields(spec, _NOT_IDENTITY_FIELDS)
-    run = _fields(spec, _SPEC_ONLY_FIELDS | _NOT_IDENTITY_FIELDS)
+    full = _algorithm_fields(spec, _fields(spec, _NOT_IDENTITY_FIELDS))
+    run = _algorithm_fields(spec, _fields(spec, _SPEC_ONLY_FIELDS | _NOT_IDENTITY_FIELDS))
     run["budget"] = _fields(spec.budget, _BUDGET_SPEC_ONLY_FIELDS)
     build = spec.env_factory()  # a fresh env per probe, on one compiled tree
     first, second = probe(spec, build=build), probe(spec, build=build)

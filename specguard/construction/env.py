@@ -44,6 +44,7 @@ __all__ = [
     "BaselineEnv",
     "EnvFactory",
     "SpecEnv",
+    "action_masks_problem",
     "make_baseline_env",
     "make_env",
     "preflight",
@@ -143,7 +144,9 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
       annotation (``path:name``), whether the episode has had no violation
       so far; ``info["reward_terms"]``: every weighted
       component by key, summing to the reward; ``info["base_reward"]``: the
-      initial env's own reward.
+      initial env's own reward;
+    * :meth:`action_masks`: the initial env's, where it has them and the agent acts
+      in its action space (sb3-contrib's MaskablePPO reads them).
 
     Args:
         env: the base (initial) env.
@@ -221,6 +224,7 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         )
         if action_space is not None:
             self.action_space = action_space
+        self._own_actions = execute is not None or action_space is not None  # the agent's are not the base env's
         # The base observation can be handed on untouched when nothing is added or converted.
         self._passthrough = self._identity and not slots and base_space.dtype == np.float32
         self._pending: Any = None  # (weights, CompiledTree) adapted, in force from the next reset
@@ -248,6 +252,31 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         # shaping").
         adapted = {path: tuple(float(w) for w in ws) for path, ws in weights.items()}
         self._pending = adapted, compile_tree(self.tree, self.features, weights=adapted)
+
+    def action_masks_problem(self) -> str | None:
+        """Why this env has no action masks to give (:meth:`action_masks`), or ``None`` when it has them."""
+        if self._own_actions:
+            return (
+                "the agent's actions go through execute() (or act in another action space), so the initial env's "
+                "masks do not say which of them are valid"
+            )
+        try:
+            self.env.get_wrapper_attr("action_masks")
+        except AttributeError:
+            return f"the initial env ({type(self.env.unwrapped).__name__}) has no action_masks() method"
+        return None
+
+    def action_masks(self) -> np.ndarray:
+        """The initial env's ``action_masks()``: which actions are valid in the current state.
+
+        Raises:
+            InitialEnvError: the initial env has none, or the agent does not act in its action space
+                (:meth:`action_masks_problem`).
+        """
+        problem = self.action_masks_problem()
+        if problem is not None:
+            raise InitialEnvError(f"{self.tree.name}: no action masks: {problem}")
+        return np.asarray(self.env.get_wrapper_attr("action_masks")())
 
     # -- gymnasium API -------------------------------------------------------
 
@@ -361,6 +390,24 @@ class BaselineEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
             else self.evaluator.members(f)
         )
         return obs, reward, terminated, truncated, self._info(info, members)
+
+
+def action_masks_problem(env: gym.Env) -> str | None:
+    """Why ``env`` (a :class:`SpecEnv` or :class:`BaselineEnv`, wrapped or not) has no action masks, or ``None``.
+
+    A ``SpecEnv`` has its initial env's where the agent acts in the initial env's action space
+    (:meth:`SpecEnv.action_masks_problem`); any other env has them when it or a wrapper has ``action_masks()``.
+    """
+    inner: Any = env
+    while not isinstance(inner, SpecEnv) and isinstance(inner, gym.Wrapper):
+        inner = inner.env
+    if isinstance(inner, SpecEnv):
+        return inner.action_masks_problem()
+    try:
+        env.get_wrapper_attr("action_masks")
+    except AttributeError:
+        return f"the initial env ({type(env.unwrapped).__name__}) has no action_masks() method"
+    return None
 
 
 def preflight(where: str, initial_env: object, tree: object) -> CompiledTree:

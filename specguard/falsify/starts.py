@@ -13,6 +13,12 @@ starts. A :class:`StartSpace` names other starts: per state variable a range
   ``g, m, l``; Acrobot ``link_length_1, link_length_2, link_mass_1,
   link_mass_2``; MountainCar ``force, gravity``; MountainCarContinuous
   ``power``); one left out keeps the env's own value;
+* Gymnasium's MuJoCo envs (any ``MujocoEnv``) are set by their model's joints
+  (:mod:`specguard.falsify.joints`): a hinge or slide joint ``J`` gives ``J``
+  and ``J_vel`` (InvertedPendulum: ``slider, hinge, slider_vel, hinge_vel``),
+  set through ``set_state``. They have no default range: a variable left out
+  keeps what the env's reset gave, and a space naming none searches the
+  env's reset seeds;
 * any env: the hook ``set_state(env, values)`` (``values`` by name; it sets
   the state of ``env.unwrapped`` and returns the observation of that state),
   or ``reset_options=True``: the values are passed as ``reset(options=values)``;
@@ -38,13 +44,15 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
 from specguard.error import InvalidSpec, UnknownFeature
+from specguard.falsify.joints import joint_setter
+from specguard.falsify.setter import Range, Setter, env_label
 from specguard.validation import check_finite, check_flag, check_text
 
 __all__ = [
@@ -56,52 +64,13 @@ __all__ = [
     "Starts",
     "as_start_space",
     "setter_for",
+    "start_variables",
 ]
 
-Range = tuple[float, float]
 SEED_RANGE: Range = (0.0, float(2**31 - 1))
 """The reset seeds searched for an env whose state cannot be set."""
 START_OPTION = "specguard_start"
 """The ``reset(options=...)`` key under which :class:`StartWrapper` receives a start."""
-
-
-@dataclass(frozen=True)
-class Setter:
-    """How one kind of env is put in a start state.
-
-    Attributes:
-        names: the state variables, in order.
-        bounds: per variable, the range any start must lie in (``+-inf`` for none).
-        default: per variable, the env's own reset range (the start space's default).
-        apply: ``apply(env, values) -> observation``: sets ``env.unwrapped``'s state.
-        parameters: physical parameters a start space may also range over, by
-            name: the attribute of ``env.unwrapped`` each sets (any value > 0).
-        settle: ``settle(unwrapped)`` after parameters are set: recomputes what the env derives from them.
-    """
-
-    names: tuple[str, ...]
-    bounds: Mapping[str, Range]
-    default: Mapping[str, Range]
-    apply: Callable[[gym.Env, Mapping[str, float]], Any]
-    parameters: Mapping[str, str] = field(default_factory=dict)
-    settle: Callable[[Any], None] | None = None
-
-    def with_parameters(self, names: tuple[str, ...]) -> Callable[[gym.Env, Mapping[str, float]], Any]:
-        """``apply`` that also sets the parameters ``names`` from the values, before the state."""
-        if not names:
-            return self.apply
-        attributes = {n: self.parameters[n] for n in names}
-        settle, apply = self.settle, self.apply
-
-        def apply_all(env: gym.Env, values: Mapping[str, float]) -> Any:
-            u = env.unwrapped
-            for name, attribute in attributes.items():
-                setattr(u, attribute, float(values[name]))
-            if settle is not None:
-                settle(u)
-            return apply(env, values)
-
-        return apply_all
 
 
 def _settle_cartpole(u: Any) -> None:
@@ -179,13 +148,24 @@ BUILTIN_SETTERS: Mapping[str, Setter] = {
 
 
 def setter_for(env: gym.Env) -> Setter | None:
-    """The built-in setter of ``env`` (by its unwrapped class), or ``None`` when its state cannot be set."""
-    return BUILTIN_SETTERS.get(type(env.unwrapped).__name__)
+    """The built-in setter of ``env`` (by its unwrapped class; a MuJoCo env's by its joints), or ``None``.
+
+    ``None``: the env's state cannot be set.
+    """
+    builtin = BUILTIN_SETTERS.get(type(env.unwrapped).__name__)
+    return builtin if builtin is not None else joint_setter(env)
 
 
-def _env_label(env: gym.Env) -> str:
-    spec = getattr(env, "spec", None)
-    return getattr(spec, "id", None) or type(env.unwrapped).__name__
+def start_variables(env: gym.Env) -> tuple[str, ...]:
+    """The names a start space may give ranges for on ``env``: its state variables, then its physical
+    parameters; ``()`` where its state cannot be set (a hook's names are its own).
+
+    Example:
+        >>> start_variables(gym.make("Pendulum-v1"))
+        ('theta', 'omega', 'g', 'm', 'l')
+    """
+    setter = setter_for(env)
+    return () if setter is None else (*setter.names, *setter.parameters)
 
 
 # -- checks: each a small named function, raising with the actual values ------------------------------
@@ -213,6 +193,7 @@ def check_known(where: str, names: Mapping[str, Any], known: tuple[str, ...]) ->
             where,
             f"the start space names {', '.join(map(repr, unknown))}, which its setter does not know; "
             f"known: {', '.join(known)}",
+            hint="docs/guide/falsify.md, 'The start space', says which variables each env has",
         )
 
 
@@ -243,7 +224,7 @@ class StartSpace:
 
     Args:
         ranges: ``{variable: (lo, hi)}``; variables left out keep the env's
-            own reset range (built-in setters only).
+            own reset range (built-in setters only; a MuJoCo env's keep what its reset gave).
         set_state: ``set_state(env, values) -> observation``: the hook for an
             env without a built-in setter; ``values`` by name.
         reset_options: pass the values as ``env.reset(options=values)`` instead.
@@ -293,7 +274,7 @@ class StartSpace:
             InvalidSpec: a range outside its variable's bounds; ranges for an
                 env whose state cannot be set; no ranges with a hook.
         """
-        where = f"StartSpace for {_env_label(env)}"
+        where = f"StartSpace for {env_label(env)}"
         declared = {n: (lo, hi) for n, lo, hi in self.ranges}
         if self.set_state is not None or self.reset_options:
             if not declared:
@@ -311,8 +292,7 @@ class StartSpace:
                     f"yet the start space gives ranges for {', '.join(declared)}",
                     hint="pass set_state=fn(env, values) or reset_options=True, or no ranges to search reset seeds",
                 )
-            seeds = {"seed": SEED_RANGE}
-            return Starts(where, ("seed",), _array(seeds, ("seed",), 0), _array(seeds, ("seed",), 1), "reset seeds")
+            return _seeds(where, "its state cannot be set")
         check_known(where, declared, (*setter.names, *setter.parameters))
         params = tuple(n for n in setter.parameters if n in declared)
         for name, rng in declared.items():
@@ -320,10 +300,19 @@ class StartSpace:
                 check_parameter(where, name, rng)
             else:
                 check_within(where, name, rng, setter.bounds[name])
-        full = {n: declared.get(n, setter.default[n]) for n in setter.names} | {n: declared[n] for n in params}
-        names = (*setter.names, *params)
+        kept = tuple(n for n in setter.names if n in declared or n in setter.default)
+        full = {n: declared[n] if n in declared else setter.default[n] for n in kept}
+        full |= {n: declared[n] for n in params}
+        names = (*kept, *params)
+        if not names:  # no default ranges (a MuJoCo env) and none given: the env's own starts, by reset seed
+            return _seeds(where, "no ranges were given for its variables")
         apply = setter.with_parameters(params)
         return Starts(where, names, _array(full, names, 0), _array(full, names, 1), "state", apply)
+
+
+def _seeds(where: str, why: str) -> Starts:
+    seeds = {"seed": SEED_RANGE}
+    return Starts(where, ("seed",), _array(seeds, ("seed",), 0), _array(seeds, ("seed",), 1), "reset seeds", why=why)
 
 
 def _array(ranges: Mapping[str, Range], names: tuple[str, ...], side: int) -> np.ndarray:
@@ -340,6 +329,7 @@ class Starts:
         how: ``"state"`` (a setter), ``"reset options"`` or ``"reset seeds"``
             (the env's state cannot be set: its reset seeds are searched).
         apply: the setter or hook (``None`` for reset options and seeds).
+        why: for reset seeds, why they are searched (for :attr:`note`).
     """
 
     where: str
@@ -348,6 +338,7 @@ class Starts:
     high: np.ndarray
     how: str
     apply: Callable[[gym.Env, Mapping[str, float]], Any] | None = None
+    why: str = ""
 
     @property
     def center(self) -> np.ndarray:
@@ -358,7 +349,7 @@ class Starts:
     def note(self) -> str:
         """One line saying how starts are set, for progress lines and reports."""
         if self.how == "reset seeds":
-            return f"{self.where}: its state cannot be set, so reset seeds are searched instead"
+            return f"{self.where}: {self.why or 'its state cannot be set'}, so reset seeds are searched instead"
         return f"{self.where}: starts set by {self.how} over {', '.join(self.names)}"
 
     def values(self, point: np.ndarray) -> dict[str, float]:

@@ -2,7 +2,11 @@
 
 A missing renderer (an env without an ``rgb_array`` render mode, a render
 that raises, Pillow not installed) never raises: :func:`write_gif` returns a
-:class:`Gif` with a note instead of a path. :func:`report_gifs` is what
+:class:`Gif` with a note instead of a path. An env whose factory takes no
+``render_mode`` is built without one and told to render ``rgb_array`` frames
+(``env.unwrapped.render_mode``); a MuJoCo env on a machine without a display
+renders off-screen (:mod:`specguard.report.offscreen`), or the note says how
+to enable it. :func:`report_gifs` is what
 ``pytest --goal-specs --goal-specs-report DIR`` writes: one GIF per spec, of
 its first seed's cached model.
 """
@@ -18,8 +22,9 @@ from pathlib import Path
 from typing import Any
 
 from specguard.cache.models import load_model
-from specguard.error import NoFrames
+from specguard.error import InitialEnvError, NoFrames, NoOffscreen
 from specguard.falsify.starts import START_OPTION, StartSpace
+from specguard.report.offscreen import HOW, is_mujoco, offscreen
 from specguard.spec.spec import Spec
 from specguard.training.policy import policy
 from specguard.training.rollout import episode
@@ -89,6 +94,39 @@ def _draw_caption(image: Any, text: str) -> Any:
     return image
 
 
+def _refuses_render_mode(error: InitialEnvError) -> bool:
+    """The initial env's factory (or the env's constructor) does not take the keyword ``render_mode``."""
+    cause = error.__cause__
+    return isinstance(cause, TypeError) and "render_mode" in str(cause)
+
+
+def rendering_env(spec: Spec) -> Any:
+    """``spec``'s env, rendering ``rgb_array`` frames: made with ``render_mode="rgb_array"``, or, where its
+    factory takes no ``render_mode``, made without and its ``unwrapped.render_mode`` set.
+
+    Raises:
+        NoFrames: the env lists its render modes and ``rgb_array`` is not among them.
+        SpecError: the env cannot be made (as ``spec.make_env``).
+    """
+    try:
+        return spec.make_env(render_mode="rgb_array")
+    except InitialEnvError as e:
+        if not _refuses_render_mode(e):
+            raise
+    env = spec.make_env()
+    base = env.unwrapped
+    modes = (getattr(base, "metadata", None) or {}).get("render_modes")
+    if modes is not None and "rgb_array" not in modes:
+        env.close()
+        raise NoFrames(f"its factory takes no render_mode, and {type(base).__name__} lists render modes {list(modes)}")
+    base.render_mode = "rgb_array"
+    return env
+
+
+def _one_line(error: BaseException) -> str:
+    return " ".join(f"{type(error).__name__}: {error}".split())
+
+
 def write_gif(
     model: Any,
     spec: Spec,
@@ -102,7 +140,7 @@ def write_gif(
 ) -> Gif:
     """Render one deterministic episode of ``model`` on ``spec``'s env into an animated GIF at ``path``.
 
-    The env is made with ``render_mode="rgb_array"``; frames are subsampled
+    The env is made with ``render_mode="rgb_array"`` (:func:`rendering_env`); frames are subsampled
     evenly to at most ``max_frames``; the last frame carries the caption: the
     goals met (and missed) when the episode ended (``info["goals"]``).
 
@@ -123,11 +161,13 @@ def write_gif(
     try:
         # Frames are drawn off-screen: SDL needs no display (and prints no complaint about a missing one).
         os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
-        env = spec.make_env(render_mode="rgb_array")
+        env = rendering_env(spec)
         options = None
         if start is not None:  # as the falsifier's runner: the start wrapper under the spec's env, reset seed 0
             env.env = (starts or StartSpace()).resolve(env.env).wrap(env.env)
             options, seed = {START_OPTION: dict(start)}, 0
+    except NoFrames as e:
+        return Gif(None, f"no GIF of spec {spec.label!r}: its env does not render rgb_array frames ({e})")
     except Exception as e:
         return Gif(None, f"no GIF of spec {spec.label!r}: its env cannot be made to render rgb_array frames ({e})")
     act = policy(model, normalizer, deterministic=True)
@@ -151,17 +191,21 @@ def write_gif(
 
     try:
         try:
-            steps = episode(env, act, seed, capture, options)
-            if last != len(steps):  # the final state, whatever the stride
-                frame = env.render()
-                if isinstance(frame, np.ndarray):
-                    frames.append(frame)
+            with offscreen(env):
+                steps = episode(env, act, seed, capture, options)
+                if last != len(steps):  # the final state, whatever the stride
+                    frame = env.render()
+                    if isinstance(frame, np.ndarray):
+                        frames.append(frame)
         finally:
             env.close()
+    except NoOffscreen as e:
+        return Gif(None, f"no GIF of spec {spec.label!r}: {e}")
     except NoFrames as e:
         return Gif(None, f"no GIF of spec {spec.label!r}: its env does not render rgb_array frames ({e})")
     except Exception as e:
-        return Gif(None, f"no GIF of spec {spec.label!r}: rendering failed ({type(e).__name__}: {e})")
+        how = f"; to render MuJoCo off-screen, {HOW}" if is_mujoco(env) else ""
+        return Gif(None, f"no GIF of spec {spec.label!r}: rendering failed ({_one_line(e)}){how}")
     goals = steps[-1]["info"].get("goals", {}) if steps else {}
     caption = _caption(spec, len(steps), goals)
     images = [Image.fromarray(np.asarray(f[..., :3], dtype=np.uint8)) for f in _subsample(frames, max_frames)]

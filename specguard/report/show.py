@@ -16,7 +16,7 @@ import ast
 from pathlib import Path
 from typing import Any
 
-from specguard.spec.algorithms import collect_steps, collection_unit
+from specguard.spec.algorithms import algorithm_name, collect_steps, collection_unit
 from specguard.spec.budget import trained_timesteps
 from specguard.spec.spec import Spec
 from specguard.tree.formula import formula
@@ -75,7 +75,8 @@ def _budget(spec: Spec) -> str:
         per_env = collect_steps(spec.algorithm, spec.hyperparameters)
         unit = collection_unit(spec.algorithm)
         steps = (
-            f"{trained} timesteps per seed ({b.timesteps} asked, rounded up to whole {spec.algorithm} {unit} "
+            f"{trained} timesteps per seed ({b.timesteps} asked, rounded up to whole "
+            f"{algorithm_name(spec.algorithm)} {unit} "
             f"of {per_env * spec.n_envs} = {per_env} steps x {envs})"
         )
     seeds = f"{b.min_seeds} seeds" + (f" (up to {b.max_seeds})" if b.max_seeds != b.min_seeds else "")
@@ -98,7 +99,7 @@ def render_spec(spec: Spec, name: str | None = None) -> str:
     kind = "baseline: the initial env's own reward" if spec.baseline else "constructed env"
     lines = [
         f"== {name or spec.label}",
-        f"{spec.initial_env!r}, {spec.algorithm}, {kind}",
+        f"{spec.initial_env!r}, {algorithm_name(spec.algorithm)}, {kind}",
         *render_tree(spec.tree),
         *_layout(spec),
         _budget(spec),

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from specguard.error import InvalidSpec
-from specguard.spec.algorithms import collect_parameter, collect_steps
+from specguard.spec.algorithms import algorithm_name, collect_parameter, collect_steps
 from specguard.stats.anytime import DEFAULT_CHECKPOINTS
 from specguard.validation import check_count, check_positive
 
@@ -126,14 +126,15 @@ ROUNDING_WARNING = 0.10  # warn when training rounds the budget up by more than 
 
 
 def trained_timesteps(
-    budget: Budget | int, algorithm: str, hyperparameters: Mapping[str, Any] | None = None, n_envs: int = 1
+    budget: Budget | int, algorithm: str | type, hyperparameters: Mapping[str, Any] | None = None, n_envs: int = 1
 ) -> int:
     """The timesteps a run actually trains: the budget rounded up to whole collections.
 
-    stable-baselines3 stops only between collections: PPO and A2C collect
-    ``n_steps`` per env (defaults 2048 and 5), so they train
+    stable-baselines3 stops only between collections: on-policy algorithms collect
+    ``n_steps`` per env (PPO's default 2048, A2C's 5, RecurrentPPO's 128), so they train
     ``ceil(timesteps / (n_steps * n_envs)) * n_steps * n_envs``; off-policy
-    algorithms collect ``train_freq`` steps per env (DQN 4, SAC/TD3/DDPG 1).
+    algorithms collect ``train_freq`` steps per env (DQN and QRDQN 4, SAC, TD3, DDPG, TQC and
+    CrossQ 1); the defaults are read from the algorithm's constructor.
     Warns once when that is more than 10% above the budget.
 
     Example:
@@ -145,7 +146,8 @@ def trained_timesteps(
     trained = math.ceil(timesteps / chunk) * chunk
     if trained > timesteps * (1 + ROUNDING_WARNING):
         warnings.warn(
-            f"budget of {timesteps} timesteps trains {trained}: {algorithm} collects {chunk} steps at a time "
+            f"budget of {timesteps} timesteps trains {trained}: {algorithm_name(algorithm)} collects {chunk} steps "
+            "at a time "
             f"({chunk // n_envs} per env x {n_envs} env{'s' if n_envs != 1 else ''}); "
             f"set timesteps to a multiple of {chunk} or lower " + collect_parameter(algorithm),
             stacklevel=2,

@@ -24,7 +24,7 @@ from specguard.construction.env import BaselineEnv, EnvFactory, SpecEnv
 from specguard.construction.initial_env import InitialEnv
 from specguard.error import InvalidSpec
 from specguard.falsify.starts import StartSpace, as_start_space
-from specguard.spec.algorithms import ALGORITHMS
+from specguard.spec.algorithms import check_hyperparameters, check_policy, default_policy, resolve_algorithm
 from specguard.spec.budget import Budget
 from specguard.stats.intervals import UNDECIDED_OUTCOMES
 from specguard.tree.keys import check_expect, check_xfail, check_xfail_thresholded, resolve_goal
@@ -45,8 +45,12 @@ class Spec:
         expect: ``{node path or unique node name: minimum success}``, or one
             number for the root goal (read by :func:`specguard.tree.keys.check_expect`).
             Empty: measure only, or take the thresholds of ``@goal_spec(expect=...)``.
-        algorithm: a stable-baselines3 algorithm name that fits the action space.
-        hyperparameters: keyword arguments for the algorithm (``n_steps``, ...).
+        algorithm: the algorithm, fitting the action space: a stable-baselines3 or
+            sb3-contrib name (``"PPO"``, ``"TQC"``, ...), or any ``BaseAlgorithm``
+            subclass, as a class or ``"module:Class"``
+            (:func:`~specguard.spec.algorithms.resolve_algorithm`; a named class is kept as its name).
+        hyperparameters: keyword arguments for the algorithm (``n_steps``, ...); a name its
+            constructor does not take is refused here, before anything trains.
         n_envs: parallel environments per run (a ``DummyVecEnv``).
         normalize: wrap the training env in ``VecNormalize``.
         quorum: runs that must meet each threshold; default every run
@@ -74,13 +78,17 @@ class Spec:
             ``specguard falsify``, :meth:`SpecResult.falsify` and
             ``falsify=True`` read it. Not part of the spec's identity: it
             changes no run and no verdict of its goals.
+        policy: the algorithm's policy: one of its names (``"MlpPolicy"``, ``"CnnPolicy"``, ...)
+            or a ``BasePolicy`` subclass; ``None`` (default): ``"MlpPolicy"``, or the algorithm's
+            only MLP policy where it has no ``MlpPolicy`` (RecurrentPPO's ``"MlpLstmPolicy"``).
+            Part of a run's key only when it is not that default.
     """
 
     initial_env: InitialEnv
     tree: Node
     budget: Budget
     expect: Mapping[str, float] | float = field(default_factory=dict)
-    algorithm: str = "PPO"
+    algorithm: str | type = "PPO"
     hyperparameters: Mapping[str, Any] = field(default_factory=dict)
     n_envs: int = 1
     normalize: bool = False
@@ -92,6 +100,7 @@ class Spec:
     name: str | None = None
     xfail: Mapping[str, str] = field(default_factory=dict)
     starts: StartSpace | None = None
+    policy: str | type | None = None
 
     def __post_init__(self) -> None:
         label = f"Spec {self.label!r}"
@@ -101,13 +110,13 @@ class Spec:
             raise InvalidSpec(f"{label}.tree", f"expected a Goal or All node, got {self.tree!r}")
         if not isinstance(self.budget, Budget):
             raise InvalidSpec(f"{label}.budget", f"expected a Budget, got {self.budget!r}")
-        if self.algorithm not in ALGORITHMS:
-            raise InvalidSpec(
-                f"{label}.algorithm",
-                f"unknown algorithm {self.algorithm!r}; expected one of {', '.join(ALGORITHMS)}",
-            )
+        algorithm = resolve_algorithm(f"{label}.algorithm", self.algorithm)
+        object.__setattr__(self, "algorithm", algorithm)
         if not isinstance(self.hyperparameters, Mapping):
             raise InvalidSpec(f"{label}.hyperparameters", f"expected a mapping, got {self.hyperparameters!r}")
+        check_hyperparameters(f"{label}.hyperparameters", algorithm, self.hyperparameters)
+        policy = default_policy(algorithm) if self.policy is None else self.policy
+        object.__setattr__(self, "policy", check_policy(f"{label}.policy", algorithm, policy))
         object.__setattr__(self, "n_envs", check_count(label, "n_envs", self.n_envs, "parallel environments per run"))
         if self.quorum is not None:
             object.__setattr__(self, "quorum", self._checked_quorum(label))

@@ -1,16 +1,32 @@
-"""A trained model as a policy: its action for an observation, with its ``VecNormalize`` statistics applied.
+"""A trained model as a policy: its action for an observation, with what it carries from step to step.
 
-The one assembly of a policy from an SB3 model, used where a run is evaluated
-(:mod:`specguard.training.train`), watched (:mod:`specguard.training.rollout`,
-GIFs) and falsified (:mod:`specguard.engine.falsification`).
+The one assembly of a policy from an SB3 model, used wherever a model acts: a
+run's evaluation and anytime checkpoints (:mod:`specguard.training.train`),
+rollouts and GIFs (:mod:`specguard.training.rollout`) and the falsifier
+(:mod:`specguard.engine.falsification`). Per env it keeps
+
+* the model's ``VecNormalize`` statistics, applied to every observation;
+* a recurrent policy's state (sb3-contrib's RecurrentPPO: its LSTM's hidden and
+  cell states), cleared when an episode starts (:meth:`Policy.start`) and
+  carried from each step to the next, as ``model.predict(obs, state=...,
+  episode_start=...)`` asks;
+* the env's action masks, read before every action, for an algorithm whose
+  ``predict`` takes ``action_masks`` (sb3-contrib's MaskablePPO).
+
+A model without a recurrent state acts exactly as ``model.predict(obs)[0]``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Sequence
 from typing import Any
 
-__all__ = ["normalizer_of", "policy"]
+import numpy as np
+
+from specguard.error import SpecError
+from specguard.spec.algorithms import takes_action_masks
+
+__all__ = ["Policy", "normalizer_of", "policy"]
 
 
 def normalizer_of(model: Any, normalizer: Any = None) -> Any:
@@ -24,24 +40,78 @@ def normalizer_of(model: Any, normalizer: Any = None) -> Any:
     return env if isinstance(env, VecNormalize) else None
 
 
-def policy(
-    model: Any, normalizer: Any = None, *, deterministic: bool = True, batch: bool = False
-) -> Callable[[Any], Any]:
-    """``model``'s action for an observation, its ``VecNormalize`` statistics applied where it has them.
+class Policy:
+    """``model``'s action for an observation (or a batch of them, one row per env), with what it carries per env.
+
+    Call :meth:`start` with the envs as their episodes start (after ``reset``), then the policy once per step.
+    It satisfies :class:`specguard.falsify.search.EpisodePolicy`.
 
     Args:
+        model: a trained SB3 model (any ``BaseAlgorithm``).
         normalizer: the statistics of a ``normalize=True`` spec; default: the model's training env when it is one.
         deterministic: the model's deterministic action, or a sampled one.
-        batch: the policy takes a batch of observations (rows) and returns their actions as the model gives them;
-            otherwise one observation, and a discrete action as a Python ``int``.
+        batch: the policy takes a batch of observations (rows, one per env) and returns their actions as the model
+            gives them; otherwise one observation, and a discrete action as a Python ``int``.
     """
-    import gymnasium as gym
 
-    norm = normalizer_of(model, normalizer)
-    discrete = not batch and isinstance(getattr(model, "action_space", None), gym.spaces.Discrete)
+    def __init__(self, model: Any, normalizer: Any = None, *, deterministic: bool = True, batch: bool = False) -> None:
+        import gymnasium as gym
 
-    def act(obs: Any) -> Any:
-        action = model.predict(norm.normalize_obs(obs) if norm is not None else obs, deterministic=deterministic)[0]
-        return int(action) if discrete else action
+        self.model = model
+        self.deterministic = deterministic
+        self.batch = batch
+        self.masked = takes_action_masks(model)
+        """The model acts on the env's action masks."""
+        self._norm = normalizer_of(model, normalizer)
+        self._discrete = not batch and isinstance(getattr(model, "action_space", None), gym.spaces.Discrete)
+        self._envs: list[Any] = []
+        self._state: tuple[np.ndarray, ...] | None = None  # a recurrent policy's, (layers, envs, size) per array
+        self._starting = np.ones(1, dtype=bool)  # per env: its next action is its episode's first
 
-    return act
+    def start(self, envs: Sequence[Any]) -> None:
+        """Episodes start on ``envs`` (one env, or one per row of a batch): a recurrent state starts afresh."""
+        self._envs = list(envs)
+        self._state = None
+        self._starting = np.ones(len(self._envs), dtype=bool)
+
+    def __call__(self, observations: Any, rows: Sequence[int] | None = None) -> Any:
+        """The action for ``observations``: of every env started, or of the envs ``rows`` (a batch's still running).
+
+        Raises:
+            SpecError: the model acts on action masks and was not told the envs (:meth:`start`).
+        """
+        if rows is None:
+            rows = list(range(len(observations))) if self.batch else [0]
+        rows = list(rows)
+        if max(rows) >= len(self._starting):  # more envs than it was told of (no start): all start here
+            self._state, self._starting = None, np.ones(max(rows) + 1, dtype=bool)
+        obs = self._norm.normalize_obs(observations) if self._norm is not None else observations
+        kwargs: dict[str, Any] = {}
+        if self.masked:
+            kwargs["action_masks"] = self._masks(rows)
+        state = None if self._state is None else tuple(s[:, rows] for s in self._state)
+        action, state = self.model.predict(
+            obs, state=state, episode_start=self._starting[rows], deterministic=self.deterministic, **kwargs
+        )
+        self._starting[rows] = False
+        if state is not None:  # a recurrent policy: keep each env's own state
+            if self._state is None:
+                n = len(self._starting)
+                self._state = tuple(np.zeros((s.shape[0], n, *s.shape[2:]), dtype=s.dtype) for s in state)
+            for kept, new in zip(self._state, state, strict=True):
+                kept[:, rows] = new
+        return int(action) if self._discrete else action
+
+    def _masks(self, rows: list[int]) -> np.ndarray:
+        if not self._envs:
+            raise SpecError(
+                f"{type(self.model).__name__} acts on action masks, and the policy was not told its envs",
+                hint="call policy.start(envs) after each reset",
+            )
+        masks = [np.asarray(self._envs[i].get_wrapper_attr("action_masks")()) for i in rows]
+        return np.stack(masks) if self.batch else masks[0]
+
+
+def policy(model: Any, normalizer: Any = None, *, deterministic: bool = True, batch: bool = False) -> Policy:
+    """``model``'s :class:`Policy` (its arguments as there)."""
+    return Policy(model, normalizer, deterministic=deterministic, batch=batch)

@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from specguard.falsify.search import EpisodePolicy
 from specguard.spec.spec import Spec
 from specguard.training.policy import policy
 from specguard.training.train import EVAL_SEED_BASE
@@ -27,8 +28,10 @@ def episode(
     options: dict[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
     """One episode of ``act`` on ``env`` from ``reset(seed=seed, options=options)``; ``on_step(n)`` after each of
-    its ``n`` steps."""
+    its ``n`` steps. An :class:`~specguard.falsify.search.EpisodePolicy` is told as the episode starts."""
     obs, info = env.reset(seed=seed, options=options)
+    if isinstance(act, EpisodePolicy):
+        act.start([env])
     if on_step is not None:
         on_step(0)
     steps: list[dict[str, Any]] = []

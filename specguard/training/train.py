@@ -24,9 +24,11 @@ from typing import Any
 
 import gymnasium as gym
 
+from specguard.construction.env import action_masks_problem
 from specguard.error import InvalidSpec, SpecError, TrainingError
+from specguard.falsify.search import EpisodePolicy
 from specguard.parallel.protocol import Report
-from specguard.spec.algorithms import ALGORITHMS, algorithm_class
+from specguard.spec.algorithms import ALGORITHMS, algorithm_class, algorithm_name, takes_action_masks
 from specguard.spec.spec import Spec
 from specguard.stats.anytime import checkpoint_steps, final_evaluation, interim_look
 from specguard.training.auto_weights import WeightAdapter
@@ -55,6 +57,9 @@ def evaluate(
 ) -> dict[str, int]:
     """Run ``episodes`` episodes of ``policy`` on ``env`` (which reports ``info["goals"]`` and ``info["safe"]``).
 
+    An :class:`~specguard.falsify.search.EpisodePolicy` (a trained model's
+    :class:`~specguard.training.policy.Policy`) is told as each episode starts.
+
     ``started``, if given, receives per episode whether its first state (at reset) was in the root goal
     (the first of ``info["goals"]``).
 
@@ -66,6 +71,8 @@ def evaluate(
     counts: dict[str, int] = {}
     for i in range(episodes):
         obs, info = env.reset(seed=seeds[i])
+        if isinstance(policy, EpisodePolicy):
+            policy.start([env])
         if started is not None:
             started.append(bool(next(iter(info["goals"].values()))))
         done = False
@@ -116,6 +123,15 @@ class _Run:
         return TrainingError(f"{self.label}, {where}: {cause}")
 
 
+def _masks_problem(build: Callable[[], gym.Env]) -> str | None:
+    """Why the spec's env has no action masks for an algorithm that acts on them, or ``None``."""
+    env = build()
+    try:
+        return action_masks_problem(env)
+    finally:
+        env.close()
+
+
 def _build(spec: Spec, seed: int) -> _Run:
     """The model on the spec's training envs (normalized if the spec asks), and the evaluation env, one compilation.
 
@@ -134,22 +150,31 @@ def _build(spec: Spec, seed: int) -> _Run:
         raise
     except Exception as e:
         raise TrainingError(f"{label}, seed {seed}, building the env: {type(e).__name__}: {e}") from e
+    name = algorithm_name(spec.algorithm)
     space = type(venv.action_space).__name__
-    if space not in ALGORITHMS[spec.algorithm]:
+    if isinstance(spec.algorithm, str) and space not in ALGORITHMS[spec.algorithm]:
         venv.close()
         raise InvalidSpec(
             f"{label}.algorithm",
-            f"{spec.algorithm} cannot act in a {space} action space; "
-            f"it handles {', '.join(ALGORITHMS[spec.algorithm])}",
+            f"{name} cannot act in a {space} action space; it handles {', '.join(ALGORITHMS[spec.algorithm])}",
+        )
+    algorithm = algorithm_class(spec.algorithm, f"{label}.algorithm")
+    problem = _masks_problem(build) if takes_action_masks(algorithm) else None
+    if problem is not None:
+        venv.close()
+        raise InvalidSpec(
+            f"{label}.algorithm",
+            f"{name} acts on action masks, and {problem}",
+            hint="give the initial env an action_masks() method (sb3_contrib.common.wrappers.ActionMasker wraps one "
+            "around an env), or train an algorithm without masks (PPO)",
         )
     if spec.normalize:
         venv = VecNormalize(venv)
     try:
-        algorithm = algorithm_class(spec.algorithm)
-        model = algorithm("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **dict(spec.hyperparameters))
+        model = algorithm(spec.policy, venv, seed=seed, device="cpu", verbose=0, **dict(spec.hyperparameters))
     except (TypeError, ValueError, AssertionError) as e:
         venv.close()
-        raise InvalidSpec(f"{label}.hyperparameters", f"{spec.algorithm} rejected them: {e}") from e
+        raise InvalidSpec(f"{label}.hyperparameters", f"{name} rejected them: {e}") from e
     normalizer = venv if isinstance(venv, VecNormalize) else None
     return _Run(spec, seed, model, normalizer, build())
 
