@@ -98,21 +98,26 @@ qualified = sg.Spec(sg.InitialEnv("sgreg_cli:sgreg_cliLine-v0", features=("x",))
 """
 
 
-def test_specguard_run_trains_a_registered_id_in_worker_processes(tmp_path):
-    write_package(tmp_path, "sgreg_cli")
-    spec_file = tmp_path / "registered_specs.py"
-    spec_file.write_text(textwrap.dedent(SPEC_FILE))
+def specguard_run(args: list[str], cwd: Path, *on_path: Path) -> subprocess.CompletedProcess[str]:
+    """``specguard run ARGS`` in a fresh process, with ``on_path`` and the checkout importable."""
     repo = Path(__file__).resolve().parents[1]
-    path = os.pathsep.join([str(tmp_path), str(repo), os.environ.get("PYTHONPATH", "")])
-    done = subprocess.run(
-        [sys.executable, "-m", "specguard", "run", str(spec_file), "--workers", "1", "--quiet"],
-        cwd=tmp_path,
+    path = os.pathsep.join([*map(str, on_path), str(repo), os.environ.get("PYTHONPATH", "")])
+    return subprocess.run(
+        [sys.executable, "-m", "specguard", "run", *args],
+        cwd=cwd,
         env={**os.environ, "PYTHONPATH": path},
         capture_output=True,
         text=True,
         timeout=300,
         check=False,
     )
+
+
+def test_specguard_run_trains_a_registered_id_in_worker_processes(tmp_path):
+    write_package(tmp_path, "sgreg_cli")
+    spec_file = tmp_path / "registered_specs.py"
+    spec_file.write_text(textwrap.dedent(SPEC_FILE))
+    done = specguard_run([str(spec_file), "--workers", "1", "--quiet"], tmp_path, tmp_path)
     out = done.stdout + done.stderr
     assert done.returncode in (0, 1), out  # a verdict, not an error
     assert "NameNotFound" not in out and "failed:" not in out, out
@@ -155,20 +160,9 @@ def test_minigrid_trains_through_both_doors(spelling, tmp_path, pytester):
     assert ("import minigrid" in source) == (spelling == "plain")
     spec_file = tmp_path / "grid_specs.py"
     spec_file.write_text(source)
-    repo = Path(__file__).resolve().parents[1]
-    path = os.pathsep.join([str(repo), os.environ.get("PYTHONPATH", "")])
-
     results = tmp_path / "results.json"
     options = ["--workers", "1", "--quiet", "--cache-dir", str(tmp_path / "run-cache"), "--json", str(results)]
-    done = subprocess.run(
-        [sys.executable, "-m", "specguard", "run", f"{spec_file}::grid_spec", *options],
-        cwd=tmp_path,
-        env={**os.environ, "PYTHONPATH": path},
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
-    )
+    done = specguard_run([f"{spec_file}::grid_spec", *options], tmp_path)
     out = done.stdout + done.stderr
     assert done.returncode == 0, out  # xfailed or xpassed: a verdict, not an error
     run = json.loads(results.read_text())["grid_spec"]

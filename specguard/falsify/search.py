@@ -158,6 +158,7 @@ class EpisodeRunner:
         self.scales = feature_scales(first.features, box.low[:n], box.high[:n])
         self.discrete = isinstance(first.action_space, gym.spaces.Discrete)
         self.max_steps = _time_limit(first)
+        self.reach = not until_end(self.tree)  # reaching the root goal ends the episode
         """The episode's step limit (``None``: the env has no ``TimeLimit``)."""
         self.episodes = 0
         """Episodes run so far."""
@@ -207,7 +208,7 @@ class EpisodeRunner:
         judgement = judge_end(
             self.tree, self.keys, s, own_states(ev.slots, ev.own_state), info["goals"], info["safe"], self.scales
         )
-        if terminated and self.max_steps and not until_end(self.tree):  # a reach goal: how early it was reached
+        if terminated and self.max_steps and self.reach:  # a reach goal: how early it was reached
             judgement = reached_early(judgement, self.tree.name, steps, self.max_steps)
         last = {f: float(v) for f, v in zip(s._fields, s, strict=True)}
         return Outcome(start, judgement, steps, "terminated" if terminated else "truncated", last)
