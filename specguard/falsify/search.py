@@ -40,9 +40,7 @@ database: the counterexample replayed first.
 
 from __future__ import annotations
 
-import heapq
 import json
-from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
@@ -51,6 +49,7 @@ import gymnasium as gym
 import numpy as np
 
 from specguard.extend import until_end
+from specguard.falsify.portfolio import Portfolio
 from specguard.falsify.robustness import Judgement, feature_scales, judge_end, own_states, reached_early
 from specguard.falsify.starts import START_OPTION, Starts, StartSpace
 from specguard.stats.intervals import success_interval
@@ -63,21 +62,6 @@ BISECTIONS = 16
 
 EXPLORE = 16
 """Uniform draws (after the middle of the space) before the guided search steps from its lowest scores."""
-
-ELITE = 4
-"""The guided search steps from one of this many starts with the lowest robustness scores so far."""
-
-STEP = 0.1
-"""A guided step's standard deviation, per variable, as a fraction of half its range."""
-
-RETIRE = 4
-"""Steps from one start after which it leaves the pool, so a search does not dwell where nothing fails.
-
-The parents of a round are picked when it begins: a start retired during a round may be stepped from again in it.
-"""
-
-UNIFORM_SHARE = 0.25
-"""The share of the guided search's later starts drawn uniformly all the same (failures elsewhere)."""
 
 
 @dataclass(frozen=True)
@@ -320,58 +304,35 @@ def _time_limit(env: Any) -> int | None:
     return None
 
 
-class _Pool:
-    """The guided search's starts so far, by robustness score; one leaves once ``RETIRE`` steps were taken from it."""
-
-    def __init__(self) -> None:
-        self._scored: list[tuple[float, int, np.ndarray]] = []  # (score, order, point): ties go to the earlier start
-        self._uses: Counter[int] = Counter()
-
-    def add(self, score: float, order: int, point: np.ndarray) -> None:
-        self._scored.append((score, order, point))
-
-    def parents(self) -> list[tuple[int, np.ndarray]]:
-        """The ``ELITE`` lowest-scoring starts not yet used up, with their order of arrival."""
-        kept = (t for t in self._scored if self._uses[t[1]] < RETIRE)
-        return [(order, point) for _, order, point in heapq.nsmallest(ELITE, kept)]
-
-    def use(self, order: int) -> None:
-        self._uses[order] += 1
-
-
-def _proposals(starts: Starts, rng: np.random.Generator, n: int, pool: _Pool) -> np.ndarray:
-    """``n`` new starts: Gaussian steps from the lowest-scoring starts so far, some uniform draws among them.
-
-    A space of reset seeds has no neighbourhoods (seed 41 and seed 42 start anywhere): all its starts are uniform.
-    """
-    points = starts.uniform(rng, n)
-    elite = pool.parents()
-    if starts.how == "reset seeds" or not elite:
-        return points
-    half = (starts.high - starts.low) / 2.0
-    for i in range(n):
-        if rng.random() >= UNIFORM_SHARE:
-            order, centre = elite[int(rng.integers(len(elite)))]
-            pool.use(order)
-            points[i] = np.clip(centre + rng.normal(0.0, STEP, len(centre)) * half, starts.low, starts.high)
-    return points
-
-
 def _guided(runner: EpisodeRunner, examples: int, rng: np.random.Generator) -> tuple[Outcome, np.ndarray, int] | None:
-    """The first failing start of the guided search, its point and the episodes run up to it; ``None``: none."""
+    """The first failing start of the guided search, its point and the episodes run up to it; ``None``: none.
+
+    The middle of the space, ``EXPLORE`` uniform draws, then rounds of the portfolio's proposals
+    (:mod:`specguard.falsify.portfolio`). A space of reset seeds has no neighbourhoods (seed 41 and seed 42
+    start anywhere): all its starts are uniform draws.
+    """
     starts = runner.starts
-    pool = _Pool()
+    seeds = starts.how == "reset seeds"
+    half = (starts.high - starts.low) / 2.0
+    portfolio = Portfolio(len(starts.names), rng)
     done = 0
     while done < examples:
+        arms: list[str] = []
         if done == 0:
-            first = [starts.center[None, :]] if starts.how != "reset seeds" else []
+            first = [] if seeds else [starts.center[None, :]]
             points = np.concatenate([*first, starts.uniform(rng, EXPLORE)])[: min(examples, EXPLORE + 1)]
+        elif seeds:
+            points = starts.uniform(rng, min(runner.batch, examples - done))
         else:
-            points = _proposals(starts, rng, min(runner.batch, examples - done), pool)
-        for i, (outcome, point) in enumerate(zip(runner.run(points), points, strict=True)):
+            unit, arms = portfolio.propose(min(runner.batch, examples - done))
+            points = np.clip(starts.center + unit * half, starts.low, starts.high)
+        outcomes = runner.run(points)
+        for i, (outcome, point) in enumerate(zip(outcomes, points, strict=True)):
             if outcome.failed:
                 return outcome, point, done + i + 1
-            pool.add(outcome.judgement.score, done + i, point)
+        if not seeds:
+            unit = np.divide(points - starts.center, half, out=np.zeros_like(points), where=half > 0)
+            portfolio.observe(unit, np.array([o.judgement.score for o in outcomes]), arms or ["uniform"] * len(points))
         done += len(points)
     return None
 
