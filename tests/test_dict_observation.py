@@ -272,10 +272,21 @@ def test_the_falsifiers_lockstep_batches_and_the_policy_take_dict_observations()
     together = outcomes(4)
     assert len(together) == 8 and together == outcomes(1)
     env = beside.make_env()
-    rows = stack_observations([env.reset(seed=s)[0] for s in range(3)])
-    assert rows[SPEC_KEY].shape == (3, 2) and rows["view"].shape == (3, LENGTH) and rows["clock"].shape == (3,)
-    assert len(policy(model, batch=True)(rows)) == 3  # three rows, not the Dict's three keys
-    assert list(policy(model, batch=True)(rows)) == [policy(model)(env.reset(seed=s)[0]) for s in range(3)]
+    observations = [env.reset(seed=s)[0] for s in range(5)]
+    rows = stack_observations(observations)
+    assert rows[SPEC_KEY].shape == (5, 2) and rows["view"].shape == (5, LENGTH) and rows["clock"].shape == (5,)
+
+
+def test_a_batch_of_dict_observations_has_as_many_rows_as_envs_not_keys():
+    from sb3_contrib import RecurrentPPO
+
+    beside = spec(observation="features+env", algorithm="RecurrentPPO")
+    model = RecurrentPPO("MultiInputLstmPolicy", beside.make_env(), seed=0, device="cpu")
+    env = beside.make_env()
+    observations = [env.reset(seed=s)[0] for s in range(5)]  # five envs, three keys
+    together, alone = policy(model, batch=True), [policy(model) for _ in observations]
+    for _ in range(3):  # each row carries its own recurrent state from step to step, as each env alone does
+        assert list(together(stack_observations(observations))) == [a(o) for a, o in zip(alone, observations)]
 
 
 def test_show_draws_the_dict_observation():
