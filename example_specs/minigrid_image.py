@@ -25,7 +25,9 @@ import minigrid  # noqa: F401  (registers the MiniGrid ids)
 from minigrid.wrappers import ImgObsWrapper, RGBImgPartialObsWrapper
 
 import specguard as sg
-from example_specs.minigrid_empty import BUDGET, MOVES, PPO, to_move, tree
+from example_specs import minigrid_empty
+
+plain = minigrid_empty.initial_env
 
 
 def image_grid(**kwargs: Any) -> gym.Env:
@@ -33,32 +35,29 @@ def image_grid(**kwargs: Any) -> gym.Env:
     return ImgObsWrapper(RGBImgPartialObsWrapper(gym.make("MiniGrid-Empty-5x5-v0", **kwargs)))
 
 
+# minigrid_empty.py's features (x, y, direction from the env object), actions and bounds, on the wrapped env.
 initial_env = sg.InitialEnv(
     image_grid,
-    from_env={
-        "x": lambda env: env.agent_pos[0],
-        "y": lambda env: env.agent_pos[1],
-        "direction": lambda env: env.agent_dir,
-    },
-    bounds={"x": (1, 3), "y": (1, 3), "direction": (0, 3)},
-    execute=to_move,
-    action_space=gym.spaces.Discrete(len(MOVES)),
+    from_env=dict(plain.from_env),
+    bounds={feature: (lo, hi) for feature, lo, hi in plain.bounds},
+    execute=plain.execute,
+    action_space=plain.action_space,
 )
+tree = minigrid_empty.tree
 
-# Budget and PPO settings as minigrid_empty.py's (measured: see docs/guide/your-environment.md, "Example specs").
+# minigrid_empty.py's goal, threshold, budget and PPO settings; the agent sees the image beside the features.
 specs: dict[str, sg.Spec] = {
     "green_square": sg.Spec(
         initial_env,
         tree,
         expect={"green_square": 0.8},
         name="minigrid_image",
-        budget=BUDGET,
-        hyperparameters=PPO,
+        budget=minigrid_empty.BUDGET,
+        hyperparameters=minigrid_empty.PPO,
         n_envs=4,
         observation="features+env",
     )
 }
-
 
 if __name__ == "__main__":
     print(tree)

@@ -37,6 +37,15 @@ class Corridor(gym.Env):
     )
     action_space = gym.spaces.Discrete(2)
 
+    def __init__(self, render_mode=None):
+        self.metadata = {"render_modes": ["rgb_array"]}
+        self.render_mode = render_mode
+
+    def render(self):
+        frame = np.zeros((8, 8 * LENGTH, 3), np.uint8)
+        frame[:, 8 * self.x : 8 * self.x + 8] = 255
+        return frame
+
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
         self.x, self.t = 0, 0
@@ -301,3 +310,14 @@ def test_show_draws_the_dict_observation():
 def test_dataclass_replace_keeps_the_checks():
     with pytest.raises(sg.InvalidSpec, match="baseline=True"):
         dataclasses.replace(spec(observation="features+env"), baseline=True)
+
+
+def test_a_gif_of_a_policy_acting_on_dict_observations(tmp_path):
+    from stable_baselines3 import PPO
+
+    from specguard.report.gifs import write_gif
+
+    beside = spec(observation="features+env")
+    model = PPO("MultiInputPolicy", beside.make_env(), seed=0, device="cpu", n_steps=32, batch_size=32)
+    gif = write_gif(model, beside, tmp_path / "corridor.gif", max_frames=8)
+    assert gif.written and gif.frames >= 2, gif.text
