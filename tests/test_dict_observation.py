@@ -139,6 +139,7 @@ def test_an_observation_that_is_no_dict_stands_under_its_own_key():
     obs, _ = env.reset(seed=3)
     assert np.array_equal(obs[ENV_KEY], gym.make("Pendulum-v1").reset(seed=3)[0])
     assert np.array_equal(obs[SPEC_KEY], obs[ENV_KEY])  # identity features, no own state
+    assert gym.make(env.spec).observation_space == env.observation_space  # env.spec re-creates it, Dict and all
 
 
 def test_minigrid_with_its_image():
@@ -255,11 +256,16 @@ def test_a_dict_spec_trains_with_multi_input_policy_is_judged_and_served_from_th
     assert again.cached == {0: True} and again.runs[0].successes == result.runs[0].successes
 
 
-def test_normalize_normalizes_the_features_and_own_state_only():
+def test_normalize_normalizes_the_features_and_own_state_only(tmp_path):
     result, model = train_run(spec(observation="features+env", normalize=True), 0)
     normalizer = model.get_env()
     assert normalizer.norm_obs_keys == [SPEC_KEY] and set(normalizer.obs_rms) == {SPEC_KEY}
     assert result.timesteps == 128
+    cached = sg.run_spec(spec(observation="features+env", normalize=True), workers=1, cache_dir=tmp_path, progress=None)
+    assert set(cached.normalizer(0).obs_rms) == {SPEC_KEY}  # the statistics kept in the cache, per key
+    obs = cached.rollout(0)[0][0]["obs"]  # the cached policy acts through them
+    normalized = cached.normalizer(0).normalize_obs(obs)
+    assert np.array_equal(normalized["view"], obs["view"]) and not np.array_equal(normalized[SPEC_KEY], obs[SPEC_KEY])
 
 
 def test_the_falsifiers_lockstep_batches_and_the_policy_take_dict_observations():
