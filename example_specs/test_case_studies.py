@@ -18,7 +18,16 @@ from collections.abc import Iterable, Mapping
 import pytest
 
 import specguard as sg
-from example_specs import acrobot, cartpole, inverted_pendulum, lunar_lander, minigrid_empty, mountain_car, pendulum
+from example_specs import (
+    acrobot,
+    cartpole,
+    inverted_pendulum,
+    lunar_lander,
+    minigrid_empty,
+    minigrid_image,
+    mountain_car,
+    pendulum,
+)
 
 paper = pytest.mark.paper
 
@@ -34,4 +43,5 @@ test_mountain_car = sg.goal_specs(mountain_car.specs, marks=opt_in(mountain_car.
 test_lunar_lander = sg.goal_specs(lunar_lander.specs, marks=opt_in(lunar_lander.specs, also=["baseline"]))
 test_cartpole = sg.goal_specs(cartpole.specs)
 test_minigrid = sg.goal_specs(minigrid_empty.specs)
+test_minigrid_image = sg.goal_specs(minigrid_image.specs)  # the agent sees MiniGrid's image beside the features
 test_inverted_pendulum = sg.goal_specs(inverted_pendulum.specs)

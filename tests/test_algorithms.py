@@ -131,7 +131,7 @@ def test_the_default_policy_is_mlp_and_the_recurrent_algorithms_lstm():
 def test_a_policy_by_name_or_class():
     from stable_baselines3.common.policies import ActorCriticPolicy
 
-    assert spec(policy="MultiInputPolicy").policy == "MultiInputPolicy"
+    assert spec(policy="CnnPolicy").policy == "CnnPolicy"
     assert spec(policy=ActorCriticPolicy).policy is ActorCriticPolicy
 
 
@@ -260,7 +260,7 @@ def test_a_users_algorithm_is_keyed_by_its_code():
 def test_the_policy_is_in_the_key_only_when_it_is_not_the_default():
     default = fingerprint_spec(spec()).run_base
     assert fingerprint_spec(spec(policy="MlpPolicy")).run_base == default
-    assert fingerprint_spec(spec(policy="MultiInputPolicy")).run_base != default
+    assert fingerprint_spec(spec(policy="CnnPolicy")).run_base != default
     recurrent, named = spec(algorithm="RecurrentPPO"), spec(algorithm="RecurrentPPO", policy="MlpLstmPolicy")
     assert fingerprint_spec(recurrent).run_base == fingerprint_spec(named).run_base
 

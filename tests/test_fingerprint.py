@@ -257,6 +257,7 @@ def test_every_spec_field_is_in_the_spec_key_and_only_run_fields_in_the_run_key(
         "deterministic": dataclasses.replace(base, deterministic=False),
         "confidence": dataclasses.replace(base, confidence=0.9),
         "baseline": dataclasses.replace(base, baseline=True),
+        "observation": dataclasses.replace(base, observation="features+env", policy=None),
         "expect": dataclasses.replace(base, expect={"pendulum": 0.6}),
         "timesteps": dataclasses.replace(base, budget=dataclasses.replace(base.budget, timesteps=129)),
         "tree": dataclasses.replace(base, tree=pendulum.trees["c"], expect={}),

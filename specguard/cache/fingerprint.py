@@ -87,14 +87,19 @@ def _fields(obj: Any, exclude: frozenset[str]) -> dict[str, Any]:
 
 
 def _algorithm_fields(spec: Any, fields: dict[str, Any]) -> dict[str, Any]:
-    """``fields`` with the algorithm by identity and version, and the policy only where it is not the default.
+    """``fields`` with the algorithm by identity and version, and the policy and the observation only where they are
+    not the default.
 
     stable-baselines3's algorithms stay their names (its version is in every key already); any other algorithm is
     its class: an installed one by module, qualified name and its distribution's version (sb3-contrib's), the user's
-    own by its code, as any class in a spec. A run of the default policy keeps the key it had before specs had one.
+    own by its code, as any class in a spec. A run of the default policy and observation keeps the key it had before
+    specs had them.
     """
     out = dict(fields)
-    if out["policy"] == default_policy(spec.algorithm):
+    with_env = out["observation"] != "features"
+    if not with_env:
+        del out["observation"]
+    if out["policy"] == default_policy(spec.algorithm, dict_observation=with_env):
         del out["policy"]
     if not (isinstance(spec.algorithm, str) and spec.algorithm in SB3):
         out["algorithm"] = algorithm_class(spec.algorithm)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import copy
 import hashlib
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -63,9 +63,19 @@ def probe(spec: Any, steps: int = PROBE_STEPS, build: Callable[[], Any] | None =
     return h.hexdigest()
 
 
-def _hash_step(h: Any, obs: Any, reward: Any, terminated: Any, truncated: Any, info: dict[str, Any]) -> None:
+def _hash_observation(h: Any, obs: Any) -> None:
+    """An observation by dtype, shape and content; a ``Dict`` observation's parts by key, in sorted order."""
+    if isinstance(obs, Mapping):
+        for key in sorted(obs):
+            h.update(str(key).encode() + b"\0")
+            _hash_observation(h, obs[key])
+        return
     arr = np.asarray(obs)
     h.update(arr.dtype.str.encode() + repr(arr.shape).encode() + np.ascontiguousarray(arr).tobytes())
+
+
+def _hash_step(h: Any, obs: Any, reward: Any, terminated: Any, truncated: Any, info: dict[str, Any]) -> None:
+    _hash_observation(h, obs)
     if reward is not None:
         h.update(float(reward).hex().encode() + bytes([bool(terminated), bool(truncated)]))
     for key in ("goals", "reward_terms"):

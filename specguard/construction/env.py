@@ -36,22 +36,80 @@ from specguard.construction.initial_env import InitialEnv, check_identity_observ
 from specguard.construction.reference import ReferenceEvaluator
 from specguard.error import EvaluationError, InitialEnvError, InvalidSpec, SpecError, StateMappingError
 from specguard.tree.nodes import Node
+from specguard.validation import check_choice
 
 _FLOAT32 = np.dtype(np.float32)
 _isfinite = math.isfinite
 
 __all__ = [
+    "ENV_KEY",
+    "OBSERVATIONS",
+    "SPEC_KEY",
     "BaselineEnv",
     "EnvFactory",
     "SpecEnv",
     "action_masks_problem",
+    "env_parts",
+    "features_space",
     "make_baseline_env",
     "make_env",
     "preflight",
+    "stack_observations",
     "starts_in_root_goal",
 ]
 
 EvaluatorName = Literal["flat", "reference"]
+
+OBSERVATIONS = ("features", "features+env")
+"""What the agent sees: the features and own state (a flat ``Box``), or those beside the env's own observation
+(a ``Dict``: :data:`SPEC_KEY`, then the env's keys)."""
+SPEC_KEY = "spec"
+"""The key of the features and own state in a ``"features+env"`` observation."""
+ENV_KEY = "observation"
+"""The key of the env's own observation in a ``"features+env"`` observation, where it is not a ``Dict``."""
+# The spaces stable-baselines3 takes inside a Dict observation (its preprocessing handles these, and no other).
+_DICT_PARTS = (gym.spaces.Box, gym.spaces.Discrete, gym.spaces.MultiDiscrete, gym.spaces.MultiBinary)
+
+
+def env_parts(where: str, space: gym.Space[Any]) -> dict[str, gym.Space[Any]]:
+    """The parts of the env's own observation space that a ``"features+env"`` observation holds beside
+    :data:`SPEC_KEY`: a ``Dict``'s keys as the env gives them, any other space under :data:`ENV_KEY`.
+
+    Raises:
+        InvalidSpec: one line per key refused: a key named :data:`SPEC_KEY`, or a space stable-baselines3 cannot
+            take in a ``Dict`` observation (a ``Text``, MiniGrid's ``MissionSpace``, a nested ``Dict`` or ``Tuple``).
+    """
+    parts = dict(space.spaces) if isinstance(space, gym.spaces.Dict) else {ENV_KEY: space}
+    lines = []
+    for key, part in parts.items():
+        if key == SPEC_KEY:
+            lines.append(f"the env's observation has a key {SPEC_KEY!r}, where the features and own state go")
+        elif not isinstance(part, _DICT_PARTS):
+            seen = f"key {key!r}" if isinstance(space, gym.spaces.Dict) else "observation"
+            lines.append(
+                f"the env's {seen} is a {type(part).__name__}, which stable-baselines3 cannot take in a Dict "
+                "observation (it takes Box, Discrete, MultiDiscrete and MultiBinary)"
+            )
+    if lines:
+        raise InvalidSpec(
+            where,
+            "\n".join(f"observation='features+env': {line}" for line in lines),
+            hint="leave that part out with an observation wrapper in the initial env's factory (MiniGrid's "
+            "ImgObsWrapper keeps only the image)",
+        )
+    return parts
+
+
+def features_space(space: gym.Space[Any]) -> gym.spaces.Box:
+    """The ``Box`` of the features and own state in a constructed env's observation space (either kind)."""
+    return cast(gym.spaces.Box, space[SPEC_KEY] if isinstance(space, gym.spaces.Dict) else space)
+
+
+def stack_observations(observations: Sequence[Any]) -> Any:
+    """Observations of several envs as one batch, rows first: an array, or a ``Dict``'s arrays key by key."""
+    if observations and isinstance(observations[0], Mapping):
+        return {key: np.stack([o[key] for o in observations]) for key in observations[0]}
+    return np.stack(observations)
 
 
 def _compiled_for(tree: Node, features: tuple[str, ...], compiled: CompiledTree | None) -> CompiledTree:
@@ -129,12 +187,15 @@ class FeatureReader:
         return f
 
 
-class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
+class SpecEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
     """Wraps an initial env into the environment Algorithm 1 constructs from ``tree``.
 
     * observation: ``state(obs*)`` followed by the own state of the nodes and
       annotations that have one (constraint counters, sequence stages), in
       Algorithm 1's order, a float32 ``Box`` with finite bounds where known;
+      with ``observation="features+env"``, a ``Dict`` of that ``Box`` under
+      :data:`SPEC_KEY` and the base env's own observation (its keys where it is
+      a ``Dict``, else under :data:`ENV_KEY`, :func:`env_parts`);
     * reward: the root requirements' ``R_G``, a Python float;
     * ``terminated``: the base env's, or the root goal reached, or a counter at
       0, or a node's own termination;
@@ -162,6 +223,7 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
             ``features`` (:attr:`InitialEnv.from_info`, :attr:`InitialEnv.from_env`).
         compiled: ``compile_tree(tree, features)`` when the caller has it (envs of one
             tree share it, :class:`EnvFactory`); ``None`` compiles the tree here.
+        observation: ``"features"`` (the ``Box``) or ``"features+env"`` (the ``Dict``), :data:`OBSERVATIONS`.
     """
 
     def __init__(
@@ -179,6 +241,7 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         from_info: Sequence[tuple[str, str]] = (),
         from_env: Sequence[tuple[str, Callable[[Any], Any]]] = (),
         compiled: CompiledTree | None = None,
+        observation: str = "features",
     ) -> None:
         RecordConstructorArgs.__init__(  # not ``compiled``: the spec re-creates the env from the tree
             self,
@@ -192,10 +255,12 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
             evaluator=evaluator,
             from_info=tuple(from_info),
             from_env=tuple(from_env),
+            observation=observation,
         )
         gym.Wrapper.__init__(self, env)
         if not isinstance(tree, Node):
             raise InvalidSpec("tree", f"expected a goal-tree node (Goal, All, ...), got {tree!r}")
+        check_choice(tree.name, "observation", observation, OBSERVATIONS)
         self.tree = tree
         self.features = tuple(features)
         self.compiled = _compiled_for(tree, self.features, compiled)
@@ -217,16 +282,24 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         slots = [slot for _, slot in self.evaluator.slots]
         low = np.full(self._n, -np.inf) if feature_low is None else np.asarray(feature_low, dtype=np.float64)
         high = np.full(self._n, np.inf) if feature_high is None else np.asarray(feature_high, dtype=np.float64)
-        self.observation_space = gym.spaces.Box(
+        box = gym.spaces.Box(
             np.concatenate([low, [s.low for s in slots]]).astype(np.float32),
             np.concatenate([high, [s.high for s in slots]]).astype(np.float32),
             dtype=np.float32,
         )
+        self.observation = observation
+        """What the agent sees, one of :data:`OBSERVATIONS`."""
+        self._with_env = observation == "features+env"
+        self._whole = not isinstance(base_space, gym.spaces.Dict)  # the env's observation goes under ENV_KEY
+        if self._with_env:
+            self.observation_space = gym.spaces.Dict({SPEC_KEY: box, **env_parts(tree.name, base_space)})
+        else:
+            self.observation_space = box
         if action_space is not None:
             self.action_space = action_space
         self._own_actions = execute is not None or action_space is not None  # the agent's are not the base env's
         # The base observation can be handed on untouched when nothing is added or converted.
-        self._passthrough = self._identity and not slots and base_space.dtype == np.float32
+        self._passthrough = self._identity and not slots and base_space.dtype == np.float32 and not self._with_env
         self._pending: Any = None  # (weights, CompiledTree) adapted, in force from the next reset
         self.adapted_weights: dict[str, tuple[float, ...]] = {}
         """The adapted weights in force this episode (:meth:`set_weights`); empty while the tree's own."""
@@ -280,9 +353,7 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
 
     # -- gymnasium API -------------------------------------------------------
 
-    def reset(
-        self, *, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[np.ndarray, dict[str, Any]]:
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         if self._pending is not None:
             (self.adapted_weights, self.compiled), self._pending = self._pending, None
             self.evaluator = self.compiled.evaluator()
@@ -293,9 +364,14 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         ev.reset(f)
         info["goals"] = ev.goals
         info["safe"] = ev.safe_info() if self._safety_keys else {}
-        return (obs if self._passthrough else np.array(f + ev.own_state, _FLOAT32)), info
+        observation = obs if self._passthrough else np.array(f + ev.own_state, _FLOAT32)
+        return (self._beside(obs, observation) if self._with_env else observation), info
 
-    def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+    def _beside(self, obs: Any, observation: np.ndarray) -> dict[str, Any]:
+        """The ``"features+env"`` observation: ``observation`` under :data:`SPEC_KEY`, the env's ``obs`` beside."""
+        return {SPEC_KEY: observation, ENV_KEY: obs} if self._whole else {SPEC_KEY: observation, **obs}
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         # The hot path: every call of a user's training runs it, so it is written out in one function.
         base_action = action
         if self._execute is not None:
@@ -322,7 +398,9 @@ class SpecEnv(gym.Wrapper[np.ndarray, Any, Any, Any], RecordConstructorArgs):
         info["base_reward"] = float(base_reward)
         # A new array each step (a consumer may keep it, e.g. SB3's terminal_observation); or, when
         # nothing is added or converted, the base env's own observation untouched.
-        observation = obs if self._passthrough else np.array(f + ev.own_state, _FLOAT32)
+        observation: Any = obs if self._passthrough else np.array(f + ev.own_state, _FLOAT32)
+        if self._with_env:
+            observation = self._beside(obs, observation)
         return observation, reward, bool(terminated or ended), bool(truncated), info
 
 
@@ -477,15 +555,23 @@ class EnvFactory:
         tree: the goal tree.
         baseline: build :class:`BaselineEnv` envs (the initial env's own reward) rather than :class:`SpecEnv`.
         evaluator: the :class:`SpecEnv` evaluator, ``"flat"`` or ``"reference"``.
+        observation: what a :class:`SpecEnv`'s agent sees, one of :data:`OBSERVATIONS`.
     """
 
     def __init__(
-        self, initial_env: InitialEnv, tree: Node, *, baseline: bool = False, evaluator: EvaluatorName = "flat"
+        self,
+        initial_env: InitialEnv,
+        tree: Node,
+        *,
+        baseline: bool = False,
+        evaluator: EvaluatorName = "flat",
+        observation: str = "features",
     ) -> None:
         self.initial_env = initial_env
         self.tree = tree
         self.baseline = baseline
         self.evaluator: EvaluatorName = evaluator
+        self.observation = observation
         self.compiled: CompiledTree | None = None
         """The compiled tree, once the first call's preflight passed."""
         self.starts_checked = False
@@ -533,6 +619,7 @@ class EnvFactory:
                 from_info=initial_env.from_info,
                 from_env=initial_env.from_env,
                 compiled=compiled,
+                observation=self.observation,
             )
         except SpecError:
             base.close()
@@ -547,13 +634,22 @@ def make_baseline_env(initial_env: InitialEnv, tree: Node, **make_kwargs: Any) -
     return cast(BaselineEnv, EnvFactory(initial_env, tree, baseline=True)(**make_kwargs))
 
 
-def make_env(initial_env: InitialEnv, tree: Node, *, evaluator: EvaluatorName = "flat", **make_kwargs: Any) -> SpecEnv:
+def make_env(
+    initial_env: InitialEnv,
+    tree: Node,
+    *,
+    evaluator: EvaluatorName = "flat",
+    observation: str = "features",
+    **make_kwargs: Any,
+) -> SpecEnv:
     """Construct the trainable env of ``tree`` over ``initial_env`` (Algorithm 1).
 
     Args:
         initial_env: the initial environment and its mappings.
         tree: the goal tree; its root goal ends the episode.
         evaluator: ``"flat"`` (default, compiled) or ``"reference"``.
+        observation: ``"features"`` (default: the features and own state, a ``Box``) or ``"features+env"``
+            (a ``Dict`` of those and the initial env's own observation, :class:`SpecEnv`).
         **make_kwargs: overrides for the base env's ``gymnasium.make`` kwargs
             (e.g. ``render_mode="human"``).
 
@@ -564,4 +660,4 @@ def make_env(initial_env: InitialEnv, tree: Node, *, evaluator: EvaluatorName = 
     Raises:
         SpecError: the tree or the initial env is invalid; the message names the node path.
     """
-    return cast(SpecEnv, EnvFactory(initial_env, tree, evaluator=evaluator)(**make_kwargs))
+    return cast(SpecEnv, EnvFactory(initial_env, tree, evaluator=evaluator, observation=observation)(**make_kwargs))

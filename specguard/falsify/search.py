@@ -48,6 +48,7 @@ from typing import Any, Protocol, runtime_checkable
 import gymnasium as gym
 import numpy as np
 
+from specguard.construction.env import features_space, stack_observations
 from specguard.extend import until_end
 from specguard.falsify.portfolio import Portfolio
 from specguard.falsify.robustness import Judgement, feature_scales, judge_end, own_states, reached_early
@@ -138,7 +139,7 @@ class EpisodeRunner:
         self._envs: list[Any] = [first]
         self.tree = first.tree
         n = len(first.features)
-        box = first.observation_space
+        box = features_space(first.observation_space)  # the features, with either kind of observation
         self.scales = feature_scales(first.features, box.low[:n], box.high[:n])
         self.discrete = isinstance(first.action_space, gym.spaces.Discrete)
         self.max_steps = _time_limit(first)
@@ -172,7 +173,7 @@ class EpisodeRunner:
         if isinstance(act, EpisodePolicy):
             act.start(envs)
         while active:
-            rows = np.stack([obs[i] for i in active])
+            rows = stack_observations([obs[i] for i in active])
             actions = act(rows, active) if isinstance(act, EpisodePolicy) else act(rows)
             for j, i in enumerate(active):
                 action = int(actions[j]) if self.discrete else actions[j]

@@ -44,7 +44,9 @@ def render_tree(tree: Node) -> list[str]:
 
 
 def _layout(spec: Spec) -> list[str]:
-    from specguard.construction.env import make_baseline_env, make_env
+    import gymnasium as gym
+
+    from specguard.construction.env import SPEC_KEY, features_space, make_baseline_env, make_env
 
     if spec.baseline:
         env: Any = make_baseline_env(spec.initial_env, spec.tree)
@@ -52,14 +54,21 @@ def _layout(spec: Spec) -> list[str]:
             return [f"observation: the initial env's own, {env.observation_space}"]
         finally:
             env.close()
-    env = make_env(spec.initial_env, spec.tree)
+    env = make_env(spec.initial_env, spec.tree, observation=spec.observation)
     try:
-        space = env.observation_space
+        space = features_space(env.observation_space)
         names = list(spec.initial_env.features) + [f"{slot.name} {k}" for k, slot in env.evaluator.slots]
-        lines = [f"observation: {len(names)} components (features, then the own state of nodes and annotations)"]
+        parts = "features, then the own state of nodes and annotations"
+        if spec.observation == "features":
+            lines = [f"observation: {len(names)} components ({parts})"]
+        else:
+            lines = [f"observation: a Dict; {SPEC_KEY!r}: {len(names)} components ({parts})"]
         width = max(len(n) for n in names)
         for name, lo, hi in zip(names, space.low.tolist(), space.high.tolist()):
             lines.append(f"  {name:<{width}}  {bounds_text(lo, hi)}")
+        if isinstance(env.observation_space, gym.spaces.Dict):
+            lines.append("beside it, the initial env's own observation:")
+            lines += [f"  {k!r}: {part}" for k, part in env.observation_space.spaces.items() if k != SPEC_KEY]
         return lines
     finally:
         env.close()

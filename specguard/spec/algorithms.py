@@ -151,29 +151,44 @@ def algorithm_name(algorithm: str | type) -> str:
 # -- policies -----------------------------------------------------------------------------
 
 
-def default_policy(algorithm: str | type) -> str:
+_DICT_PREFIX = "MultiInput"  # SB3's policy names for a Dict observation: MultiInputPolicy, MultiInputLstmPolicy
+
+
+def default_policy(algorithm: str | type, *, dict_observation: bool = False) -> str:
     """The policy a spec gets unless it names one: ``MlpPolicy``, or the algorithm's only other MLP policy
-    (RecurrentPPO's ``MlpLstmPolicy``)."""
+    (RecurrentPPO's ``MlpLstmPolicy``); for a ``Dict`` observation, ``MultiInputPolicy`` (RecurrentPPO's
+    ``MultiInputLstmPolicy``)."""
     aliases = list(getattr(algorithm_class(algorithm), "policy_aliases", {}))
-    if "MlpPolicy" in aliases:
-        return "MlpPolicy"
-    mlp = [a for a in aliases if a.startswith("Mlp")]
-    return mlp[0] if len(mlp) == 1 else "MlpPolicy"
+    prefix, plain = (_DICT_PREFIX, "MultiInputPolicy") if dict_observation else ("Mlp", "MlpPolicy")
+    if plain in aliases:
+        return plain
+    named = [a for a in aliases if a.startswith(prefix)]
+    return named[0] if len(named) == 1 else plain
 
 
-def check_policy(where: str, algorithm: str | type, policy: object) -> str | type:
+def check_policy(where: str, algorithm: str | type, policy: object, *, dict_observation: bool = False) -> str | type:
     """``policy`` if ``algorithm`` can take it: one of its policy names, or a subclass of SB3's ``BasePolicy``.
 
+    A name fits the observation: a ``MultiInput`` policy for a ``Dict`` observation (``dict_observation``), another
+    for a ``Box``; a class is SB3's to check.
+
     Raises:
-        InvalidSpec: naming the policy, the algorithm and its policy names.
+        InvalidSpec: naming the policy, the algorithm and its policy names; or the observation it does not fit.
     """
     from stable_baselines3.common.policies import BasePolicy
 
     aliases = list(getattr(algorithm_class(algorithm, where), "policy_aliases", {}))
     if isinstance(policy, type) and issubclass(policy, BasePolicy):
         return policy
-    if isinstance(policy, str) and policy in aliases:
+    fitting = [a for a in aliases if a.startswith(_DICT_PREFIX) == dict_observation]
+    if isinstance(policy, str) and policy in fitting:
         return policy
+    if isinstance(policy, str) and (policy in aliases or not fitting):  # a policy of the other observation, or none
+        seen = "a Dict (observation='features+env')" if dict_observation else "a flat Box (observation='features')"
+        which = ", ".join(fitting) or f"none: {algorithm_name(algorithm)} has no policy for it"
+        raise InvalidSpec(
+            where, f"the agent's observation is {seen}, which {policy!r} does not take; one that does: {which}"
+        )
     raise InvalidSpec(
         where,
         f"expected policy to be one of {', '.join(aliases)} ({algorithm_name(algorithm)}'s policy names) "

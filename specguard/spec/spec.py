@@ -20,7 +20,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from specguard.construction.env import BaselineEnv, EnvFactory, SpecEnv
+from specguard.construction.env import OBSERVATIONS, BaselineEnv, EnvFactory, SpecEnv
 from specguard.construction.initial_env import InitialEnv
 from specguard.error import InvalidSpec
 from specguard.falsify.starts import StartSpace, as_start_space
@@ -80,8 +80,18 @@ class Spec:
             changes no run and no verdict of its goals.
         policy: the algorithm's policy: one of its names (``"MlpPolicy"``, ``"CnnPolicy"``, ...)
             or a ``BasePolicy`` subclass; ``None`` (default): ``"MlpPolicy"``, or the algorithm's
-            only MLP policy where it has no ``MlpPolicy`` (RecurrentPPO's ``"MlpLstmPolicy"``).
-            Part of a run's key only when it is not that default.
+            only MLP policy where it has no ``MlpPolicy`` (RecurrentPPO's ``"MlpLstmPolicy"``);
+            with ``observation="features+env"``, ``"MultiInputPolicy"`` (RecurrentPPO's
+            ``"MultiInputLstmPolicy"``). Part of a run's key only when it is not that default.
+        observation: what the agent sees. ``"features"`` (default): the features, then the goal
+            tree's own state, a flat ``Box``. ``"features+env"``: a ``Dict`` of that ``Box``
+            under ``"spec"`` and the initial env's own observation beside it (a ``Dict``'s keys
+            as the env gives them, any other observation under ``"observation"``), for an image
+            the features leave out; the goals are judged on the features alone either way.
+            Refused with ``baseline=True`` (the baseline sees the env's own observation), and
+            for a key stable-baselines3 cannot take (a ``Text``) when the env is built.
+            ``normalize=True`` normalizes the ``"spec"`` part only. Part of a run's key only
+            when it is not the default.
     """
 
     initial_env: InitialEnv
@@ -101,6 +111,7 @@ class Spec:
     xfail: Mapping[str, str] = field(default_factory=dict)
     starts: StartSpace | None = None
     policy: str | type | None = None
+    observation: str = "features"
 
     def __post_init__(self) -> None:
         label = f"Spec {self.label!r}"
@@ -115,8 +126,18 @@ class Spec:
         if not isinstance(self.hyperparameters, Mapping):
             raise InvalidSpec(f"{label}.hyperparameters", f"expected a mapping, got {self.hyperparameters!r}")
         check_hyperparameters(f"{label}.hyperparameters", algorithm, self.hyperparameters)
-        policy = default_policy(algorithm) if self.policy is None else self.policy
-        object.__setattr__(self, "policy", check_policy(f"{label}.policy", algorithm, policy))
+        check_choice(label, "observation", self.observation, OBSERVATIONS)
+        if self.baseline and self.observation != "features":
+            raise InvalidSpec(
+                f"{label}.observation",
+                f"baseline=True trains on the initial env's own observation; observation={self.observation!r} "
+                "is for the constructed env",
+            )
+        with_env = self.observation == "features+env"
+        policy = default_policy(algorithm, dict_observation=with_env) if self.policy is None else self.policy
+        object.__setattr__(
+            self, "policy", check_policy(f"{label}.policy", algorithm, policy, dict_observation=with_env)
+        )
         object.__setattr__(self, "n_envs", check_count(label, "n_envs", self.n_envs, "parallel environments per run"))
         if self.quorum is not None:
             object.__setattr__(self, "quorum", self._checked_quorum(label))
@@ -132,7 +153,7 @@ class Spec:
 
     def env_factory(self) -> EnvFactory:
         """Builds the envs this spec trains on, compiling its tree once for all of them (one run's envs share one)."""
-        return EnvFactory(self.initial_env, self.tree, baseline=self.baseline)
+        return EnvFactory(self.initial_env, self.tree, baseline=self.baseline, observation=self.observation)
 
     def make_env(self, **make_kwargs: Any) -> SpecEnv | BaselineEnv:
         """The env this spec trains on, built afresh, as Gymnasium's ``EnvSpec.make`` builds a registered env.

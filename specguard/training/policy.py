@@ -18,7 +18,7 @@ A model without a recurrent state acts exactly as ``model.predict(obs)[0]``.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -77,11 +77,14 @@ class Policy:
     def __call__(self, observations: Any, rows: Sequence[int] | None = None) -> Any:
         """The action for ``observations``: of every env started, or of the envs ``rows`` (a batch's still running).
 
+        An observation is an array, or a ``Dict`` observation's arrays by key (``Spec(observation="features+env")``;
+        a batch of them stacked key by key, :func:`~specguard.construction.env.stack_observations`).
+
         Raises:
             SpecError: the model acts on action masks and was not told the envs (:meth:`start`).
         """
         if rows is None:
-            rows = list(range(len(observations))) if self.batch else [0]
+            rows = list(range(_rows(observations))) if self.batch else [0]
         rows = list(rows)
         if max(rows) >= len(self._starting):  # more envs than it was told of (no start): all start here
             self._state, self._starting = None, np.ones(max(rows) + 1, dtype=bool)
@@ -110,6 +113,13 @@ class Policy:
             )
         masks = [np.asarray(self._envs[i].get_wrapper_attr("action_masks")()) for i in rows]
         return np.stack(masks) if self.batch else masks[0]
+
+
+def _rows(observations: Any) -> int:
+    """The rows of a batch of observations: an array's, or a ``Dict`` observation's (its parts', key by key)."""
+    if isinstance(observations, Mapping):
+        return len(next(iter(observations.values())))
+    return len(observations)
 
 
 def policy(model: Any, normalizer: Any = None, *, deterministic: bool = True, batch: bool = False) -> Policy:

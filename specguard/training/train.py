@@ -24,7 +24,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from specguard.construction.env import action_masks_problem
+from specguard.construction.env import SPEC_KEY, action_masks_problem
 from specguard.error import InvalidSpec, SpecError, TrainingError
 from specguard.falsify.search import EpisodePolicy
 from specguard.parallel.protocol import Report
@@ -168,8 +168,8 @@ def _build(spec: Spec, seed: int) -> _Run:
             hint="give the initial env an action_masks() method (sb3_contrib.common.wrappers.ActionMasker wraps one "
             "around an env), or train an algorithm without masks (PPO)",
         )
-    if spec.normalize:
-        venv = VecNormalize(venv)
+    if spec.normalize:  # a Dict observation's "spec" part only: the features and own state, as for a Box
+        venv = VecNormalize(venv, norm_obs_keys=[SPEC_KEY] if spec.observation == "features+env" else None)
     try:
         model = algorithm(spec.policy, venv, seed=seed, device="cpu", verbose=0, **dict(spec.hyperparameters))
     except (TypeError, ValueError, AssertionError) as e:
