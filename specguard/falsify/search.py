@@ -12,11 +12,11 @@ episode's end by the spec's property (:mod:`specguard.falsify.robustness`).
 1. **replay**: the counterexample stored under ``key`` in the Hypothesis
    example database (if any) is run first; if it still fails, that is the answer;
 2. **guided search**: the middle of the space, then ``EXPLORE`` uniform
-   draws, then rounds of local search: each new start is a Gaussian step
-   (``STEP`` of each range's half-width) from one of the ``ELITE`` starts
-   with the lowest robustness scores so far (a start leaves them once
-   ``RETIRE`` steps were taken from it), or, for a share ``UNIFORM_SHARE``
-   of them, a uniform draw; it stops at the first failing start, which is
+   draws, then rounds of a portfolio of samplers (uniform draws, a
+   cross-entropy trend, local steps; :mod:`specguard.falsify.portfolio`)
+   that shifts each round's starts to the samplers whose episodes came
+   closest to failing, keeping a uniform share; it stops at the first failing
+   start, which is
    then moved towards the middle of the space, each variable in turn
    (set to its middle if the start still fails there, else bisected), so the
    counterexample has as few variables off the middle as it can, each on the
