@@ -188,6 +188,13 @@ class GoalMissed(AssertionError):
     """A goal missed its threshold (the failure an ``xfail`` goal expects)."""
 
 
+class RunsCrashed(AssertionError):
+    """Runs of a spec crashed (a worker raised, was killed or died): its items fail, even a goal expected to miss.
+
+    Not a :class:`GoalMissed`, so a goal's ``xfail`` (which expects a miss) does not take it for one.
+    """
+
+
 class Broken(Exception):
     """Raised by a contract property with what breaks the invariant; ``contract.trees.run_property`` adds the rest."""
 

@@ -532,6 +532,17 @@ def test_a_worker_error_is_one_clean_message_with_its_traceback_only_under_verbo
     verbose.stdout.fnmatch_lines(["*worker traceback (seed 0):*", "Traceback (most recent call last):*"])
 
 
+def test_a_crashed_run_fails_a_goal_expected_to_miss_rather_than_xfailing_it(pytester):
+    # A run that never finished says nothing of the goal: an xfail mark expects a miss, not a crash.
+    write(
+        pytester,
+        BROKEN_ENV.replace('expect={"stabilization": 0.0}', 'expect={"stabilization": 0.9}, xfail=["stabilization"]'),
+    )
+    result = run(pytester, "--goal-specs", "--goal-specs-no-cache")
+    result.assert_outcomes(failed=1)
+    result.stdout.fnmatch_lines(["*runs crashed (a crash is not a miss, even for a goal expected to miss)*"])
+
+
 TRAJECTORY = """
 def test_the_trained_agent(goal_spec_result, pendulum, tree):
     result = goal_spec_result(tiny(pendulum, tree))

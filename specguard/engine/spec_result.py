@@ -117,9 +117,12 @@ class SpecResult:
 
         The one place the spec's ``undecided`` and ``xfail`` apply: an undecided
         goal counts as the spec's ``undecided`` says; a goal the spec expects
-        to miss (``xfail``) that did not pass counts as xfailed.
+        to miss (``xfail``) that did not pass counts as xfailed, unless runs
+        crashed: a crash is not a miss, so the goal counts as failed.
         """
         outcome = self.outcome(path)
+        if self.errors and outcome is not GoalOutcome.PASSED:
+            return "failed"
         undecided_as = self.trained.undecided if self.trained is not None else "fail"
         if outcome is GoalOutcome.PASSED or (outcome is GoalOutcome.UNDECIDED and undecided_as == "pass"):
             return "passed"

@@ -15,7 +15,7 @@ from typing import Any
 
 import pytest
 
-from specguard.error import GoalMissed
+from specguard.error import GoalMissed, RunsCrashed
 from specguard.pytest_plugin.declare import GOAL_FIXTURE, FalsifyItem, SpecItem
 
 __all__ = [
@@ -107,6 +107,9 @@ def spec_of(item: pytest.Function, expect: Any) -> tuple[Any, list[str]]:
 def raise_outcome(item: pytest.Function, checks: Sequence[Any], undecided_as: str, result: Any) -> None:
     """The item's pytest outcome from its goals' checks: pass, ``GoalMissed``, xfail, or pass with a warning.
 
+    Runs that crashed fail the item with :class:`~specguard.error.RunsCrashed`, which an ``xfail`` goal does not
+    expect: a run that never finished says nothing about the goal.
+
     ``undecided_as`` is the session's ``--goal-specs-undecided``: what a goal whose
     runs stayed undecided does (fail, xfail or pass).
     """
@@ -114,10 +117,15 @@ def raise_outcome(item: pytest.Function, checks: Sequence[Any], undecided_as: st
 
     failures = [c.message() for c in checks if c.outcome is GoalOutcome.FAILED]
     undecided = [c.message() for c in checks if c.outcome is GoalOutcome.UNDECIDED]
-    if failures or (undecided and undecided_as == "fail"):
+    if result.errors or failures or (undecided and undecided_as == "fail"):
         text = "\n\n".join(failures + undecided)
         if detailed(item.config) and result.tracebacks:
             text += "".join(f"\n\nworker traceback (seed {k}):\n{tb}" for k, tb in sorted(result.tracebacks.items()))
+        if result.errors:  # a crash is no miss: an xfail goal (which expects GoalMissed) fails too
+            crashed = "\n".join(f"seed {seed} failed: {error}" for seed, error in sorted(result.errors.items()))
+            raise RunsCrashed(
+                f"runs crashed (a crash is not a miss, even for a goal expected to miss):\n{crashed}\n\n{text}"
+            )
         raise GoalMissed(text)
     if undecided and undecided_as == "xfail":
         pytest.xfail("undecided: " + "\n\n".join(undecided))

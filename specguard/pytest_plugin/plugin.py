@@ -19,6 +19,7 @@ from typing import Any
 
 import pytest
 
+from specguard.error import RunsCrashed
 from specguard.pytest_plugin.declare import FALSIFY, GOAL_FIXTURE, SpecItem
 from specguard.pytest_plugin.items import GoalMissed, falsify_check, group_of, one_line_errors, raise_outcome, spec_of
 from specguard.pytest_plugin.options import add_options, baseline_path, parse_options
@@ -171,7 +172,7 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Generator[None, Any, Any]:
     report = yield
-    if call.excinfo is not None and isinstance(call.excinfo.value, GoalMissed) and report.failed:
+    if call.excinfo is not None and isinstance(call.excinfo.value, (GoalMissed, RunsCrashed)) and report.failed:
         report.longrepr = str(call.excinfo.value)  # the figures, not a traceback into the plugin
     return report
 
