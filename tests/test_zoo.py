@@ -151,6 +151,14 @@ def test_policy_kwargs_outside_the_closed_scope_are_refused(tmp_path, text):
         sg.zoo_settings("PPO", "CartPole-v1", file=path)
 
 
+def test_without_sb3_contrib_its_algorithms_say_what_to_install(monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "sb3_contrib", None)  # import sb3_contrib raises ImportError
+    with pytest.raises(sg.InvalidSpec, match=r"^zoo_settings\('TQC', 'Pendulum-v1'\): TQC is an sb3-contrib algorithm"):
+        sg.zoo_settings("TQC", "Pendulum-v1")
+
+
 def test_without_rl_zoo3_it_says_what_to_install(monkeypatch):
     import importlib.util
 
@@ -197,6 +205,12 @@ def test_a_file_of_ones_own_with_every_kind_of_key(tmp_path):
     assert settings.not_taken["normalize"].startswith("norm_reward=False")
     assert "A2C's constructor takes no 'no_such_key'" in settings.not_taken["no_such_key"]
     assert settings.source == str(path) and str(path) in message
+
+
+def test_an_entry_without_a_policy_gets_the_algorithms_default(tmp_path):
+    path = write(tmp_path, "E-v0:\n  n_timesteps: 100\n")
+    assert zoo("RecurrentPPO", "E-v0", file=path)[0].policy == "MlpLstmPolicy"
+    assert zoo("PPO", "E-v0", file=path)[0].policy == "MlpPolicy"
 
 
 def test_train_freq_as_a_list_is_a_tuple_and_a_bad_schedule_is_refused(tmp_path):

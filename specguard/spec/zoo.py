@@ -35,7 +35,13 @@ from pathlib import Path
 from typing import Any
 
 from specguard.error import InvalidSpec, SpecWarning
-from specguard.spec.algorithms import algorithm_class, check_policy, hyperparameter_names, resolve_algorithm
+from specguard.spec.algorithms import (
+    algorithm_class,
+    check_policy,
+    default_policy,
+    hyperparameter_names,
+    resolve_algorithm,
+)
 from specguard.validation import check_text
 
 __all__ = ["SCHEDULED", "ZOO_FILES", "LinearSchedule", "ZooSettings", "zoo_settings"]
@@ -348,6 +354,7 @@ def zoo_settings(algorithm: str | type, env_id: str, *, file: str | Path | None 
     if not isinstance(resolved, str) or resolved not in ZOO_FILES:
         name = resolved if isinstance(resolved, str) else f"{resolved.__module__}:{resolved.__qualname__}"
         raise InvalidSpec(where, f"rl-zoo3 has no settings for {name}; it has files for {', '.join(ZOO_FILES)}")
+    algorithm_class(resolved, where)  # an sb3-contrib algorithm without sb3-contrib: what to install
     if file is None:
         path, source = _zoo_file(where, ZOO_FILES[resolved])
     else:
@@ -355,8 +362,8 @@ def zoo_settings(algorithm: str | type, env_id: str, *, file: str | Path | None 
         source = str(path)
     entry = _entry(where, _read(where, path), env_id, source, resolved)
     fields, not_taken = _map(f"{where}, {source}", resolved, entry)
-    algorithm_class(resolved, where)  # sb3-contrib's algorithms: its hint if it is missing
-    policy = check_policy(f"{where}.policy", resolved, fields["policy"] or "MlpPolicy")
+    policy = fields["policy"] if fields["policy"] is not None else default_policy(resolved)
+    policy = check_policy(f"{where}.policy", resolved, policy)
     timesteps, n_envs = fields["timesteps"], fields["n_envs"]
     if not (isinstance(timesteps, (int, float)) and timesteps >= 1 and float(timesteps).is_integer()):
         raise InvalidSpec(where, f"expected n_timesteps to be a whole number of steps, got {timesteps!r}")
