@@ -180,7 +180,7 @@ def test_a_file_of_ones_own_with_every_kind_of_key(tmp_path):
           n_timesteps: !!float 2e4
           n_envs: 2
           policy: MlpPolicy
-          normalize: "dict(norm_obs=True, norm_reward=False)"
+          normalize: "dict(norm_obs=True, norm_reward=False, gamma=0.9)"
           env_wrapper: gymnasium.wrappers.TimeAwareObservation
           frame_stack: 4
           callback: rl_zoo3.callbacks.ParallelTrainCallback
@@ -202,9 +202,16 @@ def test_a_file_of_ones_own_with_every_kind_of_key(tmp_path):
         "no_such_key",
         "clip_range_vf",
     }
-    assert settings.not_taken["normalize"].startswith("norm_reward=False")
+    assert settings.not_taken["normalize"].startswith("norm_reward=False: ")  # no gamma: rewards are not normalized
     assert "A2C's constructor takes no 'no_such_key'" in settings.not_taken["no_such_key"]
     assert settings.source == str(path) and str(path) in message
+
+
+def test_normalize_discounts_by_the_algorithms_gamma_as_rl_zoo3_does(tmp_path):
+    # rl-zoo3 gives VecNormalize the algorithm's gamma over the one its options name: here 0.99, VecNormalize's own.
+    path = write(tmp_path, 'E-v0:\n  n_timesteps: 100\n  gamma: 0.99\n  normalize: "dict(gamma=0.95)"\n')
+    settings, warned = zoo("PPO", "E-v0", file=path)
+    assert settings.normalize is True and settings.not_taken == {} and warned == []
 
 
 def test_an_entry_without_a_policy_gets_the_algorithms_default(tmp_path):

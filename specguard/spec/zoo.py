@@ -270,8 +270,10 @@ def _normalize(value: Any, gamma: Any, where: str, not_taken: dict[str, str]) ->
     if not isinstance(options, Mapping):
         raise InvalidSpec(where, f"normalize: expected True, False or VecNormalize's options, got {value!r}")
     wanted = dict(options)
-    if gamma is not None:  # rl-zoo3 discounts normalized rewards by the algorithm's gamma
-        wanted.setdefault("gamma", gamma)
+    if gamma is not None:  # rl-zoo3 discounts normalized rewards by the algorithm's gamma, over any it was given
+        wanted["gamma"] = gamma
+    if not wanted.get("norm_reward", True):  # the discount only scales rewards: without them it changes nothing
+        wanted.pop("gamma", None)
     differs = {k: v for k, v in wanted.items() if _VECNORMALIZE.get(k, object()) != v}
     if differs:
         said = ", ".join(f"{k}={v!r}" for k, v in differs.items())
