@@ -69,6 +69,7 @@ _EXPORTS = {
     "make_baseline_env": "specguard.construction.env",
     "make_env": "specguard.construction.env",
     "run_spec": "specguard.engine.run_spec",
+    "zoo_settings": "specguard.spec.zoo",
 }
 
 # The one list of public names: __all__ is derived from it, and the TYPE_CHECKING imports
@@ -127,6 +128,7 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.pytest_plugin.declare import goal_specs as goal_specs
     from specguard.spec.budget import Budget as Budget
     from specguard.spec.spec import Spec as Spec
+    from specguard.spec.zoo import zoo_settings as zoo_settings
     from specguard.tree.builtin_annotations import Constraint as Constraint
     from specguard.tree.builtin_annotations import Distance as Distance
     from specguard.tree.formula import formula as formula

@@ -111,7 +111,8 @@ class GoalMetAtStart(InvalidSpec):
 class SpecWarning(UserWarning):
     """A spec that trains, but may not test what it says (a goal met at some starts, or only at the bounds' edge).
 
-    Issued before training, where the env is built; ``run_spec`` issues it once, in the caller's process.
+    Issued before training, where the env is built; ``run_spec`` issues it once, in the caller's process. Also
+    issued by ``sg.zoo_settings`` for rl-zoo3 settings a spec cannot take (it trains without them).
     """
 
 

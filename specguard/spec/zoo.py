@@ -1,0 +1,389 @@
+"""An algorithm's tuned hyperparameters for an env id, read from rl-zoo3's files, as a spec's own fields.
+
+`rl-zoo3 <https://rl-baselines3-zoo.readthedocs.io>`_ keeps tuned settings per
+algorithm and env id in YAML files (``rl_zoo3/hyperparams/ppo.yml``, ...).
+:func:`zoo_settings` reads one entry the way rl-zoo3's ``ExperimentManager``
+preprocesses it and maps it onto :class:`~specguard.spec.spec.Spec`'s fields:
+``policy``, ``n_envs``, ``normalize``, ``hyperparameters`` (``policy_kwargs``
+evaluated in a closed scope, ``lin_<x>`` schedules as :class:`LinearSchedule`),
+and ``n_timesteps`` as :attr:`ZooSettings.timesteps`. What a spec cannot say
+(env wrappers, frame stacking, callbacks, action noise, VecNormalize options
+other than its defaults, ...) is named in one :class:`~specguard.error.SpecWarning`
+and kept in :attr:`ZooSettings.not_taken`; nothing is dropped silently.
+
+The files are read without importing ``rl_zoo3`` (whose import patches
+Gymnasium's ``TimeLimit`` and loads its training stack): only its location is looked up.
+
+Example:
+    >>> hp = _from_text("policy_kwargs", "dict(activation_fn=nn.ReLU, net_arch=dict(pi=[64], vf=[64]))", "where")
+    >>> hp["activation_fn"].__name__, hp["net_arch"]
+    ('ReLU', {'pi': [64], 'vf': [64]})
+    >>> LinearSchedule(3e-4)(0.5)
+    0.00015
+"""
+
+from __future__ import annotations
+
+import ast
+import difflib
+import importlib.util
+import warnings
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+from specguard.error import InvalidSpec, SpecWarning
+from specguard.spec.algorithms import (
+    algorithm_class,
+    check_policy,
+    default_policy,
+    hyperparameter_names,
+    resolve_algorithm,
+)
+from specguard.validation import check_text
+
+__all__ = ["SCHEDULED", "ZOO_FILES", "LinearSchedule", "ZooSettings", "zoo_settings"]
+
+ZOO_FILES: dict[str, str] = {
+    "PPO": "ppo",
+    "A2C": "a2c",
+    "DQN": "dqn",
+    "SAC": "sac",
+    "TD3": "td3",
+    "DDPG": "ddpg",
+    "ARS": "ars",
+    "CrossQ": "crossq",
+    "QRDQN": "qrdqn",
+    "RecurrentPPO": "ppo_lstm",
+    "TQC": "tqc",
+    "TRPO": "trpo",
+}
+"""The algorithms rl-zoo3 has files for, by specguard's name: the file's stem (MaskablePPO has none)."""
+
+SCHEDULED = ("learning_rate", "clip_range", "clip_range_vf", "delta_std")
+"""The hyperparameters whose ``"lin_<x>"`` values rl-zoo3 turns into linear schedules (as it does, and no others)."""
+
+SPEC_FIELDS = ("algorithm", "policy", "hyperparameters", "n_envs", "normalize")
+"""The :class:`~specguard.spec.spec.Spec` keyword arguments a :class:`ZooSettings` unpacks into."""
+
+_HINT = "pip install 'specguard[zoo]'"
+
+# Keys rl-zoo3 reads itself (not the model's constructor), with why a spec does not take them.
+_NOT_TAKEN = {
+    "env_wrapper": "a wrapper around the env; a spec trains on its constructed env: wrap the initial env yourself",
+    "vec_env_wrapper": "a wrapper around the vectorized env; specguard builds the training envs itself",
+    "frame_stack": "VecFrameStack around the training envs; specguard builds the training envs itself",
+    "callback": "training callbacks; specguard's training loop sets its own",
+    "env_kwargs": "the env's make kwargs: give them to sg.InitialEnv(env_id, ..., **kwargs)",
+    "eval_env_kwargs": "the evaluation env's make kwargs; a spec evaluates on its constructed env",
+    "monitor_kwargs": "Monitor's options; specguard records episodes itself",
+    "noise_type": "rl-zoo3 builds the action noise from the env's action space: give "
+    "hyperparameters={'action_noise': NormalActionNoise(...)} yourself",
+    "noise_std": "see noise_type",
+    "replay_buffer_class": "HER's replay buffer needs a goal-conditioned (dict observation) env",
+    "replay_buffer_kwargs": "see replay_buffer_class",
+}
+
+# VecNormalize's defaults: what a spec's normalize=True is (specguard.training.train wraps VecNormalize(venv)).
+_VECNORMALIZE = {"norm_obs": True, "norm_reward": True, "clip_obs": 10.0, "clip_reward": 10.0, "gamma": 0.99}
+
+
+@dataclass(frozen=True)
+class LinearSchedule:
+    """rl-zoo3's ``lin_<x>``: ``initial_value`` times the progress remaining (1 at the start, 0 at the end).
+
+    stable-baselines3 takes it wherever it takes a schedule (``learning_rate``, ``clip_range``, ...). The same numbers
+    as rl-zoo3's ``SimpleLinearSchedule``; a frozen dataclass, so it pickles to worker processes and enters a run's key
+    by its value.
+    """
+
+    initial_value: float
+
+    def __call__(self, progress_remaining: float) -> float:
+        return progress_remaining * self.initial_value
+
+
+@dataclass(frozen=True)
+class ZooSettings(Mapping[str, Any]):
+    """One rl-zoo3 entry as a spec's fields: unpack it into ``sg.Spec(..., **settings)``.
+
+    As a mapping it holds exactly the :class:`~specguard.spec.spec.Spec` keyword arguments ``algorithm``, ``policy``,
+    ``hyperparameters``, ``n_envs`` and ``normalize``; override one with ``{**settings, "n_envs": 1}``.
+
+    Attributes:
+        env_id: the entry's env id.
+        timesteps: the zoo's ``n_timesteps`` (its whole training budget; ``sg.Budget(timesteps=...)`` takes it).
+        not_taken: ``{zoo key: its value and why a spec does not take it}``, as the warning named them.
+        source: where the entry was read (``rl-zoo3 2.9.2, ppo.yml``, or the file given).
+    """
+
+    algorithm: str
+    env_id: str
+    policy: str | type
+    hyperparameters: dict[str, Any]
+    n_envs: int
+    normalize: bool
+    timesteps: int
+    not_taken: dict[str, str] = field(default_factory=dict)
+    source: str = ""
+
+    def __getitem__(self, key: str) -> Any:
+        if key not in SPEC_FIELDS:
+            raise KeyError(key)
+        return getattr(self, key)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(SPEC_FIELDS)
+
+    def __len__(self) -> int:
+        return len(SPEC_FIELDS)
+
+
+# -- finding and reading the files ---------------------------------------------------------------
+
+
+def _zoo_file(where: str, stem: str) -> tuple[Path, str]:
+    """rl-zoo3's file ``<stem>.yml`` and its source in words, found without importing rl_zoo3."""
+    found = importlib.util.find_spec("rl_zoo3")
+    if found is None or not found.submodule_search_locations:
+        raise InvalidSpec(where, "rl-zoo3 is not installed; its hyperparameter files come with it", hint=_HINT)
+    version = metadata.version("rl_zoo3")
+    path = Path(next(iter(found.submodule_search_locations))) / "hyperparams" / f"{stem}.yml"
+    if not path.is_file():
+        raise InvalidSpec(where, f"rl-zoo3 {version} has no file hyperparams/{stem}.yml")
+    return path, f"rl-zoo3 {version}, {stem}.yml"
+
+
+def _read(where: str, path: Path) -> dict[str, Any]:
+    try:
+        import yaml
+    except ImportError:
+        raise InvalidSpec(where, "reading rl-zoo3's files needs PyYAML, which is not installed", hint=_HINT) from None
+    try:
+        entries = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as e:
+        raise InvalidSpec(where, f"cannot read {str(path)!r}: {type(e).__name__}: {e}") from None
+    if not isinstance(entries, dict):
+        raise InvalidSpec(where, f"expected {str(path)!r} to map env ids to settings, got {type(entries).__name__}")
+    return entries
+
+
+def _entry(where: str, entries: Mapping[str, Any], env_id: str, source: str, algorithm: str) -> dict[str, Any]:
+    if env_id not in entries:
+        ids = [str(k) for k in entries]
+        close = difflib.get_close_matches(env_id, ids, n=3, cutoff=0.6)
+        maybe = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
+        fallback = (
+            f" (rl-zoo3 itself falls back to its 'default' entry: ask for it by name, zoo_settings({algorithm!r}, "
+            "'default'))"
+            if "default" in ids
+            else ""
+        )
+        raise InvalidSpec(where, f"{source} has no entry for {env_id!r}{maybe}{fallback}")
+    entry = entries[env_id]
+    if not isinstance(entry, Mapping):
+        raise InvalidSpec(where, f"expected {source}'s entry {env_id!r} to be a mapping, got {entry!r}")
+    return dict(entry)
+
+
+# -- values written as Python text (policy_kwargs, normalize) --------------------------------------------
+
+
+def _names() -> dict[str, Any]:
+    """The names rl-zoo3's files may use in a value written as Python (its ``eval`` scope, closed to these)."""
+    from stable_baselines3.common.sb2_compat.rmsprop_tf_like import RMSpropTFLike
+
+    return {"RMSpropTFLike": RMSpropTFLike}
+
+
+def _torch_nn(attribute: str, where: str) -> type:
+    from torch import nn
+
+    value = getattr(nn, attribute, None)
+    if not (isinstance(value, type) and issubclass(value, nn.Module)):
+        raise InvalidSpec(where, f"nn.{attribute} is not a torch.nn module class")
+    return value
+
+
+def _value(node: ast.expr, where: str) -> Any:
+    """The value of ``node``: literals, ``dict(...)``, ``nn.<Module>`` and the names of :func:`_names`; nothing else."""
+    if isinstance(node, ast.Constant):
+        return node.value
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+        operand = _value(node.operand, where)
+        if isinstance(operand, (int, float)) and not isinstance(operand, bool):
+            return -operand if isinstance(node.op, ast.USub) else operand
+    elif isinstance(node, (ast.List, ast.Tuple)):
+        items = [_value(e, where) for e in node.elts]
+        return items if isinstance(node, ast.List) else tuple(items)
+    elif isinstance(node, ast.Dict) and None not in node.keys:
+        return {_value(k, where): _value(v, where) for k, v in zip(node.keys, node.values) if k is not None}
+    elif isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "dict" and not node.args:
+        if all(k.arg is not None for k in node.keywords):
+            return {k.arg: _value(k.value, where) for k in node.keywords}
+    elif isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id == "nn":
+        return _torch_nn(node.attr, where)
+    elif isinstance(node, ast.Name) and node.id in _names():
+        return _names()[node.id]
+    raise InvalidSpec(
+        where,
+        f"cannot evaluate {ast.unparse(node)!r}: a value here may be a literal, dict(...), nn.<Module class> "
+        f"or {', '.join(_names())}",
+    )
+
+
+def _from_text(key: str, text: str, where: str) -> Any:
+    """``text`` (a zoo value written as Python) evaluated in the closed scope of :func:`_value`."""
+    try:
+        tree = ast.parse(text.strip(), mode="eval")
+    except SyntaxError as e:
+        raise InvalidSpec(where, f"{key}: cannot parse {text!r}: {e.msg}") from None
+    return _value(tree.body, f"{where}, {key}")
+
+
+# -- mapping an entry onto a spec ----------------------------------------------------------------
+
+
+def _schedule(key: str, value: Any, where: str) -> Any:
+    """``"lin_<x>"`` as a :class:`LinearSchedule`, as rl-zoo3 reads it; numbers as they are (SB3 takes constants)."""
+    if not isinstance(value, str):
+        return value
+    kind, _, initial = value.partition("_")
+    try:
+        start = float(initial)
+    except ValueError:
+        start = None
+    if kind != "lin" or start is None:
+        raise InvalidSpec(where, f"{key}: expected a number or a schedule 'lin_<initial value>', got {value!r}")
+    return LinearSchedule(start)
+
+
+def _normalize(value: Any, gamma: Any, where: str, not_taken: dict[str, str]) -> bool:
+    """The spec's ``normalize`` for the zoo's, naming in ``not_taken`` what VecNormalize's defaults do differently."""
+    options = _from_text("normalize", value, where) if isinstance(value, str) else value
+    if isinstance(options, bool):
+        options = {} if options else None
+    if options is None:
+        return False
+    if not isinstance(options, Mapping):
+        raise InvalidSpec(where, f"normalize: expected True, False or VecNormalize's options, got {value!r}")
+    wanted = dict(options)
+    if gamma is not None:  # rl-zoo3 discounts normalized rewards by the algorithm's gamma, over any it was given
+        wanted["gamma"] = gamma
+    if not wanted.get("norm_reward", True):  # the discount only scales rewards: without them it changes nothing
+        wanted.pop("gamma", None)
+    differs = {k: v for k, v in wanted.items() if _VECNORMALIZE.get(k, object()) != v}
+    if differs:
+        said = ", ".join(f"{k}={v!r}" for k, v in differs.items())
+        not_taken["normalize"] = (
+            f"{said}: a spec's normalize=True is VecNormalize with its defaults "
+            f"({', '.join(f'{k}={v!r}' for k, v in _VECNORMALIZE.items())})"
+        )
+    return True
+
+
+def _map(where: str, algorithm: str, entry: dict[str, Any]) -> tuple[dict[str, Any], dict[str, str]]:
+    """The entry's spec fields and what is not taken (rl-zoo3's ``_preprocess_hyperparams``, step by step)."""
+    not_taken: dict[str, str] = {}
+    entry = dict(entry)
+    if "n_timesteps" not in entry:
+        raise InvalidSpec(where, "the entry has no n_timesteps")
+    timesteps = entry.pop("n_timesteps")
+    fields: dict[str, Any] = {
+        "timesteps": timesteps,
+        "n_envs": entry.pop("n_envs", 1),
+        "policy": entry.pop("policy", None),
+        "normalize": _normalize(entry.pop("normalize", False), entry.get("gamma"), where, not_taken),
+    }
+    for key in SCHEDULED:
+        if key in entry:
+            entry[key] = _schedule(key, entry[key], where)
+    if isinstance(entry.get("train_freq"), list):
+        entry["train_freq"] = tuple(entry["train_freq"])
+    if isinstance(entry.get("policy_kwargs"), str):
+        entry["policy_kwargs"] = _from_text("policy_kwargs", entry["policy_kwargs"], where)
+    known = hyperparameter_names(algorithm) or ()
+    hyperparameters: dict[str, Any] = {}
+    for key, value in entry.items():
+        if key in _NOT_TAKEN:
+            not_taken[key] = f"{value!r}: {_NOT_TAKEN[key]}"
+        elif key in known:
+            hyperparameters[key] = value
+        else:
+            not_taken[key] = f"{value!r}: {algorithm}'s constructor takes no {key!r}"
+    fields["hyperparameters"] = hyperparameters
+    return fields, not_taken
+
+
+def zoo_settings(algorithm: str | type, env_id: str, *, file: str | Path | None = None) -> ZooSettings:
+    """rl-zoo3's tuned settings of ``algorithm`` for ``env_id``, as a spec's fields.
+
+    Unpack the result into a spec, and take its budget where you want the zoo's::
+
+        zoo = sg.zoo_settings("PPO", "CartPole-v1")
+        spec = sg.Spec(initial_env, tree, budget=sg.Budget(timesteps=zoo.timesteps), **zoo)
+
+    Taken: ``policy``, ``n_envs``, ``normalize`` (``True``, or VecNormalize's options: see below),
+    ``n_timesteps`` (as :attr:`ZooSettings.timesteps`), and every key the algorithm's constructor takes as a
+    hyperparameter, as rl-zoo3 preprocesses it: ``"lin_<x>"`` of ``learning_rate``, ``clip_range``,
+    ``clip_range_vf`` and ``delta_std`` as a :class:`LinearSchedule`, a ``train_freq`` list as a tuple,
+    ``policy_kwargs`` written as Python evaluated in a closed scope (literals, ``dict(...)``, ``nn.<Module class>``
+    from ``torch.nn``, and ``RMSpropTFLike``; anything else is refused).
+
+    Not taken, each named in one :class:`~specguard.error.SpecWarning` and in :attr:`ZooSettings.not_taken`:
+    the keys rl-zoo3 reads itself (``env_wrapper``, ``vec_env_wrapper``, ``frame_stack``, ``callback``,
+    ``env_kwargs``, ``monitor_kwargs``, ``noise_type`` and ``noise_std``, ``replay_buffer_class`` and
+    ``replay_buffer_kwargs``), any other key the constructor does not take, and VecNormalize options other than its
+    defaults: rl-zoo3 discounts normalized rewards by the algorithm's ``gamma`` (a spec's ``normalize=True`` by
+    0.99) and may normalize only observations or only rewards (a spec's, both): ``normalize`` is then still
+    ``True``, and the difference is named.
+
+    Args:
+        algorithm: a name of :data:`ZOO_FILES` (or an alias or class :func:`resolve_algorithm` reads as one).
+        env_id: the entry's env id, as the file writes it (``"CartPole-v1"``; ``"default"`` and ``"atari"`` are
+            entries too; rl-zoo3's fallback to ``"default"`` is not made for you).
+        file: a YAML file in rl-zoo3's format (your own tuned settings) instead of rl-zoo3's file for the algorithm.
+
+    Raises:
+        InvalidSpec: rl-zoo3 (or PyYAML) is not installed, the algorithm has no zoo file, the env id no entry (with
+            close matches), or a value cannot be read; one line, naming it.
+    """
+    where = f"zoo_settings({algorithm!r}, {env_id!r})"
+    resolved = resolve_algorithm(f"{where}.algorithm", algorithm)
+    env_id = check_text(where, "env_id", env_id)
+    if not isinstance(resolved, str) or resolved not in ZOO_FILES:
+        name = resolved if isinstance(resolved, str) else f"{resolved.__module__}:{resolved.__qualname__}"
+        raise InvalidSpec(where, f"rl-zoo3 has no settings for {name}; it has files for {', '.join(ZOO_FILES)}")
+    algorithm_class(resolved, where)  # an sb3-contrib algorithm without sb3-contrib: what to install
+    if file is None:
+        path, source = _zoo_file(where, ZOO_FILES[resolved])
+    else:
+        path = Path(file)
+        source = str(path)
+    entry = _entry(where, _read(where, path), env_id, source, resolved)
+    fields, not_taken = _map(f"{where}, {source}", resolved, entry)
+    policy = fields["policy"] if fields["policy"] is not None else default_policy(resolved)
+    policy = check_policy(f"{where}.policy", resolved, policy)
+    timesteps, n_envs = fields["timesteps"], fields["n_envs"]
+    if not (isinstance(timesteps, (int, float)) and timesteps >= 1 and float(timesteps).is_integer()):
+        raise InvalidSpec(where, f"expected n_timesteps to be a whole number of steps, got {timesteps!r}")
+    if not (isinstance(n_envs, int) and not isinstance(n_envs, bool) and n_envs >= 1):
+        raise InvalidSpec(where, f"expected n_envs to be a count, got {n_envs!r}")
+    if not_taken:
+        lines = "\n".join(f"  {key}: {reason}" for key, reason in not_taken.items())
+        warnings.warn(
+            f"{where}: {source}: not taken as written (a spec cannot say them):\n{lines}", SpecWarning, stacklevel=2
+        )
+    return ZooSettings(
+        algorithm=resolved,
+        env_id=env_id,
+        policy=policy,
+        hyperparameters=fields["hyperparameters"],
+        n_envs=n_envs,
+        normalize=fields["normalize"],
+        timesteps=int(timesteps),
+        not_taken=not_taken,
+        source=source,
+    )

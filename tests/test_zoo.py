@@ -1,0 +1,277 @@
+"""rl-zoo3's tuned settings as a spec's fields: the real files read, mapped, refused where unsafe, trained and cached.
+
+rl_zoo3 itself is never imported here (its import patches Gymnasium's TimeLimit for the whole process): the tests
+read its files as specguard does.
+"""
+
+from __future__ import annotations
+
+import pickle
+import textwrap
+import warnings
+
+import pytest
+import yaml
+from torch import nn
+
+import specguard as sg
+from specguard.cache.canonical import digest
+from specguard.cache.fingerprint import fingerprint_spec
+from specguard.spec.zoo import ZOO_FILES, LinearSchedule, ZooSettings, _zoo_file
+
+CARTPOLE = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+UPRIGHT = sg.Goal("right", x=(0.3, None))  # starts lie near x = 0
+
+
+def zoo(algorithm, env_id, **kwargs):
+    """zoo_settings, with the warnings it gives (never left to escape into the session)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        settings = sg.zoo_settings(algorithm, env_id, **kwargs)
+    return settings, [str(w.message) for w in caught if issubclass(w.category, sg.SpecWarning)]
+
+
+def write(tmp_path, text):
+    path = tmp_path / "mine.yml"
+    path.write_text(textwrap.dedent(text))
+    return path
+
+
+# -- the real files -----------------------------------------------------------------------------------
+
+
+def test_cartpole_ppo_is_the_zoos_entry_with_its_schedules():
+    settings, warned = zoo("PPO", "CartPole-v1")
+    assert warned == []
+    assert dict(settings) == {
+        "algorithm": "PPO",
+        "policy": "MlpPolicy",
+        "hyperparameters": {
+            "n_steps": 32,
+            "batch_size": 256,
+            "gae_lambda": 0.8,
+            "gamma": 0.98,
+            "n_epochs": 20,
+            "ent_coef": 0.0,
+            "learning_rate": LinearSchedule(0.001),
+            "clip_range": LinearSchedule(0.2),
+        },
+        "n_envs": 8,
+        "normalize": False,
+    }
+    assert settings.timesteps == 100_000 and type(settings.timesteps) is int
+    assert settings.env_id == "CartPole-v1" and settings.not_taken == {}
+    assert settings.source.startswith("rl-zoo3 ") and settings.source.endswith(", ppo.yml")
+
+
+def test_policy_kwargs_are_evaluated_with_torch_nn_classes():
+    settings, _ = zoo("RecurrentPPO", "CartPoleNoVel-v1")
+    assert settings.policy == "MlpLstmPolicy"
+    assert settings.hyperparameters["policy_kwargs"] == {
+        "ortho_init": False,
+        "activation_fn": nn.ReLU,
+        "lstm_hidden_size": 64,
+        "enable_critic_lstm": True,
+        "net_arch": {"pi": [64], "vf": [64]},
+    }
+
+
+def test_what_a_spec_cannot_say_is_warned_and_kept():
+    settings, warned = zoo("TD3", "Pendulum-v1")
+    assert set(settings.not_taken) == {"noise_type", "noise_std"}
+    assert "noise_type" not in settings.hyperparameters and settings.hyperparameters["gamma"] == 0.98
+    [message] = warned
+    assert "zoo_settings('TD3', 'Pendulum-v1')" in message and "not taken" in message
+    assert "noise_type: 'normal'" in message and "noise_std: 0.1" in message
+
+    settings, warned = zoo("PPO", "MountainCarContinuous-v0")  # normalize: true with gamma 0.9999
+    assert settings.normalize is True
+    assert settings.not_taken["normalize"].startswith("gamma=0.9999: a spec's normalize=True is VecNormalize")
+    assert len(warned) == 1 and "normalize: gamma=0.9999" in warned[0]
+
+
+def test_every_entry_of_the_zoos_files_maps_onto_a_spec():
+    """Each entry of each file maps, and a spec takes its fields; the one refusal is a policy the algorithm lacks."""
+    mapped = refused = 0
+    for algorithm, stem in ZOO_FILES.items():
+        path, _ = _zoo_file("test", stem)
+        for env_id in yaml.safe_load(path.read_text()):
+            try:
+                settings, _ = zoo(algorithm, env_id)
+            except sg.InvalidSpec as e:
+                assert ".policy: expected policy to be one of" in str(e), (algorithm, env_id, str(e))
+                refused += 1
+                continue
+            sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=settings.timesteps), **settings)
+            mapped += 1
+    assert mapped > 200 and refused <= 2
+
+
+# -- refusals -----------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("algorithm", "env_id", "message"),
+    [
+        ("PPO", "CartPole-v0", r"ppo.yml has no entry for 'CartPole-v0'; did you mean 'CartPole-v1'\?.*'default'"),
+        ("MaskablePPO", "CartPole-v1", r"rl-zoo3 has no settings for MaskablePPO; it has files for PPO, A2C, "),
+        ("PPO2", "CartPole-v1", r"unknown algorithm 'PPO2'"),
+        ("PPO", "", r"expected env_id to be a non-empty string, got ''"),
+    ],
+)
+def test_a_name_the_zoo_lacks_is_one_line(algorithm, env_id, message):
+    with pytest.raises(sg.InvalidSpec, match=message) as e:
+        sg.zoo_settings(algorithm, env_id)
+    assert "\n" not in e.value.message
+
+
+def test_the_default_entry_is_asked_for_by_name():
+    settings, _ = zoo("PPO", "default")
+    assert settings.hyperparameters == {} and settings.timesteps == 1_000_000
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "__import__('os').system('true')",
+        "dict(activation_fn=nn.functional.relu)",
+        "dict(activation_fn=nn.init)",
+        "dict(activation_fn=Tanh)",
+        "exec",
+        "dict(optimizer_class=th.optim.Adam)",
+        "dict(**other)",
+        "dict(f=lambda x: x)",
+        "open('x')",
+        "[x for x in ()]",
+    ],
+)
+def test_policy_kwargs_outside_the_closed_scope_are_refused(tmp_path, text):
+    path = write(tmp_path, f'CartPole-v1:\n  n_timesteps: 1000\n  policy_kwargs: "{text}"\n')
+    with pytest.raises(sg.InvalidSpec, match=r"policy_kwargs.*(cannot evaluate|is not a torch.nn module class)"):
+        sg.zoo_settings("PPO", "CartPole-v1", file=path)
+
+
+def test_without_sb3_contrib_its_algorithms_say_what_to_install(monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "sb3_contrib", None)  # import sb3_contrib raises ImportError
+    with pytest.raises(sg.InvalidSpec, match=r"^zoo_settings\('TQC', 'Pendulum-v1'\): TQC is an sb3-contrib algorithm"):
+        sg.zoo_settings("TQC", "Pendulum-v1")
+
+
+def test_without_rl_zoo3_it_says_what_to_install(monkeypatch):
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "rl_zoo3" else real(name, *a))
+    with pytest.raises(sg.InvalidSpec, match="rl-zoo3 is not installed") as e:
+        sg.zoo_settings("PPO", "CartPole-v1")
+    assert e.value.hint == "pip install 'specguard[zoo]'"
+
+
+# -- a file of one's own, in the zoo's format ----------------------------------------------------------------
+
+
+def test_a_file_of_ones_own_with_every_kind_of_key(tmp_path):
+    path = write(
+        tmp_path,
+        """
+        MyEnv-v0:
+          n_timesteps: !!float 2e4
+          n_envs: 2
+          policy: MlpPolicy
+          normalize: "dict(norm_obs=True, norm_reward=False, gamma=0.9)"
+          env_wrapper: gymnasium.wrappers.TimeAwareObservation
+          frame_stack: 4
+          callback: rl_zoo3.callbacks.ParallelTrainCallback
+          no_such_key: 1
+          learning_rate: lin_7.3e-4
+          clip_range_vf: -1
+          policy_kwargs: "dict(net_arch=[8, 8], activation_fn=nn.Tanh, optimizer_class=RMSpropTFLike)"
+        """,
+    )
+    settings, [message] = zoo("A2C", "MyEnv-v0", file=path)
+    assert settings.timesteps == 20_000 and settings.n_envs == 2 and settings.normalize is True
+    assert settings.hyperparameters["learning_rate"] == LinearSchedule(7.3e-4)
+    assert settings.hyperparameters["policy_kwargs"]["activation_fn"] is nn.Tanh
+    assert set(settings.not_taken) == {
+        "normalize",
+        "env_wrapper",
+        "frame_stack",
+        "callback",
+        "no_such_key",
+        "clip_range_vf",
+    }
+    assert settings.not_taken["normalize"].startswith("norm_reward=False: ")  # no gamma: rewards are not normalized
+    assert "A2C's constructor takes no 'no_such_key'" in settings.not_taken["no_such_key"]
+    assert settings.source == str(path) and str(path) in message
+
+
+def test_normalize_discounts_by_the_algorithms_gamma_as_rl_zoo3_does(tmp_path):
+    # rl-zoo3 gives VecNormalize the algorithm's gamma over the one its options name: here 0.99, VecNormalize's own.
+    path = write(tmp_path, 'E-v0:\n  n_timesteps: 100\n  gamma: 0.99\n  normalize: "dict(gamma=0.95)"\n')
+    settings, warned = zoo("PPO", "E-v0", file=path)
+    assert settings.normalize is True and settings.not_taken == {} and warned == []
+
+
+def test_an_entry_without_a_policy_gets_the_algorithms_default(tmp_path):
+    path = write(tmp_path, "E-v0:\n  n_timesteps: 100\n")
+    assert zoo("RecurrentPPO", "E-v0", file=path)[0].policy == "MlpLstmPolicy"
+    assert zoo("PPO", "E-v0", file=path)[0].policy == "MlpPolicy"
+
+
+def test_train_freq_as_a_list_is_a_tuple_and_a_bad_schedule_is_refused(tmp_path):
+    path = write(tmp_path, "E-v0:\n  n_timesteps: 100\n  train_freq: [1, episode]\n")
+    settings, _ = zoo("SAC", "E-v0", file=path)
+    assert settings.hyperparameters["train_freq"] == (1, "episode")
+    path = write(tmp_path, "E-v0:\n  n_timesteps: 100\n  learning_rate: exp_0.1\n")
+    with pytest.raises(sg.InvalidSpec, match=r"learning_rate: expected a number or a schedule 'lin_<initial value>'"):
+        sg.zoo_settings("SAC", "E-v0", file=path)
+
+
+# -- schedules ------------------------------------------------------------------------------------------
+
+
+def test_a_linear_schedule_is_rl_zoos_and_keys_by_its_value():
+    schedule = LinearSchedule(0.2)
+    assert [schedule(p) for p in (1.0, 0.5, 0.0)] == [0.2, 0.1, 0.0]
+    assert pickle.loads(pickle.dumps(schedule)) == schedule
+    assert digest(LinearSchedule(0.2)) == digest(schedule) != digest(LinearSchedule(0.3))
+
+
+def test_a_zoo_entry_trains_with_its_schedules_and_is_cached(tmp_path):
+    """CartPole-v1's PPO entry end to end: two seeds in worker processes, the schedules in the model, then the cache."""
+    settings, _ = zoo("PPO", "CartPole-v1")
+    # 8 envs x 32 steps = 256 steps a rollout: two rollouts, so the schedules move.
+    spec = sg.Spec(
+        CARTPOLE,
+        UPRIGHT,
+        budget=sg.Budget(timesteps=512, min_seeds=2, eval_episodes=2, checkpoints=1),
+        **settings,
+    )
+    first = sg.run_spec(spec, workers=2, cache_dir=tmp_path, progress=None)
+    assert first.cached == {0: False, 1: False}
+    model = first.model(0)
+    assert model.n_envs == 8 and model.n_steps == 32 and model.gamma == 0.98
+    assert model.learning_rate == LinearSchedule(0.001)
+    assert model.clip_range(0.5) == pytest.approx(0.1) and model.lr_schedule(0.25) == pytest.approx(0.00025)
+    again = sg.run_spec(spec, workers=1, cache_dir=tmp_path, progress=None)
+    assert again.cached == {0: True, 1: True}
+    constant = {**settings, "hyperparameters": {**settings.hyperparameters, "learning_rate": 0.001}}
+    other = sg.Spec(CARTPOLE, UPRIGHT, budget=spec.budget, **constant)
+    assert fingerprint_spec(other).run_base != fingerprint_spec(spec).run_base
+
+
+def test_settings_unpack_as_spec_fields_and_can_be_overridden():
+    settings, _ = zoo("PPO", "CartPole-v1")
+    assert isinstance(settings, ZooSettings) and list(settings) == [
+        "algorithm",
+        "policy",
+        "hyperparameters",
+        "n_envs",
+        "normalize",
+    ]
+    spec = sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=64), **{**settings, "n_envs": 1})
+    assert spec.n_envs == 1 and spec.hyperparameters["n_steps"] == 32
+    with pytest.raises(KeyError):
+        settings["timesteps"]
