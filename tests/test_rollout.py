@@ -207,3 +207,29 @@ def test_writing_a_gif_prints_nothing_to_stderr(tmp_path):
     )
     assert done.returncode == 0, done.stderr
     assert done.stderr.strip() == ""
+
+
+def test_a_policy_acts_on_one_torch_thread_and_the_process_keeps_its_setting(trained, monkeypatch):
+    # Two threads for a few-row batch of a small network were 60 times slower on a busy 2-core machine.
+    import torch
+
+    from specguard.engine import falsification
+
+    spec, _, model = trained
+    seen: list[int] = []
+    predict = model.predict
+
+    def counting(*args, **kwargs):
+        seen.append(torch.get_num_threads())
+        return predict(*args, **kwargs)
+
+    monkeypatch.setattr(model, "predict", counting)
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        rollout(model, spec, episodes=1)
+        falsification.falsify_run(spec, model, None, seed=0, spec_key=None, examples=2, uniform=0)
+        assert seen and set(seen) == {1}
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)

@@ -22,6 +22,7 @@ import numpy as np
 from specguard.falsify.search import EpisodeRunner, Falsification, falsify
 from specguard.falsify.starts import StartSpace
 from specguard.spec.spec import Spec
+from specguard.training.policy import one_torch_thread
 
 __all__ = ["batch_policy", "database_key", "falsify_run", "property_keys", "start_space"]
 
@@ -95,13 +96,14 @@ def falsify_run(
     db = DirectoryBasedExampleDatabase(str(database)) if database is not None and spec_key else None
     key = database_key(spec_key, seed, space) if spec_key else ""
     label = f"{spec.label} seed {seed}"
-    return falsify(
-        runner,
-        examples=examples,
-        uniform=uniform,
-        seed=search_seed,
-        database=db,
-        key=key,
-        confidence=spec.confidence,
-        progress=(lambda line: progress(f"{label}: {line}")) if progress is not None else None,
-    )
+    with one_torch_thread():
+        return falsify(
+            runner,
+            examples=examples,
+            uniform=uniform,
+            seed=search_seed,
+            database=db,
+            key=key,
+            confidence=spec.confidence,
+            progress=(lambda line: progress(f"{label}: {line}")) if progress is not None else None,
+        )

@@ -18,7 +18,8 @@ A model without a recurrent state acts exactly as ``model.predict(obs)[0]``.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
@@ -26,7 +27,25 @@ import numpy as np
 from specguard.error import SpecError
 from specguard.spec.algorithms import takes_action_masks
 
-__all__ = ["Policy", "normalizer_of", "policy"]
+__all__ = ["Policy", "normalizer_of", "one_torch_thread", "policy"]
+
+
+@contextmanager
+def one_torch_thread() -> Iterator[None]:
+    """torch on one thread while a policy acts in this process, as training workers run it; the setting is restored.
+
+    A policy's network is small and its batches are a few rows: more threads only add their synchronisation, and on
+    a busy machine they wait for each other. Measured on a 2-core machine under load, the falsifier's runner on
+    CartPole took 190 microseconds a step on one thread and 11 milliseconds on two.
+    """
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
 
 
 def normalizer_of(model: Any, normalizer: Any = None) -> Any:

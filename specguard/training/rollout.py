@@ -14,7 +14,7 @@ from typing import Any
 
 from specguard.falsify.search import EpisodePolicy
 from specguard.spec.spec import Spec
-from specguard.training.policy import policy
+from specguard.training.policy import one_torch_thread, policy
 from specguard.training.train import EVAL_SEED_BASE
 
 __all__ = ["episode", "rollout"]
@@ -81,6 +81,7 @@ def rollout(
     act = policy(model, normalizer, deterministic=deterministic)
     env = spec.make_env()
     try:
-        return [episode(env, act, seed + i) for i in range(episodes)]
+        with one_torch_thread():
+            return [episode(env, act, seed + i) for i in range(episodes)]
     finally:
         env.close()
