@@ -58,6 +58,7 @@ def test_cartpole_ppo_is_the_zoos_entry_with_its_schedules():
         },
         "n_envs": 8,
         "normalize": False,
+        "observation": "features",
     }
     assert settings.timesteps == 100_000 and type(settings.timesteps) is int
     assert settings.env_id == "CartPole-v1" and settings.not_taken == {}
@@ -105,6 +106,15 @@ def test_every_entry_of_the_zoos_files_maps_onto_a_spec():
             sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=settings.timesteps), **settings)
             mapped += 1
     assert mapped > 200 and refused <= 2
+
+
+def test_an_entry_whose_policy_takes_a_dict_lets_the_agent_see_the_envs_own_observation():
+    # The zoo trained FetchReach on a Dict observation (MultiInputPolicy): a spec gives its agent the env's own
+    # observation beside the features (observation="features+env"), which that policy takes.
+    settings, _ = zoo("SAC", "FetchReach-v1")
+    assert settings["policy"] == "MultiInputPolicy" and settings["observation"] == "features+env"
+    spec = sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=1000), **settings)
+    assert spec.observation == "features+env" and spec.policy == "MultiInputPolicy"
 
 
 # -- refusals -----------------------------------------------------------------------------------------
@@ -270,6 +280,7 @@ def test_settings_unpack_as_spec_fields_and_can_be_overridden():
         "hyperparameters",
         "n_envs",
         "normalize",
+        "observation",
     ]
     spec = sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=64), **{**settings, "n_envs": 1})
     assert spec.n_envs == 1 and spec.hyperparameters["n_steps"] == 32

@@ -40,6 +40,7 @@ __all__ = [
     "collect_steps",
     "collection_unit",
     "default_policy",
+    "dict_policy",
     "hyperparameter_names",
     "load_model",
     "resolve_algorithm",
@@ -152,6 +153,11 @@ def algorithm_name(algorithm: str | type) -> str:
 
 
 _DICT_PREFIX = "MultiInput"  # SB3's policy names for a Dict observation: MultiInputPolicy, MultiInputLstmPolicy
+
+
+def dict_policy(policy: object) -> bool:
+    """``policy`` is named for a ``Dict`` observation (SB3's ``MultiInputPolicy``, ``MultiInputLstmPolicy``, ...)."""
+    return isinstance(policy, str) and policy.startswith(_DICT_PREFIX)
 
 
 def default_policy(algorithm: str | type, *, dict_observation: bool = False) -> str:

@@ -39,6 +39,7 @@ from specguard.spec.algorithms import (
     algorithm_class,
     check_policy,
     default_policy,
+    dict_policy,
     hyperparameter_names,
     resolve_algorithm,
 )
@@ -65,7 +66,7 @@ ZOO_FILES: dict[str, str] = {
 SCHEDULED = ("learning_rate", "clip_range", "clip_range_vf", "delta_std")
 """The hyperparameters whose ``"lin_<x>"`` values rl-zoo3 turns into linear schedules (as it does, and no others)."""
 
-SPEC_FIELDS = ("algorithm", "policy", "hyperparameters", "n_envs", "normalize")
+SPEC_FIELDS = ("algorithm", "policy", "hyperparameters", "n_envs", "normalize", "observation")
 """The :class:`~specguard.spec.spec.Spec` keyword arguments a :class:`ZooSettings` unpacks into."""
 
 _HINT = "pip install 'specguard[zoo]'"
@@ -110,7 +111,9 @@ class ZooSettings(Mapping[str, Any]):
     """One rl-zoo3 entry as a spec's fields: unpack it into ``sg.Spec(..., **settings)``.
 
     As a mapping it holds exactly the :class:`~specguard.spec.spec.Spec` keyword arguments ``algorithm``, ``policy``,
-    ``hyperparameters``, ``n_envs`` and ``normalize``; override one with ``{**settings, "n_envs": 1}``.
+    ``hyperparameters``, ``n_envs``, ``normalize`` and ``observation``; override one with ``{**settings, "n_envs": 1}``.
+    ``observation`` is ``"features+env"`` where the zoo's policy takes a ``Dict`` (``MultiInputPolicy``: the zoo's env
+    gave one), so the agent sees the env's own observation beside the spec's features; else ``"features"``.
 
     Attributes:
         env_id: the entry's env id.
@@ -126,6 +129,7 @@ class ZooSettings(Mapping[str, Any]):
     n_envs: int
     normalize: bool
     timesteps: int
+    observation: str = "features"
     not_taken: dict[str, str] = field(default_factory=dict)
     source: str = ""
 
@@ -365,7 +369,8 @@ def zoo_settings(algorithm: str | type, env_id: str, *, file: str | Path | None 
     entry = _entry(where, _read(where, path), env_id, source, resolved)
     fields, not_taken = _map(f"{where}, {source}", resolved, entry)
     policy = fields["policy"] if fields["policy"] is not None else default_policy(resolved)
-    policy = check_policy(f"{where}.policy", resolved, policy)
+    dict_observation = dict_policy(policy)  # the zoo's env gave a Dict
+    policy = check_policy(f"{where}.policy", resolved, policy, dict_observation=dict_observation)
     timesteps, n_envs = fields["timesteps"], fields["n_envs"]
     if not (isinstance(timesteps, (int, float)) and timesteps >= 1 and float(timesteps).is_integer()):
         raise InvalidSpec(where, f"expected n_timesteps to be a whole number of steps, got {timesteps!r}")
@@ -384,6 +389,7 @@ def zoo_settings(algorithm: str | type, env_id: str, *, file: str | Path | None 
         n_envs=n_envs,
         normalize=fields["normalize"],
         timesteps=int(timesteps),
+        observation="features+env" if dict_observation else "features",
         not_taken=not_taken,
         source=source,
     )
