@@ -29,7 +29,7 @@ episode's end by the spec's property (:mod:`specguard.falsify.robustness`).
 The shrunk start is saved under ``key`` so the next run replays it first.
 
 Why not Hypothesis's own generation with :func:`hypothesis.target`: measured
-by ``benchmarks/bench_falsify.py``, it needed more episodes than uniform
+by an earlier ``benchmarks/bench_falsify.py`` (docs/guide/falsify.md), it needed more episodes than uniform
 sampling to a first failure (a median of 179.5 against 152.5 on the CartPole
 case study, 143.5 against 73 on Acrobot). Its generation is built for
 programs, whose bugs sit at the middle, the edges and the special values of a
