@@ -26,13 +26,16 @@ Per agent:
 * **ratio**: guided ERT over random's expected episodes.
 
 Target, over every agent with a failure rate in (0, 5%]: the ratio <= 1/3,
-and on no agent above 1. The search's constants were set on seeds 0 and 1;
-the table in docs/guide/falsify.md is of seeds 2-6 (held out). Also printed:
+and on no agent above 1. No constant of the search was fitted to these
+agents. A first run on seeds 2-6 showed one change (the middle of the space
+run after the exploration's uniform draws, not before them); the table in
+docs/guide/falsify.md is of seeds 7-11, which nothing was tried on before
+(the default). Also printed:
 the cost per episode of the falsifier's runner against a plain rollout. Exits
 0 whatever the figures (targets are reported, not asserted).
 
 Usage:
-    python benchmarks/bench_falsify.py [--seeds 2 3 4 5 6] [--searches 20] [--budget 600] [--case CartPole]
+    python benchmarks/bench_falsify.py [--seeds 7 8 9 10 11] [--searches 20] [--budget 600] [--case CartPole]
 """
 
 from __future__ import annotations
@@ -54,7 +57,7 @@ import specguard as sg
 from specguard.engine.falsification import batch_policy, property_keys
 from specguard.falsify.search import EpisodeRunner, falsify
 from specguard.falsify.starts import StartSpace
-from specguard.training.policy import policy
+from specguard.training.policy import one_torch_thread, policy
 from specguard.training.rollout import episode
 
 PENDULUM_WIDE = StartSpace({"hinge": (-0.2, 0.2), "hinge_vel": (-1.0, 1.0)})
@@ -126,9 +129,15 @@ def main() -> int:
     parser.add_argument("--cache-dir", default="/tmp/fz-bench")
     parser.add_argument("--rate-draws", type=int, default=10_000, help="uniform draws for each agent's failure rate")
     parser.add_argument("--case", default="", help="only cases whose name contains this")
-    parser.add_argument("--seeds", type=int, nargs="+", default=[2, 3, 4, 5, 6], help="the agents (training seeds)")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[7, 8, 9, 10, 11], help="the agents (training seeds)")
     parser.add_argument("--workers", type=int, default=2, help="training processes")
     args = parser.parse_args()
+    with one_torch_thread():  # as the falsifier's own runs are
+        run_suite(args)
+    return 0
+
+
+def run_suite(args: argparse.Namespace) -> None:
     machine = platform.processor() or platform.machine()
     print(f"machine: {machine}, {platform.system()}, Python {platform.python_version()}")
     print(f"{args.searches} guided searches per agent, at most {args.budget} episodes each\n")
@@ -166,7 +175,6 @@ def main() -> int:
             )
             verdicts.append(verdict(name, seed, rate, ratio))
     print("\nsummary:\n  " + "\n  ".join(verdicts))
-    return 0
 
 
 if __name__ == "__main__":
