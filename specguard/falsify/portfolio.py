@@ -3,7 +3,7 @@
 Each sampler (an *arm*) proposes starts in the unit box ``[-1, 1]^d`` (every
 variable's range mapped onto ``[-1, 1]``):
 
-* ``uniform``: uniform draws. It always keeps a share ``UNIFORM_FLOOR`` of every
+* ``uniform``: uniform draws. It always keeps a share ``UNIFORM_FLOOR`` (half) of every
   round, so the search keeps sampling the whole space however the others fare
   (FalStar's portfolio keeps a uniform solver for the same reason);
 * ``trend`` (the cross-entropy method): a Gaussian, one standard deviation per
@@ -44,8 +44,13 @@ __all__ = ["ARMS", "Portfolio"]
 ARMS = ("uniform", "trend", "local")
 """The samplers, in the order a round's starts are given out."""
 
-UNIFORM_FLOOR = 0.25
-"""The share of every round drawn uniformly, whatever the arms earned."""
+UNIFORM_FLOOR = 0.5
+"""The share of every round drawn uniformly, whatever the arms earned.
+
+Half: where the score leads away from the failures, half of the starts still fail as often as uniform draws do, so
+the search needs at most about twice random's episodes (with a quarter, one CartPole agent's searches needed 1.98
+times random's).
+"""
 
 PAYOFF_QUANTILE = 0.1
 """An episode pays off when its score is below this quantile of the scores before it."""
