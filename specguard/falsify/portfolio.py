@@ -123,7 +123,8 @@ class Portfolio:
             k = max(MIN_ELITE, int(np.ceil(ELITE_FRACTION * len(self.scores))))
             elite = np.stack([self.points[i] for i in np.argsort(self.scores, kind="stable")[:k]])
             spread = np.maximum(elite.std(axis=0), MIN_SPREAD)
-            return np.clip(self.rng.normal(elite.mean(axis=0), spread), -1.0, 1.0)
+            drawn: np.ndarray = self.rng.normal(elite.mean(axis=0), spread)
+            return np.clip(drawn, -1.0, 1.0)
         if arm == "local":
             kept = ((s, i) for i, s in enumerate(self.scores) if self._uses[i] < RETIRE)
             parents = heapq.nsmallest(ELITE, kept)
