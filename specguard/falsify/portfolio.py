@@ -124,7 +124,8 @@ class Portfolio:
             elite = np.stack([self.points[i] for i in np.argsort(self.scores, kind="stable")[:k]])
             spread = np.maximum(elite.std(axis=0), MIN_SPREAD)
             drawn: np.ndarray = self.rng.normal(elite.mean(axis=0), spread)
-            return np.clip(drawn, -1.0, 1.0)
+            np.clip(drawn, -1.0, 1.0, out=drawn)
+            return drawn
         if arm == "local":
             kept = ((s, i) for i, s in enumerate(self.scores) if self._uses[i] < RETIRE)
             parents = heapq.nsmallest(ELITE, kept)
