@@ -12,12 +12,12 @@ episode's end by the spec's property (:mod:`specguard.falsify.robustness`).
 1. **replay**: the counterexample stored under ``key`` in the Hypothesis
    example database (if any) is run first; if it still fails, that is the answer;
 2. **guided search**: ``EXPLORE`` uniform draws with the middle of the
-   space among them (the fourth start), then rounds of a portfolio of samplers (uniform draws, a
-   cross-entropy trend, local steps; :mod:`specguard.falsify.portfolio`)
-   that shifts each round's starts to the samplers whose episodes came
-   closest to failing, keeping a uniform share; it stops at the first failing
-   start, which is
-   then moved towards the middle of the space, each variable in turn
+   space among them (the fourth start), then rounds of a portfolio of
+   samplers (uniform draws, a cross-entropy trend, local steps;
+   :mod:`specguard.falsify.portfolio`) that shifts each round's starts to
+   the samplers whose episodes came closest to failing, keeping half of them
+   uniform; it stops at the first failing start, which is then moved
+   towards the middle of the space, each variable in turn
    (set to its middle if the start still fails there, else bisected), so the
    counterexample has as few variables off the middle as it can, each on the
    boundary of the failure region;
@@ -29,8 +29,8 @@ episode's end by the spec's property (:mod:`specguard.falsify.robustness`).
 The shrunk start is saved under ``key`` so the next run replays it first.
 
 Why not Hypothesis's own generation with :func:`hypothesis.target`: measured
-by an earlier ``benchmarks/bench_falsify.py`` (docs/guide/falsify.md), it needed more episodes than uniform
-sampling to a first failure (a median of 179.5 against 152.5 on the CartPole
+by an earlier ``benchmarks/bench_falsify.py`` (docs/guide/falsify.md), it
+needed more episodes than uniform sampling to a first failure (a median of 179.5 against 152.5 on the CartPole
 case study, 143.5 against 73 on Acrobot). Its generation is built for
 programs, whose bugs sit at the middle, the edges and the special values of a
 range; a trained policy's failures are thin regions inside it, near the
