@@ -186,7 +186,7 @@ def check_policy(where: str, algorithm: str | type, policy: object, *, dict_obse
     aliases = list(getattr(algorithm_class(algorithm, where), "policy_aliases", {}))
     if isinstance(policy, type) and issubclass(policy, BasePolicy):
         return policy
-    fitting = [a for a in aliases if a.startswith(_DICT_PREFIX) == dict_observation]
+    fitting = [a for a in aliases if dict_policy(a) == dict_observation]
     if isinstance(policy, str) and policy in fitting:
         return policy
     if isinstance(policy, str) and (policy in aliases or not fitting):  # a policy of the other observation, or none
