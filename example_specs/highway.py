@@ -12,7 +12,8 @@ goals can name them:
   episode, and that last state is judged too); its safety rate is asserted;
 * **keep going fast**: ``Always`` at least 24 m/s, so the root holds until the end: the episode
   runs to highway-env's end (30 policy steps of 1 s; ``max_episode_steps=30`` says so to specguard)
-  and succeeds when the car never dropped below 24 m/s. Braking ("slower") drops it below at once:
+  and succeeds when the car never dropped below 24 m/s and did not crash (a crash is the env's
+  termination, before the horizon, which ``Always`` does not keep). Braking ("slower") drops it below at once:
   without this goal, a spec of the episode's end without a crash was met at 2k steps (the car
   may slow down behind the traffic).
 
@@ -78,7 +79,8 @@ DQN: dict[str, Any] = {
 # parallel, another test run beside it): 1315 s; at 50k fast in 85/120 and 92/120, crash-free in 81/120
 # and 86/120 evaluation episodes (seeds 0 / 1; 74% and 70% pooled), below the 0.8 asked. Seed 0's
 # checkpoints from 5k to 45k steps were 0/30 but one (at 25k, fast in 30/30 and crashing in all 30: the
-# Always goal counts an episode that a crash ends at speed). Both goals are declared expected to miss at
+# Always goal then counted an episode that a crash ends at speed; it no longer does, so these figures
+# predate that change and "fast" would read lower now). Both goals are declared expected to miss at
 # this budget (XFAIL; XPASS once they pass).
 BUDGET = sg.Budget(timesteps=50_000, min_seeds=2, eval_episodes=30)
 MEASURED = "measured 70-74% at 50k steps (2 seeds), below 0.8: highway-env needs a longer budget"

@@ -20,6 +20,8 @@ node keeps no episode state of its own, the evaluators hold it):
 * **termination**: :meth:`Node.terminates`, given the children's (it must include them);
   whether the goal, at the root, ends the episode when reached (a *reach* goal, the
   paper's) or is judged when the episode ends (:meth:`Node.until_end`, ``Always``);
+  the own state when the initial env terminates an episode before its horizon
+  (:meth:`Node.terminated_state`);
 * **description**: :meth:`Node.describe`, exact and deterministic.
 
 Example: an "at least k of the children" operator.
@@ -349,6 +351,17 @@ class Node:
     def next_state(self, before: Context, action: Any, s2: Any, inside2: tuple[bool, ...]) -> tuple[float, ...]:
         """``q'`` after the step from ``before`` to ``s2``, whose children's memberships are ``inside2``."""
         return before.q
+
+    def terminated_state(self, after: Context) -> tuple[float, ...]:
+        """``q'`` when the initial env *terminated* the episode in ``after`` before its horizon.
+
+        docs/semantics.md, "Goals that hold until the end": asked only where the root goal holds until the
+        end (:func:`until_end`), at the step whose base env reported ``terminated`` (whatever ``truncated``
+        says), right after :meth:`next_state`, children first, so a parent sees its children's answer.
+        ``after.q`` is the state :meth:`next_state` gave. Default: ``after.q``, a termination changes
+        nothing; ``Always`` (``until="horizon"``) answers not held, since the episode did not reach its end.
+        """
+        return after.q
 
     # -- core reward and termination ----------------------------------------
 

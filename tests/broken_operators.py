@@ -181,6 +181,34 @@ class OverfullLatch(_Combiner):
         return ctx.q[0] >= 1.0
 
 
+class FallOverflow(_Combiner):
+    """Holds until the end, like ``Always``, but marks a fall ``-1`` in a slot declared ``[0, 1]``.
+
+    Only a base env that terminates the episode (a fall) asks ``terminated_state``, so only the examples
+    that end by termination can catch it.
+    """
+
+    kind = "FallOverflow"
+
+    def state_slots(self) -> tuple[Slot, ...]:
+        return (Slot("held", 0.0, 1.0),)
+
+    def initial_state(self, ctx: Context) -> tuple[float, ...]:
+        return (1.0 if all(ctx.inside) else 0.0,)
+
+    def next_state(self, before: Context, action: Any, s2: Any, inside2: tuple[bool, ...]) -> tuple[float, ...]:
+        return (1.0 if before.q[0] >= 1.0 and all(inside2) else 0.0,)
+
+    def terminated_state(self, after: Context) -> tuple[float, ...]:
+        return (-1.0,)  # should be (0.0,): a fall is not kept, and the slot's bounds are [0, 1]
+
+    def contains(self, ctx: Context) -> bool:
+        return ctx.q[0] >= 1.0 and all(ctx.inside)
+
+    def until_end(self, children: tuple[bool, ...]) -> bool:
+        return True
+
+
 class WrongBox(_Combiner):
     """An OR operator (goal: any child's) that declares the intersection of its children's boxes as its box.
 
@@ -242,6 +270,7 @@ CAUGHT_BY = {
     AddressInDescribe: "check_description_is_exact",
     UnorderedDescribe: "check_description_is_exact",
     OverfullLatch: "check_observations_in_space",
+    FallOverflow: "check_observations_in_space",
     WrongBox: "check_flat_matches_reference",
     InfiniteOutside: "check_rewards_are_finite_sums_of_terms",
     LooseRefinement: "check_refinement_preserves_root_goal",

@@ -68,7 +68,7 @@ def test_batch_rewards_agree_with_reference(tree, data):
     for i in range(n):
         first, second = State._make(s[i]), State._make(s2[i])
         ext = ExtendedState(first, req.initial(first))
-        ext2 = ExtendedState(second, req.transition(ext, actions[i], second))
+        ext2 = ExtendedState(second, req.transition(ext, actions[i], second, False))
         expected = req.reward(ext, actions[i], ext2)
         assert list(expected) == list(compiled.term_keys)
         assert terms[i].tolist() == pytest.approx(list(expected.values()), rel=1e-9, abs=1e-12)

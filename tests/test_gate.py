@@ -10,9 +10,10 @@ from specguard.engine.judging import judge as _judge
 from specguard.engine.spec_result import SpecResult
 from specguard.gate.baseline import Baseline
 from specguard.pytest_plugin.gate import gate_goal
-from specguard.stats.intervals import GoalOutcome
+from specguard.stats.intervals import GoalOutcome, success_interval
 from specguard.training.result import RunResult
 from specguard.tree.keys import ROOT
+from specguard.utils.text import interval_text
 
 
 def result_of(spec, per_seed, errors=None):
@@ -68,6 +69,11 @@ def test_undecided_runs_leave_the_goal_undecided():
     assert check.outcome is GoalOutcome.UNDECIDED
     assert "could not be decided" in check.message()
     assert check.hint.startswith("runs stayed undecided after 30 evaluation episodes")
+    # The interval the verdict used, not the table's 95% one: seed 0's, at the corrected confidence.
+    lo, hi = success_interval(25, 30, s.verdict_confidence)
+    assert lo < s.thresholds["pendulum"] < hi
+    assert f"these intervals contain the threshold 0.8: seed 0 {interval_text((lo, hi))}" in check.hint
+    assert "seed 1" not in check.hint  # 30/30 met
 
 
 def test_crashed_seeds_fail_and_are_listed():

@@ -655,3 +655,46 @@ def test_a_subset_save_keeps_the_other_specs_and_says_what_it_replaced(pytester)
     )
     stored = json.loads(path.read_text())["goals"]
     assert sorted(stored) == [f"test_specs.py::test_{x}::pendulum/stabilization" for x in "ab"]
+
+
+FALLS = """
+import gymnasium as gym
+import numpy as np
+
+
+class Hopper(gym.Env):
+    # Tall (x = 1) at every state, and the env ends each episode at step 3: a fall the goal does not see.
+    observation_space = gym.spaces.Box(-2.0, 2.0, (1,), np.float32)
+    action_space = gym.spaces.Discrete(2)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        return np.ones(1, np.float32), {}
+
+    def step(self, action):
+        self.t += 1
+        return np.ones(1, np.float32), 0.0, self.t >= 3, False, {}
+
+
+@sg.goal_spec(expect=0.5)
+def test_stay_tall():
+    initial = sg.InitialEnv(lambda: gym.wrappers.TimeLimit(Hopper(), 10), features=("z",))
+    tree = sg.Always(sg.Goal("tall", z=(0.5, None)), name="stay")
+    budget = sg.Budget(timesteps=64, min_seeds=1, eval_episodes=4)
+    return sg.Spec(initial, tree, budget=budget, hyperparameters=TINY)
+"""
+
+
+def test_the_table_and_the_failure_say_how_many_episodes_the_env_ended_before_the_horizon(pytester):
+    # The facts `specguard run` prints under its table (SpecResult.notes) show at this door too.
+    write(pytester, FALLS)
+    result = run(pytester, "--goal-specs", "--goal-specs-no-cache")
+    result.assert_outcomes(failed=1)  # tall at every state, and fallen: not kept (it passed every episode before)
+    text = result.stdout.str()
+    episodes = int(text.split("per seed: seed 0: 0/")[1].split(" ")[0])
+    note = f"{episodes} of {episodes} evaluation episodes were ended by termination before their horizon*"
+    result.stdout.fnmatch_lines([f"*{note}", "*hint: the env ended every evaluation episode before the horizon*"])
+    result.stdout.fnmatch_lines(
+        ["*= specguard goal specs =*", "*stay*0% (0/*failed*", f"test_specs.py::test_stay_tall: {note}"]
+    )

@@ -30,7 +30,7 @@ def chain(req, trajectory, actions=None):
     out = [ExtendedState(s, req.initial(s))]
     for t, f in enumerate(trajectory[1:]):
         s2 = State._make(f)
-        out.append(ExtendedState(s2, req.transition(out[-1], actions[t] if actions else 0, s2)))
+        out.append(ExtendedState(s2, req.transition(out[-1], actions[t] if actions else 0, s2, False)))
     return out
 
 

@@ -19,11 +19,15 @@ from test_met_at_start import TINY, Drift, share_inside
 
 import specguard as sg
 from specguard import strategies as sgst
+from specguard.construction import cap
+from specguard.construction.cap import CAPPED, EPISODE_CAP
 from specguard.construction.checks import START_SAMPLES
 from specguard.construction.reference import ReferenceEvaluator
+from specguard.engine.spec_result import SpecResult
 from specguard.error import GoalMetAtStart, SpecWarning, UnreachableGoal
 from specguard.extend import until_end
 from specguard.testing import ReplayEnv
+from specguard.training.train import train_run
 
 EVALUATORS = ("flat", "reference")
 
@@ -126,6 +130,26 @@ def test_it_holds_exactly_when_every_state_so_far_is_in_its_child(leaf, trajecto
         assert flat.step(0, f)[2][0] == ref.step(0, f)[2][0] == held
 
 
+@given(
+    sgst.goals(("a", "b")),
+    sgst.trajectories(("a", "b"), min_size=2, max_size=10),
+    st.sampled_from(["horizon", "termination"]),
+)
+def test_an_episode_the_env_terminates_keeps_it_only_until_termination(leaf, trajectory, until):
+    tree = sg.Always(leaf, name="kept", until=until)
+    flat = sg.compile_tree(tree, ("a", "b")).evaluator()
+    ref = ReferenceEvaluator(tree, ("a", "b"))
+    member = sg.compile_tree(leaf, ("a", "b")).members
+    inside = [bool(m[0]) for m in member(np.asarray(trajectory, dtype=np.float64))]
+    flat.reset(trajectory[0]), ref.reset(trajectory[0])
+    for f in trajectory[1:-1]:
+        flat.step(0, f), ref.step(0, f)
+    fell = [ev.step(0, trajectory[-1], True, True) for ev in (flat, ref)]  # the base env terminated here
+    kept = all(inside) and until == "termination"
+    assert fell[0][2][0] == fell[1][2][0] == kept
+    assert fell[0][0] == fell[1][0] == float(kept) - float(all(inside[:-1]))  # -1 once, on leaving
+
+
 @given(st.data(), sgst.trajectories(("a", "b", "c"), min_size=1, max_size=10))
 def test_refining_its_child_preserves_the_root_goal(data, trajectory):
     features = ("a", "b", "c")
@@ -209,13 +233,123 @@ def test_a_spec_trains_on_it_and_its_table_counts_the_episodes_that_started_outs
     assert run.successes["stay"] <= run.started_in_goal  # an episode that started outside cannot succeed
 
 
-def test_an_env_without_an_episode_limit_is_warned_about():
-    endless = sg.InitialEnv(lambda: Drift(0.6), features=("x",))  # ends at 20 steps, but declares no limit
-    tree = sg.Always(sg.Goal("up", x=(0.5, None)), name="stay")
-    with pytest.warns(SpecWarning, match="no episode limit"):
-        sg.make_env(endless, tree).close()
-    limited = sg.InitialEnv(always_inside, features=("x",))
+class Endless(Drift):
+    """Drift that never ends its episodes, and declares no limit (an unwrapped env)."""
+
+    def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict]:
+        obs, reward, _, _, info = super().step(action)
+        return obs, reward, False, False, info
+
+
+def test_an_env_that_never_ends_its_episodes_runs_under_the_stated_cap():
+    tree = sg.Always(sg.Goal("up", x=(-2.0, None)), name="stay")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # nothing to warn about: every episode ends
+        env = sg.make_env(sg.InitialEnv(lambda: Endless(0.6), features=("x",)), tree)
+    env.reset(seed=0)
+    steps, truncated, info = 0, False, {}
+    while not truncated:
+        _, _, terminated, truncated, info = env.step(0)
+        steps += 1
+        assert not terminated
+    assert steps == EPISODE_CAP and info[CAPPED] == EPISODE_CAP
+    assert info["goals"]["stay"] is True  # truncated at the cap: its horizon
+
+
+def test_an_env_that_ends_its_own_episodes_is_not_warned_about_nor_cut():
+    self_ending = sg.InitialEnv(lambda: Drift(0.6), features=("x",))  # ends at 20 steps, declares no limit
+    tree = sg.Always(sg.Goal("up", x=(-2.0, None)), name="stay")
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        sg.make_env(limited, tree).close()
-        sg.make_env(sg.InitialEnv(never_inside, features=("x",)), sg.Goal("far", x=(1.5, None))).close()  # reach
+        env = sg.make_env(self_ending, tree)
+    env.reset(seed=0)
+    for t in range(1, 21):
+        _, _, _, truncated, info = env.step(0)
+        assert truncated is (t == 20)
+    assert CAPPED not in info
+    limited = sg.make_env(sg.InitialEnv(always_inside, features=("x",)), tree)  # its own TimeLimit, kept
+    assert limited.get_wrapper_attr("_max_episode_steps") == 20
+
+
+# -- the end is the horizon: an episode the env terminates has not kept it -----------------------------
+
+
+class Hopper(Drift):
+    """Stays tall (``x`` high) and falls over at step 5: the env terminates on a condition the goal omits."""
+
+    def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict]:
+        obs, reward, _, truncated, info = super().step(1)  # up, whatever the agent does
+        return obs, reward, self.t >= 5, truncated, info
+
+
+STAY_TALL = sg.Goal("tall", x=(0.5, None))
+
+
+@pytest.mark.parametrize("evaluator", EVALUATORS)
+def test_an_episode_the_env_terminates_inside_it_has_not_kept_it(evaluator):
+    env = sg.SpecEnv(Falls([[0.0], [0.5], [0.2]]), tree=BALANCE, features=("x",), evaluator=evaluator)
+    env.reset(seed=0)
+    assert env.step(0)[1:3] == (0.0, False)
+    _, reward, terminated, truncated, info = env.step(0)  # inside, but the env ended the episode: a fall
+    assert (reward, terminated, truncated) == (-1.0, True, False)
+    assert info["goals"] == {"balance": False, "balance/inside": True}
+    assert info["reward_terms"]["balance"] == -1.0
+
+
+@pytest.mark.parametrize("evaluator", EVALUATORS)
+def test_until_termination_takes_the_envs_termination_as_its_end(evaluator):
+    kept = sg.Always(INSIDE, name="balance", until="termination")
+    env = sg.SpecEnv(Falls([[0.0], [0.5], [0.2]]), tree=kept, features=("x",), evaluator=evaluator)
+    env.reset(seed=0)
+    env.step(0)
+    _, reward, terminated, _, info = env.step(0)
+    assert (reward, terminated, info["goals"]["balance"]) == (0.0, True, True)
+
+
+@pytest.mark.parametrize("evaluator", EVALUATORS)
+def test_beside_a_reach_goal_the_envs_termination_where_it_is_reached_is_success(evaluator):
+    tree = sg.All(BALANCE, sg.Goal("far", x=(0.8, None)), name="carry")  # MiniGrid's goal square ends it
+    env = sg.SpecEnv(Falls([[0.0], [0.5], [0.9]]), tree=tree, features=("x",), evaluator=evaluator)
+    env.reset(seed=0)
+    env.step(0)
+    _, _, terminated, _, info = env.step(0)
+    assert terminated and info["goals"]["carry"] is True
+
+
+def test_the_baseline_env_reports_the_fall_too():
+    initial = sg.InitialEnv(lambda: gym.wrappers.TimeLimit(Hopper(0.6), 20), features=("x",))
+    tree = sg.Always(STAY_TALL, name="stay")
+    for env in (sg.make_baseline_env(initial, tree), sg.make_env(initial, tree)):
+        env.reset(seed=0)
+        for _ in range(5):
+            _, _, terminated, truncated, info = env.step(0)
+        assert terminated and not truncated
+        assert info["goals"] == {"stay": False, "stay/tall": True}  # tall, and fallen: not kept
+
+
+@pytest.mark.parametrize("until", ["horizon", "termination"])
+def test_a_run_counts_the_episodes_the_env_ended_before_the_horizon(until):
+    initial = sg.InitialEnv(lambda: gym.wrappers.TimeLimit(Hopper(0.6), 20), features=("x",))
+    tree = sg.Always(STAY_TALL, name="stay", until=until)
+    budget = sg.Budget(timesteps=64, min_seeds=1, max_seeds=1, eval_episodes=6, checkpoints=1)
+    spec = sg.Spec(initial, tree, budget=budget, hyperparameters=TINY, expect=0.5)
+    result = sg.run_spec(spec, workers=1, cache_dir=None, progress=None)
+    (run,) = result.runs
+    assert run.terminated == run.episodes  # every episode fell at step 5 of 20
+    assert run.successes["stay"] == (0 if until == "horizon" else run.episodes)  # Hopper passed 30/30 before
+    assert result.passed is (until == "termination")
+    line = f"{run.episodes} of {run.episodes} evaluation episodes were ended by termination before their horizon"
+    assert line in result.table()
+    assert result.to_dict()["runs"][0]["terminated"] == run.episodes
+
+
+def test_a_run_on_an_env_that_never_ends_finishes_and_says_where_it_cut(monkeypatch):
+    monkeypatch.setattr(cap, "EPISODE_CAP", 50)  # in this process: train_run, not run_spec's workers
+    initial = sg.InitialEnv(lambda: Endless(0.6), features=("x",))
+    tree = sg.Always(sg.Goal("up", x=(-2.0, None)), name="stay")
+    budget = sg.Budget(timesteps=64, min_seeds=1, max_seeds=1, eval_episodes=6, checkpoints=1)
+    spec = sg.Spec(initial, tree, budget=budget, hyperparameters=TINY, expect=0.5)
+    run, _ = train_run(spec, 0)
+    assert run.capped == run.episodes and run.terminated == 0
+    table = SpecResult(spec=spec.label, runs=[run], goals={}, trained=spec).table()
+    assert f"{run.episodes} of {run.episodes} evaluation episodes were cut at 50 steps" in table

@@ -46,7 +46,6 @@ from specguard.utils.text import bounds_text
 
 __all__ = [
     "START_SAMPLES",
-    "check_episode_limit",
     "check_goals",
     "check_goals_off_the_edge",
     "check_goals_reachable",
@@ -293,26 +292,6 @@ def episode_limit(env: Any) -> int | None:
     spec = getattr(env, "spec", None)
     limit = getattr(spec, "max_episode_steps", None)
     return limit if isinstance(limit, int) and not isinstance(limit, bool) and limit > 0 else None
-
-
-def check_episode_limit(compiled: CompiledTree, env: Any) -> None:
-    """A root goal that holds until the end has an episode limit to end its episodes (a ``TimeLimit``).
-
-    Such a goal ends nothing: the episode ends only where the initial env ends it.
-
-    Warns:
-        SpecWarning: the env declares no step limit, so an episode the env never ends would not end.
-    """
-    if compiled.reach or episode_limit(env) is not None:
-        return
-    warnings.warn(
-        f"{compiled.paths[0]} must hold until the end, which only the initial env decides, and the env declares "
-        "no episode limit (no TimeLimit): its episodes end only where it terminates or truncates them itself, and "
-        "one it never ends hangs training and evaluation. Hint: pass max_episode_steps=N to sg.InitialEnv (it goes "
-        "to gymnasium.make), or wrap your factory's env in gymnasium.wrappers.TimeLimit",
-        SpecWarning,
-        stacklevel=_caller(),  # the caller of make_env
-    )
 
 
 def unreachable_reason(initial_env: Any, tree: Node, path: str) -> str | None:

@@ -306,9 +306,12 @@ def source_of(tree: FlatTree) -> str:
 class _GeneralNode:
     """Calls one node's protocol methods with its own state kept in ``z[start:stop]``."""
 
-    def __init__(self, path: str, node: Any, start: int, size: int) -> None:
+    def __init__(self, path: str, node: Any, start: int, size: int, fell: list[bool] | None = None) -> None:
         self.path, self.node = path, node
         self.start, self.stop = start, start + size
+        # fell[0]: the initial env terminated the episode in this step's s2, and the root goal holds until the
+        # end (the evaluator sets it for that step): a node that defines terminated_state() is asked it.
+        self.fell = fell if fell is not None and type(node).terminated_state is not Node.terminated_state else None
         self.own_reward = node.own_reward
         self.default_reward = type(node).reward is Node.reward  # reward is the potential difference
         self.last: tuple[Context, float] | None = None  # the last state's context and potential
@@ -339,6 +342,7 @@ class _GeneralNode:
         own_reward, default_reward = self.own_reward, self.default_reward
         keep_after = type(node).terminates is not Node.terminates  # only a node's own termination reads it
         general, context, new = self, Context, _context
+        fell, terminated_state = self.fell, node.terminated_state
 
         def step(
             s: Any, a: Any, s2: Any, z: list[float], inside: tuple[bool, ...], inside2: tuple[bool, ...]
@@ -356,6 +360,8 @@ class _GeneralNode:
                     q2 = next_state(before, a, s2, inside2)
                     if type(q2) is not tuple:
                         q2 = tuple(q2)
+                    if fell is not None and fell[0]:
+                        q2 = tuple(terminated_state(new(context, (s2, q2, inside2))))
                 else:
                     q2 = q
                 after = new(context, (s2, q2, inside2))
@@ -398,6 +404,9 @@ class _GeneralNode:
         before = Context(s, q, inside)
         if self.stop > self.start:
             q2 = tuple(float(v) for v in call("next_state()", node.next_state, before, a, s2, inside2))
+            if self.fell is not None and self.fell[0]:
+                after = Context(s2, q2, inside2)
+                q2 = tuple(float(v) for v in call("terminated_state()", node.terminated_state, after))
         else:
             q2 = q
         after = self.after = Context(s2, q2, inside2)
@@ -461,14 +470,15 @@ class _GeneralAnnotation:
 
 def build_namespace(tree: FlatTree, make: Callable[..., Any]) -> dict[str, Any]:
     """The globals the generated code runs with: user functions and general nodes by index."""
-    namespace: dict[str, Any] = {"_new": tuple.__new__, "_State": make, "_float": float}
+    fell = [False]  # set by the evaluator for a step the initial env terminated (_GeneralNode)
+    namespace: dict[str, Any] = {"_new": tuple.__new__, "_State": make, "_float": float, "_fell": fell}
     slot_counts: dict[str, int] = {}
     for key, _ in tree.slots:
         slot_counts[key] = slot_counts.get(key, 0) + 1
     for i, node in enumerate(tree.nodes):
         if not tree.fast[i]:
             size = slot_counts.get(tree.paths[i], 0) if tree.slot_start[i] >= 0 else 0
-            general = _GeneralNode(tree.paths[i], node, max(tree.slot_start[i], 0), size)
+            general = _GeneralNode(tree.paths[i], node, max(tree.slot_start[i], 0), size, fell)
             namespace[f"_node{i}"] = general.hot_step()
             namespace[f"_end{i}"] = general.end
             namespace[f"_start{i}"] = general.begin

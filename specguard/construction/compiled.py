@@ -196,7 +196,12 @@ class CompiledTree:
         return np.asarray(self.reward_terms(states, actions, next_states).sum(axis=1))
 
     def step_batch(
-        self, observations: np.ndarray, actions: Any, next_states: np.ndarray, last: Sequence[bool] | None = None
+        self,
+        observations: np.ndarray,
+        actions: Any,
+        next_states: np.ndarray,
+        last: Sequence[bool] | None = None,
+        terminated: Sequence[bool] | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Each transition evaluated alone, from its observation: what a Markov env must reproduce.
 
@@ -206,6 +211,8 @@ class CompiledTree:
             next_states: ``(B, features...)`` the next states' features (extra columns ignored).
             last: ``B`` flags: the base env ended the episode in the next state, which is judged
                 (:meth:`Evaluator.step`); ``None``: no base env ended one.
+            terminated: ``B`` flags: the base env's end was a termination (``Evaluator.step``'s
+                ``terminated``); ``None``: none was.
 
         Returns:
             ``(rewards, terminated, goals, next_own)``: the rewards ``(B,)``, the
@@ -218,9 +225,10 @@ class CompiledTree:
         rewards, ended, goals, own = [], [], [], []
         ev = self.evaluator()
         ends = [False] * len(obs) if last is None else [bool(v) for v in last]
-        for row, a, f2, base_end in zip(obs.tolist(), list(actions), s2.tolist(), ends, strict=True):
+        falls = [False] * len(obs) if terminated is None else [bool(v) for v in terminated]
+        for row, a, f2, base_end, fell in zip(obs.tolist(), list(actions), s2.tolist(), ends, falls, strict=True):
             ev.restore(row[:n], row[n:])
-            r, end, m2, _ = ev.step(a, f2, base_end)
+            r, end, m2, _ = ev.step(a, f2, base_end, fell)
             rewards.append(r)
             ended.append(end)
             goals.append(m2)
@@ -496,6 +504,9 @@ class Evaluator:
         self._step: Callable[..., Any] = namespace["step"]
         self._safe: Callable[[list[float]], tuple[bool, ...]] = namespace["safe"]
         self._safe_info: Callable[[list[float]], dict[str, bool]] = namespace["safe_info"]
+        self._fell: list[bool] = namespace["_fell"]
+        self.horizon = not tree.reach
+        """The root goal holds until the end: an episode the initial env terminates ended before its horizon."""
         self._m: tuple[bool, ...] = ()
         self._q: tuple[float, ...] = ()
         self._s: Any = None
@@ -543,13 +554,15 @@ class Evaluator:
         return self._safe_info(self.own_state)
 
     def step(
-        self, action: Any, f: Sequence[float], last: bool | None = False
+        self, action: Any, f: Sequence[float], last: bool | None = False, terminated: bool = False
     ) -> tuple[float, bool, tuple[bool, ...], dict[str, float]]:
         """Advance by one transition to features ``f``.
 
         When the episode ends at ``f`` (the spec ends it, or ``last``: the base env terminated or truncated),
         the last state is judged too (docs/semantics.md, "The last state"), in this step's terms; with
         ``last`` None never (the transition's own reward, as :meth:`CompiledTree.reward_terms` gives it).
+        ``terminated``: the base env terminated the episode at ``f``; where the root goal holds until the
+        end (:attr:`horizon`), the episode ended before its horizon (:meth:`~specguard.extend.Node.terminated_state`).
 
         Returns:
             The reward, whether the spec ends the episode (root goal reached, a
@@ -557,12 +570,16 @@ class Evaluator:
             of ``f`` and the weighted reward terms by key (Algorithm 1's processing order).
         """
         own = self.own_state[:]  # the episode state changes only once the step succeeded
+        fell = self._fell
+        fell[0] = bool(terminated) and self.horizon
         try:
             r, ended, m2, goals, s2, q2, terms = self._step(f, self._m, self._s, self._q, own, action, last)
         except EvaluationError:
             raise
         except Exception as e:
             self._diagnose(action, f, e)
+        finally:
+            fell[0] = False
         if not _isfinite(r):
             bad = {k: v for k, v in terms.items() if not math.isfinite(v)}
             raise EvaluationError(f"non-finite reward {r}: the terms {bad} are not finite")

@@ -30,7 +30,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.utils import RecordConstructorArgs
 
-from specguard.construction.checks import START_SAMPLES, check_episode_limit, check_goals, check_starts
+from specguard.construction.cap import capped
+from specguard.construction.checks import START_SAMPLES, check_goals, check_starts
 from specguard.construction.compiled import CompiledTree, compile_tree
 from specguard.construction.initial_env import InitialEnv, check_identity_observation, read_env_features
 from specguard.construction.reference import ReferenceEvaluator
@@ -391,7 +392,8 @@ class SpecEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         else:
             f = self._read(obs, info, self.env, self._t)
         ev = self.evaluator
-        reward, ended, _, terms = ev.step(action, f, terminated or truncated)  # the last state is judged too
+        # The last state is judged too; a termination by the initial env is one before the horizon.
+        reward, ended, _, terms = ev.step(action, f, terminated or truncated, terminated)
         info["goals"] = ev.goals  # a new dict each step, as are the others
         info["safe"] = ev.safe_info() if self._safety_keys else {}
         info["reward_terms"] = terms
@@ -463,7 +465,7 @@ class BaselineEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         # Own state (stages, counters) follows the episode, though the spec's reward and termination do not
         # apply; without own state, membership of one state is all there is (no rewards computed for nothing).
         members = (
-            self.evaluator.step(action, f, terminated or truncated)[2]
+            self.evaluator.step(action, f, terminated or truncated, terminated)[2]
             if self.evaluator.slots
             else self.evaluator.members(f)
         )
@@ -546,7 +548,8 @@ class EnvFactory:
     of its own. The factory holds the tree object itself, so what it compiled is exactly that tree.
 
     The first call runs :func:`preflight` (a failure is raised again by every later call); every call builds
-    a base env and checks the goals against the bounds of its observation space, before wrapping it. The
+    a base env (under :func:`~specguard.construction.cap.capped` where it declares no episode limit, so every
+    episode ends) and checks the goals against the bounds of its observation space, before wrapping it. The
     first call that gets that far also judges the root goal on seeded resets of an env of its own
     (:func:`starts_in_root_goal`, :func:`~specguard.construction.checks.check_starts`).
 
@@ -586,7 +589,7 @@ class EnvFactory:
         if self.compiled is None:
             self.compiled = preflight("make_baseline_env" if self.baseline else "make_env", self.initial_env, self.tree)
         compiled, initial_env = self.compiled, self.initial_env
-        base = initial_env.make(**make_kwargs)
+        base = capped(initial_env.make(**make_kwargs))  # every episode ends (specguard.construction.cap)
         try:
             low, high = initial_env.feature_bounds(base.observation_space)  # checks the features fit the observation
             check_goals(compiled, low, high)  # refuse a goal no state can be in, before training
@@ -594,7 +597,6 @@ class EnvFactory:
                 inside = starts_in_root_goal(initial_env, compiled, START_SAMPLES, **make_kwargs)
                 if inside is not None:
                     check_starts(compiled, inside, START_SAMPLES)
-                check_episode_limit(compiled, base)
                 self.starts_checked = True
             if self.baseline:
                 return BaselineEnv(

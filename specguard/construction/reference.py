@@ -57,7 +57,9 @@ class Requirements:
         reward: the weighted reward terms of a step, by key.
         terminal: whether an extended state is in ``T_G``.
         initial: the own states of the subtree at the start of an episode in features ``s``.
-        transition: the own states after the step ``(x, a, s')`` (the automaton of ``S_G``).
+        transition: the own states after the step ``(x, a, s', fell)`` (the automaton of ``S_G``); ``fell``: the
+            initial env terminated the episode in ``s'`` where the root goal holds until the end
+            (:meth:`Node.terminated_state`).
         slots: ``S_G`` beyond the features: ``(key, slot)`` in Algorithm 1's processing order.
         roles: the role of each reward term (``"core"``, ``"shaping"``, ``"safety"``), by key.
         goals: every node's goal, by path (``info["goals"]``).
@@ -70,7 +72,7 @@ class Requirements:
     reward: Callable[[ExtendedState, Any, ExtendedState], Terms]
     terminal: Callable[[ExtendedState], bool]
     initial: Callable[[Any], dict[str, tuple[float, ...]]]
-    transition: Callable[[ExtendedState, Any, Any], dict[str, tuple[float, ...]]]
+    transition: Callable[[ExtendedState, Any, Any, bool], dict[str, tuple[float, ...]]]
     slots: tuple[tuple[str, Slot], ...]
     roles: Mapping[str, str]
     goals: Mapping[str, Callable[[ExtendedState], bool]]
@@ -145,14 +147,17 @@ def _operator(path: str, node: Node, kids: Sequence[Requirements]) -> Requiremen
             states[path] = tuple(float(v) for v in q0)
         return states
 
-    def transition(x: ExtendedState, a: Any, s2: Any) -> dict[str, tuple[float, ...]]:
+    def transition(x: ExtendedState, a: Any, s2: Any, fell: bool) -> dict[str, tuple[float, ...]]:
         states: dict[str, tuple[float, ...]] = {}
         for k in kids:
-            states.update(k.transition(x, a, s2))
+            states.update(k.transition(x, a, s2, fell))
         if node.state_slots():
             inside2 = inside(ExtendedState(s2, states))
-            q2 = call_definition(path, "next_state()", node.next_state, ctx(x), a, s2, inside2)
-            states[path] = tuple(float(v) for v in q2)
+            q2 = tuple(float(v) for v in call_definition(path, "next_state()", node.next_state, ctx(x), a, s2, inside2))
+            if fell:  # the initial env ended the episode before its horizon (docs/semantics.md)
+                after = Context(s2, q2, inside2)
+                q2 = tuple(float(v) for v in call_definition(path, "terminated_state()", node.terminated_state, after))
+            states[path] = q2
         return states
 
     def last(x: ExtendedState, a: Any) -> tuple[dict[str, tuple[float, ...]], Terms]:
@@ -197,8 +202,8 @@ def _annotation(key: str, w: float, a: Annotation, req: Requirements) -> Require
             states[key] = tuple(float(v) for v in call_definition(key, "initial_state()", a.initial_state, s))
         return states
 
-    def transition(x: ExtendedState, act: Any, s2: Any) -> dict[str, tuple[float, ...]]:
-        states = req.transition(x, act, s2)
+    def transition(x: ExtendedState, act: Any, s2: Any, fell: bool) -> dict[str, tuple[float, ...]]:
+        states = req.transition(x, act, s2, fell)
         if has_state:
             states[key] = tuple(
                 float(v) for v in call_definition(key, "next_state()", a.next_state, x.s, q(x), act, s2)
@@ -279,6 +284,8 @@ class ReferenceEvaluator:
 
     def __init__(self, tree: Node, features: Sequence[str]) -> None:
         self.req = process(tree)
+        self.horizon = until_end(tree)
+        """The root goal holds until the end: an episode the initial env terminates ended before its horizon."""
         self.state_cls = state_type(tuple(features))
         self.paths = tuple(self.req.goals)
         self.slots = self.req.slots
@@ -336,18 +343,20 @@ class ReferenceEvaluator:
         return dict(zip(self.safety_keys, self.safe))
 
     def step(
-        self, action: Any, f: Sequence[float], last: bool | None = False
+        self, action: Any, f: Sequence[float], last: bool | None = False, terminated: bool = False
     ) -> tuple[float, bool, tuple[bool, ...], Terms]:
         """Advance by one transition to features ``f``: reward, spec termination, goals, weighted terms.
 
         When the episode ends at ``f`` (the spec ends it, or ``last``: the base env terminated or truncated),
         the last state is judged too (docs/semantics.md, "The last state"), in this step's terms; with
         ``last`` None never (the transition's own reward, as :meth:`CompiledTree.reward_terms` gives it).
+        ``terminated``: the base env terminated the episode at ``f``; where the root goal holds until the
+        end, the episode ended before its horizon (:meth:`~specguard.extend.Node.terminated_state`).
         """
         x = self._x
         assert x is not None, "reset() first"
         s2 = self.state_cls._make(f)
-        x2 = ExtendedState(s2, self.req.transition(x, action, s2))
+        x2 = ExtendedState(s2, self.req.transition(x, action, s2, bool(terminated) and self.horizon))
         terms = self.req.reward(x, action, x2)
         ended = self.req.terminal(x2)
         if last or (ended and last is not None):

@@ -95,7 +95,7 @@ def check_observations_in_space(cls: type, max_examples: int = MAX_EXAMPLES) -> 
 
     def body(case: Example) -> None:
         assert case.trajectory is not None and case.actions is not None
-        env = replay_env(case.tree, case.trajectory)
+        env = replay_env(case.tree, case.trajectory, terminate=case.terminate)
         for t, step in enumerate(play(env, case.actions)):
             if step.obs not in env.observation_space:
                 n = len(FEATURES)
@@ -118,7 +118,9 @@ def check_rewards_are_finite_sums_of_terms(cls: type, max_examples: int = MAX_EX
     def body(case: Example) -> None:
         assert case.trajectory is not None and case.actions is not None
         for evaluator in ("reference", "flat"):
-            for t, step in enumerate(play(replay_env(case.tree, case.trajectory, evaluator), case.actions)):
+            for t, step in enumerate(
+                play(replay_env(case.tree, case.trajectory, evaluator, case.terminate), case.actions)
+            ):
                 if t == 0:
                     continue
                 r, terms = step.reward, step.info["reward_terms"]
@@ -142,7 +144,7 @@ def check_core_reward_telescopes(cls: type, max_examples: int = MAX_EXAMPLES) ->
 
     def body(case: Example) -> None:
         assert case.trajectory is not None and case.actions is not None
-        req, xs = extended_states(case.tree, case.trajectory, case.actions)
+        req, xs = extended_states(case.tree, case.trajectory, case.actions, case.terminate)
         acts = case.actions
         for path, node in case.tree.walk():
             if isinstance(node, cls):
@@ -187,7 +189,7 @@ def check_markov(cls: type, max_examples: int = MAX_EXAMPLES) -> None:
     def body(case: Example) -> None:
         assert case.trajectory is not None and case.actions is not None
         pristine = cloudpickle.dumps(case.tree)  # every transition gets a fresh copy of the tree
-        steps = play(replay_env(case.tree, case.trajectory), case.actions)
+        steps = play(replay_env(case.tree, case.trajectory, terminate=case.terminate), case.actions)
         n = len(FEATURES)
         used = compile_tree(case.tree, FEATURES)
         for t in reversed(range(1, len(steps))):  # against the trajectory's order: hidden state cannot follow
@@ -195,15 +197,17 @@ def check_markov(cls: type, max_examples: int = MAX_EXAMPLES) -> None:
             env = {"reward": after.reward, "terminated": after.terminated, "goals": after.info["goals"]}
             env["own state"] = after.obs[n:].tolist()
             where = f"{step_name(t)}, evaluated alone from the observation {before.obs.tolist()}"
+            last = t == len(case.trajectory) - 1  # the replay's own end: truncated, or terminated (case.terminate)
+            base_end = (last, last and case.terminate)
             for attempt in ("", " a second time"):  # the second evaluation sees whatever the first one left
                 fresh = compile_tree(cloudpickle.loads(pristine), FEATURES)
-                alone = _alone(fresh, before.obs, action, after.obs[:n], after.truncated)
+                alone = _alone(fresh, before.obs, action, after.obs[:n], *base_end)
                 diffs = _differences(env, alone, "env", "alone", 1e-6)
                 if diffs:
                     raise Broken(f"{where}{attempt}: " + "; ".join(diffs))
             # The same transition on the tree the env ran: state kept in the nodes shows up here.
             diffs = _differences(
-                _alone(used, before.obs, action, after.obs[:n], after.truncated), alone, "used", "fresh", TOL
+                _alone(used, before.obs, action, after.obs[:n], *base_end), alone, "used", "fresh", TOL
             )
             if diffs:
                 raise Broken(
@@ -213,12 +217,15 @@ def check_markov(cls: type, max_examples: int = MAX_EXAMPLES) -> None:
     run_property(check_markov, cls, max_examples, body)
 
 
-def _alone(compiled: CompiledTree, obs: np.ndarray, action: int, features: np.ndarray, last: bool) -> dict[str, Any]:
-    """One transition evaluated alone by ``step_batch``, as the env reports it (``last``: the base env ended it)."""
-    rewards, ended, goals, own = compiled.step_batch(obs[None, :], [action], features[None, :], [last])
+def _alone(
+    compiled: CompiledTree, obs: np.ndarray, action: int, features: np.ndarray, last: bool, terminated: bool
+) -> dict[str, Any]:
+    """One transition evaluated alone by ``step_batch``, as the env reports it (``last``: the base env ended it,
+    ``terminated``: by termination)."""
+    rewards, ended, goals, own = compiled.step_batch(obs[None, :], [action], features[None, :], [last], [terminated])
     return {
         "reward": float(rewards[0]),
-        "terminated": bool(ended[0]),
+        "terminated": bool(ended[0]) or terminated,  # the env's flag: the spec's end, or the base env's
         "goals": dict(zip(compiled.paths, goals[0].tolist())),
         "own state": own[0].tolist(),
     }
@@ -287,7 +294,7 @@ def check_contains_depends_on_ctx_alone(cls: type, max_examples: int = MAX_EXAMP
     def body(case: Example) -> None:
         assert case.trajectory is not None and case.actions is not None
         pristine = cloudpickle.dumps(case.tree)
-        req, xs = extended_states(case.tree, case.trajectory, case.actions)
+        req, xs = extended_states(case.tree, case.trajectory, case.actions, case.terminate)
         fresh = dict(cloudpickle.loads(pristine).walk())
         nodes = [(path, fresh[path]) for path, node in case.tree.walk() if isinstance(node, cls)]
         ctxs = {path: [context(req, path, node, x) for x in xs] for path, node in nodes}
@@ -323,9 +330,11 @@ def check_reset_restores_own_state(cls: type, max_examples: int = MAX_EXAMPLES) 
     def body(case: Example) -> None:
         assert case.trajectory is not None and case.actions is not None
         pristine = cloudpickle.dumps(case.tree)
-        env = replay_env(case.tree, case.trajectory)
+        env = replay_env(case.tree, case.trajectory, terminate=case.terminate)
         first, again = play(env, case.actions), play(env, case.actions)
-        fresh = play(replay_env(cloudpickle.loads(pristine), case.trajectory), case.actions[:0])
+        fresh = play(
+            replay_env(cloudpickle.loads(pristine), case.trajectory, terminate=case.terminate), case.actions[:0]
+        )
         for name, other in (("the first", first[0]), ("a fresh env's", fresh[0])):
             seen = (again[0].obs.tolist(), again[0].info["goals"], again[0].info["safe"])
             want = (other.obs.tolist(), other.info["goals"], other.info["safe"])
@@ -353,7 +362,7 @@ def check_termination_includes_children(cls: type, max_examples: int = MAX_EXAMP
 
     def body(case: Example) -> None:
         assert case.trajectory is not None and case.actions is not None
-        req, xs = extended_states(case.tree, case.trajectory, case.actions)
+        req, xs = extended_states(case.tree, case.trajectory, case.actions, case.terminate)
         for path, node in case.tree.walk():
             if not isinstance(node, cls) or not node.children:
                 continue
@@ -391,7 +400,7 @@ def check_flat_matches_reference(cls: type, max_examples: int = MAX_EXAMPLES) ->
         _agree(0, *(_seen(ev, None, False, goals, {}) for ev, goals in sides))
         end = min(len(case.actions), len(case.trajectory) - 1)
         for t, (a, f) in enumerate(zip(case.actions, case.trajectory[1:]), 1):
-            steps = [(ev, ev.step(a, f, t == end)) for ev in (flat, ref)]
+            steps = [(ev, ev.step(a, f, t == end, t == end and case.terminate)) for ev in (flat, ref)]
             _agree(t, *(_seen(ev, r, end, goals, terms) for ev, (r, end, goals, terms) in steps))
 
     run_property(check_flat_matches_reference, cls, max_examples, body)

@@ -23,7 +23,7 @@ from specguard.construction.initial_env import state_type
 from specguard.construction.reference import ExtendedState, Requirements, process
 from specguard.contract.replay import ReplayEnv
 from specguard.error import Broken
-from specguard.extend import Annotation, Context, Node
+from specguard.extend import Annotation, Context, Node, until_end
 from specguard.tree._draw import values
 from specguard.tree.builtin_annotations import Constraint, Distance
 from specguard.tree.nodes import All, Goal
@@ -46,6 +46,7 @@ class Example(NamedTuple):
     trajectory: list[list[float]] | None = None
     actions: list[int] | None = None
     leaf: Node | None = None  # the refined leaf (check_refinement_preserves_root_goal)
+    terminate: bool = False  # the base env ends the trajectory by termination (a fall), not truncation
 
 
 # -- strategies ----------------------------------------------------------------
@@ -116,7 +117,10 @@ def cases(draw: st.DrawFn, cls: type, max_size: int = 10) -> Example:
     tree = draw(trees_with(cls))
     trajectory = f32(draw(sgst.trajectories(FEATURES, max_size=max_size)))
     n = len(trajectory) - 1
-    return Example(tree, trajectory, draw(st.lists(st.integers(0, 2), min_size=n, max_size=n)))
+    actions = draw(st.lists(st.integers(0, 2), min_size=n, max_size=n))
+    # Trajectories of odd length end by the base env's termination, the others by truncation: both ends are
+    # covered with no draw of their own, which would change every example the checks are tuned to find.
+    return Example(tree, trajectory, actions, terminate=n % 2 == 0)
 
 
 @st.composite
@@ -148,6 +152,8 @@ def _example(case: Example) -> list[str]:
         for t, s in enumerate(case.trajectory):
             act = f"   a{t} = {case.actions[t]}" if case.actions is not None and t < len(case.actions) else ""
             lines.append(f"    s{t} = ({', '.join(value_text(v) for v in s)}){act}")
+        if case.terminate:  # else it truncates there, its horizon
+            lines.append(f"    (the base env terminates at s{len(case.trajectory) - 1}: a fall before its horizon)")
     return lines
 
 
@@ -210,13 +216,15 @@ def step_name(t: int) -> str:
 # -- driving the env and the reference requirements ---------------------------------
 
 
-def replay_env(tree: Node, trajectory: list[list[float]], evaluator: str = "flat") -> SpecEnv:
+def replay_env(tree: Node, trajectory: list[list[float]], evaluator: str = "flat", terminate: bool = False) -> SpecEnv:
     """The constructed env of ``tree`` over a :class:`~specguard.contract.replay.ReplayEnv` of ``trajectory``.
 
     Built as :func:`specguard.make_env` builds it, without its static checks:
-    a goal no state can be in (an ``All`` of disjoint boxes) is a fine example here.
+    a goal no state can be in (an ``All`` of disjoint boxes) is a fine example here. ``terminate``: the
+    replay ends by termination (:class:`~specguard.contract.replay.ReplayEnv`).
     """
-    return SpecEnv(ReplayEnv(trajectory), tree=tree, features=FEATURES, evaluator=evaluator)  # type: ignore[arg-type]
+    replay = ReplayEnv(trajectory, terminate=terminate)
+    return SpecEnv(replay, tree=tree, features=FEATURES, evaluator=evaluator)  # type: ignore[arg-type]
 
 
 class Step(NamedTuple):
@@ -241,15 +249,22 @@ def play(env: SpecEnv, actions: Sequence[int]) -> list[Step]:
     return steps
 
 
-def extended_states(tree: Node, trajectory: list[list[float]], actions: list[int]) -> tuple[Requirements, list[Any]]:
-    """The reference requirements and the extended states (true own states) along the trajectory."""
+def extended_states(
+    tree: Node, trajectory: list[list[float]], actions: list[int], terminate: bool = False
+) -> tuple[Requirements, list[Any]]:
+    """The reference requirements and the extended states (true own states) along the trajectory.
+
+    ``terminate``: the base env terminates at the trajectory's last state (:class:`Example`), a fall
+    before the horizon where the root goal holds until the end.
+    """
     req = process(tree)
     make = state_type(FEATURES)._make
     s = make(trajectory[0])
     xs = [ExtendedState(s, req.initial(s))]
-    for a, f in zip(actions, trajectory[1:]):
+    fall = terminate and until_end(tree)
+    for t, (a, f) in enumerate(zip(actions, trajectory[1:]), 1):
         s2 = make(f)
-        xs.append(ExtendedState(s2, req.transition(xs[-1], a, s2)))
+        xs.append(ExtendedState(s2, req.transition(xs[-1], a, s2, fall and t == len(trajectory) - 1)))
     return req, xs
 
 

@@ -6,6 +6,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from specguard.construction import cap
 from specguard.error import SpecError
 from specguard.extend import until_end
 from specguard.spec.spec import Spec
@@ -276,11 +277,52 @@ class SpecResult:
             "spec_key": self.spec_key,
         }
 
+    def notes(self) -> list[str]:
+        """The facts about the evaluation episodes that every door shows beside the verdicts, one line each.
+
+        Where the root goal holds until the end: the episodes that started outside it (failed before the
+        policy acted) and those the env ended by termination before their horizon (docs/semantics.md,
+        "Goals that hold until the end"); for a reach goal, the episodes that started inside it (met
+        before the policy acted).
+        """
+        episodes = sum(r.episodes for r in self.runs)
+        started = sum(r.started_in_goal for r in self.runs)
+        tree = self.trained.tree if self.trained is not None else None
+        root = tree.name if tree is not None else next((p for r in self.runs[:1] for p in r.successes), "?")
+        lines = []
+        capped = sum(r.capped for r in self.runs)
+        if capped:
+            lines.append(
+                f"{capped} of {episodes} evaluation episodes were cut at {cap.EPISODE_CAP} steps, specguard's cap "
+                "for an env that declares no episode limit: give it the horizon you mean (max_episode_steps=N for "
+                "an env id, a TimeLimit in a factory)"
+            )
+        if tree is None or not until_end(tree):
+            if started:
+                lines.append(
+                    f"{started} of {episodes} evaluation episodes started inside the root goal {root!r}: "
+                    "met before the policy acted"
+                )
+            return lines
+        if episodes - started:  # a goal that must hold from the first state on
+            lines.append(
+                f"{episodes - started} of {episodes} evaluation episodes started outside the root goal "
+                f"{root!r}, which must hold until the end: failed before the policy acted"
+            )
+        terminated = sum(r.terminated for r in self.runs)
+        if terminated:
+            lines.append(
+                f"{terminated} of {episodes} evaluation episodes were ended by termination before their horizon "
+                f"(the env's: a fall, a crash): the root goal {root!r} holds until the end, and an Always goal "
+                "does not keep such an episode unless until='termination'"
+            )
+        return lines
+
     def table(self) -> str:
         """A per-goal table: pooled success with interval, threshold, runs, verdict (:meth:`word`).
 
-        Goals first, then the safety rates, labelled ``path:name (safe)``; then, when some evaluation
-        episodes started inside the root goal, how many.
+        Goals first, then the safety rates, labelled ``path:name (safe)``; then the :meth:`notes` (the
+        episodes that started inside the root goal, or ended before their horizon, how many).
         """
         paths = [p for r in self.runs[:1] for p in r.successes] or list(self.goals)
         paths.sort(key=lambda p: kind(p) != GOAL)  # stable: each kind keeps its order
@@ -294,21 +336,7 @@ class SpecResult:
             met = "-" if g is None else f"{g.runs.count(RunVerdict.MET)}/{len(g.runs)} (need {g.required})"
             threshold = "-" if g is None else f">= {g.threshold:g}"
             rows.append((label(p), rate, iv, threshold, met, "-" if g is None else self.word(p)))
-        lines = render_table(header, rows)
-        started = sum(r.started_in_goal for r in self.runs)
-        episodes = sum(r.episodes for r in self.runs)
-        root = self.trained.tree.name if self.trained is not None else next(iter(paths), "?")
-        if self.trained is not None and until_end(self.trained.tree):
-            if episodes - started:  # a goal that must hold from the first state on
-                lines.append(
-                    f"{episodes - started} of {episodes} evaluation episodes started outside the root goal "
-                    f"{root!r}, which must hold until the end: failed before the policy acted"
-                )
-        elif started:
-            lines.append(
-                f"{started} of {episodes} evaluation episodes started inside the root goal {root!r}: "
-                "met before the policy acted"
-            )
+        lines = render_table(header, rows) + self.notes()
         for run in self.runs:
             if run.weights:
                 lines.append(f"seed {run.seed} adapted weights: {weights_text(run.weights)}")

@@ -12,10 +12,11 @@ from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from specguard.engine.spec_result import SpecResult
-from specguard.extend import SHAPING, Node
+from specguard.extend import SHAPING, Node, until_end
 from specguard.spec.spec import Spec
-from specguard.stats.intervals import GoalOutcome, RunVerdict
+from specguard.stats.intervals import GoalOutcome, RunVerdict, run_verdict, success_interval
 from specguard.tree.keys import GOAL, SAFETY, kind, require_thresholds, resolve_goal
+from specguard.tree.nodes import Always
 from specguard.utils.text import interval_text
 from specguard.validation import child_path
 
@@ -41,6 +42,8 @@ class GoalCheck:
         gate: the comparison's figures (repeated p-values, state, seeds at each look, the seeds of
             each side, the level it was judged at), for the session's family-wise procedure.
         baseline_runs: ``[seed, successes, episodes]`` per run a saved baseline stores for this goal.
+        notes: the spec's facts about its evaluation episodes (:meth:`SpecResult.notes
+            <specguard.engine.spec_result.SpecResult.notes>`), shown under the table as ``specguard run`` shows them.
     """
 
     group: str
@@ -65,6 +68,7 @@ class GoalCheck:
     kind: str = GOAL
     gate: dict[str, Any] | None = None
     baseline_runs: list[list[int]] | None = None
+    notes: list[str] = field(default_factory=list)
 
     @property
     def key(self) -> str:
@@ -104,6 +108,7 @@ class GoalCheck:
             ),
         ]
         lines += [f"  seed {seed} failed: {error}" for seed, error in self.errors.items()]
+        lines += [f"  {note}" for note in self.notes]
         if self.hint:
             lines.append(f"  hint: {self.hint}")
         return "\n".join(lines)
@@ -120,10 +125,20 @@ def _node(tree: Node, path: str) -> Node:
     return dict(tree.walk())[path]
 
 
-def _undecided_hint(spec: Spec) -> str:
+def _undecided_hint(spec: Spec, path: str, result: SpecResult) -> str:
+    """Why runs stayed undecided: each is judged alone, at the corrected confidence, by its own interval."""
+    confidence, threshold = spec.verdict_confidence, spec.thresholds[path]
+    undecided = [
+        f"seed {r.seed} {interval_text(success_interval(r.successes[path], r.episodes, confidence))}"
+        for r in result.runs
+        if run_verdict(r.successes[path], r.episodes, threshold, confidence) is RunVerdict.UNDECIDED
+    ]
     return (
-        f"runs stayed undecided after {spec.budget.max_eval_episodes} evaluation episodes: "
-        "raise budget.max_eval_episodes, or ask for a threshold further from the measured rate"
+        f"runs stayed undecided after {spec.budget.max_eval_episodes} evaluation episodes: each run is judged on "
+        f"its own episodes at {confidence:.2%} confidence (the table's {spec.confidence:.0%}, corrected for "
+        f"{spec.budget.looks} looks), and these intervals contain the threshold {threshold:g}: "
+        f"{', '.join(undecided) or 'none'}; raise budget.max_eval_episodes, or ask for a threshold further from "
+        "the measured rate"
     )
 
 
@@ -134,7 +149,7 @@ def _safety_hint(spec: Spec, key: str, result: SpecResult, verdicts: list[RunVer
     if not episodes:
         return None
     if RunVerdict.UNDECIDED in verdicts and RunVerdict.MISSED not in verdicts:
-        return _undecided_hint(spec)
+        return _undecided_hint(spec, key, result)
     unsafe = episodes - sum(r.successes[key] for r in runs)
     always = [r.seed for r in runs if r.successes[key] == 0]
     where = f"; in every episode of {len(always)}/{len(runs)} seeds" if always else ""
@@ -149,6 +164,17 @@ def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[RunVerdict])
     if kind(path) == SAFETY:
         return _safety_hint(spec, path, result, verdicts)
     runs = result.runs
+    fell = sum(r.terminated for r in runs)
+    horizon = any(isinstance(n, Always) and n.until == "horizon" for _, n in spec.tree.walk())
+    if fell and horizon and until_end(spec.tree):
+        episodes = sum(r.episodes for r in runs)
+        share = "every" if fell == episodes else f"{fell} of {episodes}"
+        return (
+            f"the env ended {share} evaluation episode{'s' if 1 < fell < episodes else ''} before the "
+            "horizon (a fall, a crash), which a goal held until the end does not keep: state the env's failure "
+            "condition in the spec (a Constraint, a goal) so the agent learns to avoid it, or, where the env's "
+            "termination is a good end, say so with sg.Always(..., until='termination')"
+        )
     never = [r.seed for r in runs if r.successes[path] == 0]
     shaped = any(a.role == SHAPING for _, n in _node(spec.tree, path).walk() for a in n.annotations)
     if never:
@@ -177,7 +203,7 @@ def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[RunVerdict])
                 f"{rates[worst]:.0%}; consider a Distance on {worst!r} or a larger weight for it"
             )
     if RunVerdict.UNDECIDED in verdicts:
-        return _undecided_hint(spec)
+        return _undecided_hint(spec, path, result)
     if any(r.hit_wall_clock for r in runs):
         return "training stopped at the budget's wall-clock cap in some seeds"
     return None
@@ -220,6 +246,7 @@ def gate_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalChec
         spec_key=result.spec_key,
         hint=None if outcome is GoalOutcome.PASSED else _hint(spec, path, result, verdict.runs),
         kind=kind(path),
+        notes=result.notes(),
     )
 
 

@@ -77,12 +77,16 @@ def table_lines(rows: Sequence[Row]) -> list[str]:
     and training time (``cached`` for a row whose runs all came from the cache).
 
     Safety rates follow their spec's goals, labelled ``path:name (safe)``; their
-    success is the share of episodes without a violation."""
+    success is the share of episodes without a violation. Each spec's notes follow the table, once
+    (episodes that started inside the root goal, or ended before their horizon)."""
     compared = any(r.get("comparison") for r in rows)
     header = HEADER + (["vs baseline"] if compared else [])
     body = [_cells(r) + ([""] if compared and not r.get("comparison") else []) for r in _ordered(rows)]
     out = render_table(header, body)
-    return out
+    noted: dict[str, None] = {}  # each spec's notes once, in order (every row of a spec carries them)
+    for r in _ordered(rows):
+        noted.update(dict.fromkeys(f"{r['group']}: {note}" for note in r.get("notes") or ()))
+    return out + list(noted)
 
 
 def family_lines(rows: Sequence[Row]) -> list[str]:

@@ -45,6 +45,12 @@ class RunResult:
         started_in_goal: of the ``episodes``, those whose first state (at reset) was
             already in the root goal: met before the policy acted (the root goal
             judged on sampled starts before training, :mod:`specguard.construction.checks`).
+        terminated: of the ``episodes``, those that ended by termination rather than truncation:
+            where the root goal holds until the end, episodes the env ended before their horizon
+            (a fall, a crash; or a constraint's budget spent), which an ``Always`` goal does not
+            keep unless ``until="termination"`` (docs/semantics.md, "Goals that hold until the end").
+        capped: of the ``episodes``, those cut at specguard's step cap, the end of an episode whose env
+            declares no episode limit (:mod:`specguard.construction.cap`).
     """
 
     spec: str
@@ -58,6 +64,8 @@ class RunResult:
     met_early: bool = False
     weights: dict[str, list[float]] = field(default_factory=dict)
     started_in_goal: int = 0
+    terminated: int = 0
+    capped: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -93,9 +101,10 @@ def check_run_result(result: Any, seed: int, paths: Collection[str]) -> None:
     episodes = result["episodes"]
     if not _is_int(episodes) or episodes < 1:
         raise ValueError(f"episodes {episodes!r} is not an integer >= 1")
-    started = result["started_in_goal"]
-    if not _is_int(started) or not 0 <= started <= episodes:
-        raise ValueError(f"started_in_goal {started!r} is not an integer in [0, episodes={episodes}]")
+    for name in ("started_in_goal", "terminated", "capped"):
+        count = result[name]
+        if not _is_int(count) or not 0 <= count <= episodes:
+            raise ValueError(f"{name} {count!r} is not an integer in [0, episodes={episodes}]")
     weights = result["weights"]
     if not isinstance(weights, dict) or not all(
         isinstance(ws, list) and all(isinstance(w, float) and math.isfinite(w) for w in ws) for ws in weights.values()

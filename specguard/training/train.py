@@ -24,6 +24,7 @@ from typing import Any
 
 import gymnasium as gym
 
+from specguard.construction.cap import CAPPED
 from specguard.construction.env import SPEC_KEY, action_masks_problem
 from specguard.error import InvalidSpec, SpecError, TrainingError
 from specguard.falsify.search import EpisodePolicy
@@ -54,6 +55,8 @@ def evaluate(
     episodes: int,
     seeds: list[int] | range,
     started: list[bool] | None = None,
+    terminated: list[bool] | None = None,
+    capped: list[bool] | None = None,
 ) -> dict[str, int]:
     """Run ``episodes`` episodes of ``policy`` on ``env`` (which reports ``info["goals"]`` and ``info["safe"]``).
 
@@ -61,7 +64,9 @@ def evaluate(
     :class:`~specguard.training.policy.Policy`) is told as each episode starts.
 
     ``started``, if given, receives per episode whether its first state (at reset) was in the root goal
-    (the first of ``info["goals"]``).
+    (the first of ``info["goals"]``); ``terminated``, whether it ended by termination rather than
+    truncation (a fall or a crash of the initial env, before its horizon); ``capped``, whether specguard's
+    step cap cut it (``info[CAPPED]``: the env declares no episode limit, :mod:`specguard.construction.cap`).
 
     Returns:
         Per node path, the number of episodes whose last state lies in the
@@ -75,10 +80,13 @@ def evaluate(
             policy.start([env])
         if started is not None:
             started.append(bool(next(iter(info["goals"].values()))))
-        done = False
-        while not done:
-            obs, _, terminated, truncated, info = env.step(_policy_action(env.action_space, policy(obs)))
-            done = terminated or truncated
+        ended = cut = False
+        while not (ended or cut):
+            obs, _, ended, cut, info = env.step(_policy_action(env.action_space, policy(obs)))
+        if terminated is not None:
+            terminated.append(bool(ended))
+        if capped is not None:
+            capped.append(CAPPED in info)
         count_episode(counts, info)
     return counts
 
@@ -97,6 +105,8 @@ class _Run:
     eval_env: gym.Env
     episode: int = 0  # where the last evaluation was, for an error's message
     started: dict[int, bool] = field(default_factory=dict)  # evaluation episode -> it started in the root goal
+    terminated: dict[int, bool] = field(default_factory=dict)  # evaluation episode -> it ended by termination
+    capped: dict[int, bool] = field(default_factory=dict)  # evaluation episode -> specguard's step cap cut it
 
     @property
     def label(self) -> str:
@@ -108,14 +118,27 @@ class _Run:
         first = EVAL_SEED_BASE + self.seed * EVAL_SEED_STRIDE
         act = policy_of(self.model, self.normalizer, deterministic=self.spec.deterministic)
         started: list[bool] = []
-        counts = evaluate(act, self.eval_env, count, range(first + start, first + start + count), started)
+        terminated: list[bool] = []
+        capped: list[bool] = []
+        seeds = range(first + start, first + start + count)
+        counts = evaluate(act, self.eval_env, count, seeds, started, terminated, capped)
         # The evaluation counted is the last one run (a met checkpoint's, or the final one): keep each latest.
         self.started.update(zip(range(start, start + count), started))
+        self.terminated.update(zip(range(start, start + count), terminated))
+        self.capped.update(zip(range(start, start + count), capped))
         return counts
 
     def started_in_goal(self, episodes: int) -> int:
         """Of evaluation episodes ``0 .. episodes - 1``, those that started in the root goal."""
         return sum(self.started.get(i, False) for i in range(episodes))
+
+    def ended_by_termination(self, episodes: int) -> int:
+        """Of evaluation episodes ``0 .. episodes - 1``, those that ended by termination, not truncation."""
+        return sum(self.terminated.get(i, False) for i in range(episodes))
+
+    def cut_at_cap(self, episodes: int) -> int:
+        """Of evaluation episodes ``0 .. episodes - 1``, those that specguard's step cap cut."""
+        return sum(self.capped.get(i, False) for i in range(episodes))
 
     def failure(self, where: str, e: Exception) -> TrainingError:
         """The run's error for ``e``, raised by the env or a user function ``where`` the run was."""
@@ -302,5 +325,7 @@ def train_run(
         met_early=curve.met_early,
         weights={} if adapter is None else adapter.in_force_lists(),
         started_in_goal=run.started_in_goal(episodes),
+        terminated=run.ended_by_termination(episodes),
+        capped=run.cut_at_cap(episodes),
     )
     return result, run.model

@@ -38,7 +38,7 @@ from specguard.extend import (
     set_fields,
 )
 from specguard.tree.builtin_annotations import Constraint, Distance
-from specguard.validation import ANNOTATION_SEPARATOR, PATH_SEPARATOR, check_name, number_text
+from specguard.validation import ANNOTATION_SEPARATOR, PATH_SEPARATOR, check_choice, check_name, number_text
 
 if TYPE_CHECKING:
     from hypothesis.strategies import SearchStrategy
@@ -47,6 +47,7 @@ __all__ = ["All", "Always", "Annotation", "Constraint", "Distance", "Goal", "Nod
 
 # Re-exported: modules written before the extension API import these from here.
 AUTO: Literal["auto"] = "auto"  # All(weights=AUTO): adapted during training (specguard.training.auto_weights)
+UNTIL = ("horizon", "termination")  # Always(until=...): what ends an episode that keeps the goal
 
 _REEXPORTED = (ANNOTATION_SEPARATOR, PATH_SEPARATOR, Annotation, Constraint, Distance, component_weights)
 
@@ -277,16 +278,24 @@ class All(Node):
 
 @dataclass(frozen=True, init=False, repr=False)
 class Always(Node):
-    """A goal that must hold until the episode ends: every child's goal, at every state of the episode.
+    """A goal that must hold until the episode's horizon: every child's goal, at every state of the episode.
 
     Its own state ``held`` (0 or 1, in the observation) is whether every child's
     goal has held at every state so far; the goal is ``held`` and every child's
     goal now. Entering it ends nothing: at the root, the episode runs to the
-    initial env's own end (termination or truncation) and is judged at its last
-    state. Its core reward is its membership difference, so leaving pays ``-1``
-    once and nothing is ever paid back; the children's goal rewards are not added
-    (its own replaces them), their distances and penalties count as they would
-    alone (docs/semantics.md, "Goals that hold until the end").
+    initial env's own end and is judged at its last state. Its core reward is its
+    membership difference, so leaving pays ``-1`` once and nothing is ever paid
+    back; the children's goal rewards are not added (its own replaces them), their
+    distances and penalties count as they would alone (docs/semantics.md, "Goals
+    that hold until the end").
+
+    **The end is the horizon.** An episode that the initial env *terminates* (a
+    Hopper's fall, a car's crash) did not run to its end, so by default the goal is
+    not held at that last state, whatever its children say there: ``held`` becomes
+    0, the step pays ``-1`` and ``info["goals"]`` reports it. Only an episode the
+    env truncates (its ``TimeLimit``) or that ends in a state that a reach goal
+    beside it reaches keeps it. ``until="termination"`` takes the env's termination
+    as a good end instead (an env whose episodes end by success), as a truncation.
 
     Under ``All``, beside a reach goal, it reads "until": ``All(Always(A), B)``
     is reached when ``B`` is, with ``A`` held at every state before.
@@ -294,21 +303,28 @@ class Always(Node):
     Args:
         *children: the goals that must hold, at least one, with distinct names.
         name: the node's name.
+        until: ``"horizon"`` (default): an episode the initial env terminates has
+            not kept the goal; ``"termination"``: the env's termination is an end
+            like its truncation (the goal is judged on the last state alone).
 
     Example:
         >>> balance = Always(Goal("upright", theta=(-0.2, 0.2)), name="balance")
         >>> print(balance)
         Always 'balance'
         └── Goal 'upright': -0.2 <= theta <= 0.2
+        >>> Always(Goal("upright", theta=(-0.2, 0.2)), name="balance", until="termination").describe()
+        "Always 'balance' until=termination"
     """
 
     kind: ClassVar[str] = "Always"
     name: str
     nodes: tuple[Node, ...]
+    until: Literal["horizon", "termination"]
     annotations: tuple[Annotation, ...]
 
-    def __init__(self, *children: Node, name: str) -> None:
-        self.init_node(name, children)
+    def __init__(self, *children: Node, name: str, until: Literal["horizon", "termination"] = "horizon") -> None:
+        name, _ = self.init_node(name, children)
+        set_fields(self, until=check_choice(f"Always {name!r}", "until", until, UNTIL))
 
     # -- the extension protocol (docs/semantics.md, "Goals that hold until the end") --
 
@@ -324,15 +340,25 @@ class Always(Node):
     def next_state(self, before: Context, action: object, s2: object, inside2: tuple[bool, ...]) -> tuple[float, ...]:
         return (1.0 if before.q[0] >= 1.0 and all(inside2) else 0.0,)
 
+    def terminated_state(self, after: Context) -> tuple[float, ...]:
+        return after.q if self.until == "termination" else (0.0,)  # a fall before the horizon is not kept
+
     def contains(self, ctx: Context) -> bool:
         return ctx.q[0] >= 1.0 and all(ctx.inside)
 
     def until_end(self, children: tuple[bool, ...]) -> bool:
         return True  # judged at the last state, whatever its children are
 
+    @classmethod
+    def strategy(cls, children: Sequence[Node], name: str) -> SearchStrategy[Node]:
+        from hypothesis import strategies as st
+
+        return st.sampled_from(UNTIL).map(lambda until: cls(*children, name=name, until=until))  # type: ignore[arg-type]
+
     def describe(self) -> str:
-        return f"Always {self.name!r}"
+        return f"Always {self.name!r}" + ("" if self.until == "horizon" else f" until={self.until}")
 
     def __repr__(self) -> str:
         kids = ", ".join(map(repr, self.nodes))
-        return f"Always({kids}, name={self.name!r}){self._annotations_repr()}"
+        until = "" if self.until == "horizon" else f", until={self.until!r}"
+        return f"Always({kids}, name={self.name!r}{until}){self._annotations_repr()}"
