@@ -45,7 +45,8 @@ start=$SECONDS
 "$WORK/tools/bin/python" -m build -q --outdir "$WORK/dist" plugins
 "$WORK/tools/bin/twine" check --strict "$WORK"/dist/*
 "$WORK/tools/bin/python" - "$WORK"/dist/* <<'EOF'
-"""Each archive holds the license, and there are exactly the four archives of the two distributions."""
+"""Each archive holds the license, there are exactly the four archives of the two distributions, and the sdists'
+tests are none (specguard's read example_specs/ and docs/, which its sdist leaves out) or whole (the plugins')."""
 import sys
 import tarfile
 import zipfile
@@ -65,6 +66,12 @@ for archive in archives:
         licensed = any(n.count("/") == 1 and n.endswith("/LICENSE") for n in names)
     if not licensed:
         sys.exit(f"{archive.name}: no LICENSE among its {len(names)} files")
+    if archive.suffix != ".whl":
+        tests = sorted(n.split("/", 1)[1] for n in names if n.split("/")[1:2] == ["tests"] and n.endswith(".py"))
+        folder = Path("plugins/tests") if archive.name.startswith("specguard_plugins-") else None
+        expected = sorted(f"tests/{p.relative_to(folder).as_posix()}" for p in folder.rglob("*.py")) if folder else []
+        if tests != expected:
+            sys.exit(f"{archive.name}: ships the tests {tests}, expected {expected or 'none'}")
     print(f"{archive.name}: {len(names)} files, LICENSE included")
 EOF
 echo "release smoke: built and checked in $((SECONDS - start)) s"

@@ -55,6 +55,10 @@ def test_format_1_baselines_still_load(tmp_path):
         '{"format": 3, "goals": {"k": {"runs": [[1, 2]], "spec": null, "seeds": [0, 1]}}}',
         '{"format": 3, "goals": {"k": {"runs": [[1, 2], [1, 2]], "spec": null, "seeds": [0, 0]}}}',
         '{"format": 3, "goals": {"k": {"runs": [[1, 2]], "spec": null, "seeds": ["a"]}}}',
+        '{"format": 3, "goals": {"k": {"runs": [[1, 2], [1, 2]], "spec": null, "seeds": [-1, 1]}}}',
+        '{"format": 3, "goals": {"k": {"runs": [[1, 2], [1, 2]], "spec": null, "seeds": [true, 2]}}}',
+        '{"format": 3, "goals": {"k": {"runs": [[1, 2]], "spec": null, "seeds": [1.5]}}}',
+        "[" * 100_000,
     ],
 )
 def test_corrupt_baselines_name_the_file(tmp_path, content):
@@ -62,6 +66,30 @@ def test_corrupt_baselines_name_the_file(tmp_path, content):
     path.write_text(content)
     with pytest.raises(BaselineError, match=r"baseline '.*main.json' is corrupt"):
         load_baseline(path)
+
+
+def test_negative_seeds_are_corrupt_as_a_seed_is_refused_everywhere(tmp_path):
+    path = tmp_path / "main.json"
+    path.write_text('{"format": 3, "goals": {"k": {"runs": [[1, 2], [1, 2]], "spec": null, "seeds": [-1, 1]}}}')
+    with pytest.raises(BaselineError, match=r"bad seeds for 'k': expected 2 integers >= 0, one per run, got \[-1, 1\]"):
+        load_baseline(path)
+
+
+def test_a_corrupt_baseline_quotes_a_bounded_value(tmp_path):
+    path = tmp_path / "main.json"
+    path.write_text(
+        '{"format": 3, "goals": {"k": {"runs": [[1, 2]], "spec": null, "seeds": [%s]}}}' % ("-1," * 50_000 + "1")
+    )
+    with pytest.raises(BaselineError, match=r"bad seeds for 'k'") as e:
+        load_baseline(path)
+    assert len(str(e.value)) < 600
+
+
+def test_a_directory_in_place_of_the_baseline_is_named_as_one(tmp_path):
+    (tmp_path / "main.json").mkdir()
+    for act in (lambda: load_baseline(tmp_path / "main.json"), lambda: save_baseline(tmp_path / "main.json", {})):
+        with pytest.raises(BaselineError, match=r"baseline '.*main.json' is a directory, not a baseline file"):
+            act()
 
 
 def test_missing_baseline(tmp_path):

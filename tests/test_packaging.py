@@ -6,6 +6,10 @@ Building and installing them is `.ci/release_smoke.sh`'s part; these read the me
 from __future__ import annotations
 
 import re
+import shutil
+import subprocess
+import sys
+import tarfile
 import tomllib
 from pathlib import Path
 
@@ -90,3 +94,37 @@ def test_the_long_descriptions_goal_spec_collects_one_item_per_goal(pytester):
     result = pytester.runpytest("-p", "no:cacheprovider", "--collect-only", "-q")
     items = [line for line in result.stdout.lines if "::" in line]
     assert items == [f"test_pendulum_specs.py::test_upright[{goal}]" for goal in ("pendulum", "stabilization")]
+
+
+SDIST_INPUTS = {ROOT: ["specguard", "tests"], ROOT / "plugins": ["specguard_plugins", "tests"]}
+"""Besides its metadata files, what each project's sdist could take by setuptools' defaults: its package, tests/."""
+
+
+def sdist_names(project: Path, tmp_path: Path) -> set[str]:
+    """The files of ``project``'s sdist (paths inside its top folder), built from a copy by setuptools itself."""
+    pytest.importorskip("setuptools", minversion="77")  # the build backend both pyproject.toml name
+    source, out = tmp_path / "source", tmp_path / "out"
+    ignore = shutil.ignore_patterns("__pycache__", "*.py[cod]", "*.egg-info")
+    for folder in SDIST_INPUTS[project]:
+        shutil.copytree(project / folder, source / folder, ignore=ignore)
+    for name in ["pyproject.toml", "MANIFEST.in", "LICENSE", "README.md", "DESCRIPTION.md"]:
+        if (project / name).exists():
+            shutil.copy(project / name, source / name)
+    build = "import sys; from setuptools import build_meta; build_meta.build_sdist(sys.argv[1])"
+    subprocess.run([sys.executable, "-c", build, str(out)], cwd=source, check=True, capture_output=True)
+    (archive,) = out.glob("*.tar.gz")
+    with tarfile.open(archive) as tar:
+        return {m.name.split("/", 1)[1] for m in tar.getmembers() if m.isfile()}
+
+
+def test_specguards_sdist_leaves_out_the_tests_that_need_the_checkout(tmp_path):
+    names = sdist_names(ROOT, tmp_path)
+    assert "specguard/__init__.py" in names and "LICENSE" in names
+    assert [n for n in names if n.startswith("tests/")] == []
+
+
+def test_the_plugins_sdist_ships_its_tests_whole(tmp_path):
+    tests = ROOT / "plugins" / "tests"
+    shipped = {n for n in sdist_names(ROOT / "plugins", tmp_path) if n.startswith("tests/")}
+    assert shipped == {f"tests/{p.relative_to(tests).as_posix()}" for p in tests.rglob("*.py")}
+    assert {"tests/__init__.py", "tests/conftest.py", "tests/helpers.py"} <= shipped

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import tomllib
 
 from markdown_pages import DOCS, ROOT, broken_links, python_blocks
 
@@ -29,3 +30,10 @@ def test_readme_links_every_page_of_the_docs():
 
 def test_readme_links_resolve():
     assert broken_links(README) == []
+
+
+def test_readme_summary_names_the_cluster_engine_and_its_extra():
+    summary = README.read_text(encoding="utf-8").split("It has:", 1)[1].split("\n\n", 1)[0]
+    assert "Dask cluster" in summary and "the `cluster` extra" in summary
+    extras = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]["optional-dependencies"]
+    assert [d for d in extras["cluster"] if d.startswith("distributed")], "the cluster extra installs Dask"

@@ -239,6 +239,74 @@ def test_train_freq_as_a_list_is_a_tuple_and_a_bad_schedule_is_refused(tmp_path)
         sg.zoo_settings("SAC", "E-v0", file=path)
 
 
+# -- bad input: one line, naming the file or key ------------------------------------------------------------
+
+
+def refused(path, match):
+    """The one InvalidSpec zoo_settings raises for ``path``'s entry E-v0, its message one line."""
+    with pytest.raises(sg.InvalidSpec, match=match) as e:
+        sg.zoo_settings("PPO", "E-v0", file=path)
+    assert "\n" not in e.value.message and len(e.value.message) < 500
+    return e.value
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("dict(net_arch={[1]: 2})", r"policy_kwargs: a dict key must be hashable .*, got \[1\]"),
+        ("dict(net_arch={([1],): 2})", r"policy_kwargs: a dict key must be hashable .*, got \(\[1\],\)"),
+        ("-" * 2000 + "1", r"policy_kwargs: cannot evaluate '-----.*1': it nests deeper than 64 levels"),
+        ("not " * 5000 + "1", r"policy_kwargs: cannot evaluate 'not not .*1': it nests deeper than 64 levels"),
+    ],
+)
+def test_policy_kwargs_python_cannot_evaluate_are_one_error(tmp_path, text, message):
+    path = write(tmp_path, f'E-v0:\n  n_timesteps: 1000\n  policy_kwargs: "{text}"\n')
+    refused(path, message)
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        (b"E-v0:\n  n_timesteps: 100\n  policy: Mlp\xe9Policy\n", r"not UTF-8 text \(byte 0xe9 at offset 38\)"),
+        ("E-v0:\n  n_timesteps: 100\n  x: " + "[" * 100_000 + "]" * 100_000, "it nests deeper than 64 levels"),
+        ("E-v0:\n  n_timesteps: " + "1" * 5000 + "\n", r"ValueError: Exceeds the limit \(4300 digits\)"),
+        ("E-v0: [1, 2\n", r"expected ',' or ']', but got '<stream end>' \(line 2, column 1\)\n"),
+    ],
+    ids=["latin-1", "nested", "long-integer", "syntax"],
+)
+def test_a_file_yaml_cannot_read_is_one_error_naming_it(tmp_path, content, message):
+    path = tmp_path / "mine.yml"
+    path.write_bytes(content if isinstance(content, bytes) else content.encode())
+    refused(path, rf"^zoo_settings\('PPO', 'E-v0'\): cannot read '.*mine.yml': {message}")
+
+
+@pytest.mark.parametrize("value", ["true", "false", "0", "-100", "1.5", ".inf", ".nan", "'1000'", "[1000]"])
+def test_n_timesteps_must_be_a_whole_number_of_steps(tmp_path, value):
+    path = write(tmp_path, f"E-v0:\n  n_timesteps: {value}\n")
+    refused(path, r"expected n_timesteps to be a whole number of steps >= 1, got ")
+
+
+def laughs(levels):
+    """A YAML alias bomb under unknown keys: ``levels`` lists, each of 9 aliases of the one before (9**levels)."""
+    lines = ["E-v0:", "  n_timesteps: 100", "  l0: &l0 [" + ",".join(["lol"] * 9) + "]"]
+    lines += [f"  l{i}: &l{i} [" + ",".join([f"*l{i - 1}"] * 9) + "]" for i in range(1, levels)]
+    return "\n".join(lines) + "\n"
+
+
+def test_an_alias_bomb_is_refused_and_what_is_not_taken_is_bounded(tmp_path):
+    refused(write(tmp_path, laughs(6)), r"cannot read '.*mine.yml': with its aliases expanded it holds over 100,000")
+    assert len(laughs(9)) < 500  # 9**9 (387 million) values once expanded: a repr of gigabytes
+    refused(write(tmp_path, laughs(9)), "over 100,000 values")
+    # Under the limit, a value's repr is still cut: 9**5 values under l4, a text of 100,000 characters.
+    path = write(tmp_path, laughs(5) + f"  long: {'x' * 100_000}\n")
+    settings, [message] = zoo("PPO", "E-v0", file=path)
+    assert set(settings.not_taken) == {"l0", "l1", "l2", "l3", "l4", "long"}
+    assert all(len(reason) < 300 for reason in settings.not_taken.values()) and len(message) < 2000
+    assert settings.not_taken["long"].startswith("'xxxx") and "..." in settings.not_taken["long"]
+    assert settings.not_taken["l4"].startswith("[[[[[...], [...],")
+    refused(write(tmp_path, laughs(4) + "  policy: *l3\n"), r"expected policy to be one of .*, got \[\[\[\['lol', .*…")
+
+
 # -- schedules ------------------------------------------------------------------------------------------
 
 

@@ -41,6 +41,8 @@ from typing import Any
 
 from specguard.error import BaselineError
 from specguard.utils.files import write_atomic
+from specguard.utils.text import value_text
+from specguard.validation import is_natural
 
 __all__ = ["Baseline", "BaselineError", "Saved", "load_baseline", "save_baseline", "spec_of_key"]
 
@@ -196,12 +198,31 @@ def save_baseline(
     return saved
 
 
+def _seeds(key: str, stored: Any, runs: int) -> list[int]:
+    """A goal's stored seeds: one per run, distinct, each an integer ``>= 0`` (a seed, as ``is_natural`` reads it).
+
+    Raises:
+        ValueError: naming the goal and the seeds stored.
+    """
+    if not (isinstance(stored, list) and len(stored) == runs and all(is_natural(x) for x in stored)):
+        raise ValueError(
+            f"bad seeds for {value_text(key)}: expected {runs} integers >= 0, one per run, got {value_text(stored)}"
+        )
+    if len(set(stored)) != len(stored):
+        raise ValueError(f"bad seeds for {value_text(key)}: expected distinct seeds, got {value_text(stored)}")
+    return [int(x) for x in stored]
+
+
 def load_baseline(path: Path) -> Baseline:
     """Read a baseline written by :func:`save_baseline`.
 
     Raises:
-        BaselineError: the file is missing or corrupt; the message names it.
+        BaselineError: the file is missing, a directory or corrupt; the message names it.
     """
+    if path.is_dir():
+        raise BaselineError(
+            f"baseline {str(path)!r} is a directory, not a baseline file; move it away or name another baseline"
+        )
     if not path.is_file():
         raise BaselineError(f"baseline {str(path)!r} does not exist; store one first with --goal-specs-save")
     try:
@@ -213,20 +234,17 @@ def load_baseline(path: Path) -> Baseline:
             if data["format"] == 1:
                 entry = {"runs": entry, "spec": None}
             if not isinstance(entry, dict):
-                raise ValueError(f"bad entry for {key!r}: {entry!r}")
+                raise ValueError(f"bad entry for {value_text(key)}: {value_text(entry)}")
             parsed = [(int(k), int(n)) for k, n in entry["runs"]]
             if not parsed or any(n < 1 or not 0 <= k <= n for k, n in parsed):
-                raise ValueError(f"bad counts for {key!r}: {entry['runs']!r}")
+                raise ValueError(f"bad counts for {value_text(key)}: {value_text(entry['runs'])}")
             runs[str(key)] = parsed
             if entry.get("spec") is not None:
                 if not isinstance(entry["spec"], str):
-                    raise ValueError(f"bad spec identity for {key!r}: {entry['spec']!r}")
+                    raise ValueError(f"bad spec identity for {value_text(key)}: {value_text(entry['spec'])}")
                 specs[str(key)] = entry["spec"]
             if entry.get("seeds") is not None:
-                stored = entry["seeds"]
-                if not isinstance(stored, list) or len(stored) != len(parsed) or len(set(stored)) != len(stored):
-                    raise ValueError(f"bad seeds for {key!r}: {stored!r}")
-                seeds[str(key)] = [int(x) for x in stored]
+                seeds[str(key)] = _seeds(key, entry["seeds"], len(parsed))
         return Baseline(runs, specs, seeds)
-    except (ValueError, TypeError, KeyError, AttributeError) as e:
+    except (ValueError, TypeError, KeyError, AttributeError, RecursionError) as e:  # RecursionError: JSON nested deep
         raise BaselineError(f"baseline {str(path)!r} is corrupt ({e}); delete it and save a new one") from e

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from specguard.error import InvalidSpec
+from specguard.utils.text import value_text
 from specguard.validation import is_count
 
 __all__ = [
@@ -198,7 +199,7 @@ def check_policy(where: str, algorithm: str | type, policy: object, *, dict_obse
     raise InvalidSpec(
         where,
         f"expected policy to be one of {', '.join(aliases)} ({algorithm_name(algorithm)}'s policy names) "
-        f"or a BasePolicy subclass, got {policy!r}",
+        f"or a BasePolicy subclass, got {value_text(policy)}",
     )
 
 

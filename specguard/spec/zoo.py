@@ -28,7 +28,7 @@ import ast
 import difflib
 import importlib.util
 import warnings
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
@@ -43,7 +43,8 @@ from specguard.spec.algorithms import (
     hyperparameter_names,
     resolve_algorithm,
 )
-from specguard.validation import check_text
+from specguard.utils.text import MAX_VALUE, elide, value_text
+from specguard.validation import check_text, is_count
 
 __all__ = ["SCHEDULED", "ZOO_FILES", "LinearSchedule", "ZooSettings", "zoo_settings"]
 
@@ -160,17 +161,94 @@ def _zoo_file(where: str, stem: str) -> tuple[Path, str]:
     return path, f"rl-zoo3 {version}, {stem}.yml"
 
 
+_DEEPEST = 64  # the most levels a zoo file nests (rl-zoo3's own: 3) or a value written as Python (its own: about 8)
+_MOST_NODES = 100_000  # the most values a zoo file holds, aliases expanded (rl-zoo3's largest, ppo.yml: about 1,300)
+
+
+def _yaml_error(e: Exception) -> str:
+    """A YAML error (or a value its constructor refused) in one bounded line: what, and at which line and column."""
+    import yaml
+
+    if isinstance(e, yaml.MarkedYAMLError) and e.problem_mark is not None:
+        mark = e.problem_mark
+        return elide(f"{e.problem or e.context} (line {mark.line + 1}, column {mark.column + 1})", MAX_VALUE)
+    return elide(" ".join(f"{type(e).__name__}: {e}".split()), MAX_VALUE)
+
+
+def _too_deep(events: Iterator[Any]) -> bool:
+    """Whether the collections of a YAML event stream nest deeper than :data:`_DEEPEST`.
+
+    Read event by event, nothing recursing, and stopped at the first level too deep (PyYAML's scanner slows with each
+    level of ``[`` it is inside: a document of 100,000 would take minutes to read to its end).
+    """
+    import yaml
+
+    depth = 0
+    for event in events:
+        if isinstance(event, yaml.CollectionStartEvent):
+            depth += 1
+            if depth > _DEEPEST:
+                return True
+        elif isinstance(event, yaml.CollectionEndEvent):
+            depth -= 1
+    return False
+
+
+def _expanded_size(node: Any) -> int:
+    """How many values ``node`` holds with its aliases expanded, counted up to just over :data:`_MOST_NODES`.
+
+    Each alias is counted as often as it is used, as a repr or a spec's fingerprint would expand it; a document of
+    nested aliases (a few hundred bytes that expand to a billion values) stops the count early.
+    """
+    count, stack = 0, [node]
+    while stack and count <= _MOST_NODES:
+        node = stack.pop()
+        count += 1
+        if isinstance(node.value, list):  # a sequence's items, or a mapping's (key, value) pairs
+            for item in node.value:
+                stack.extend(item if isinstance(item, tuple) else (item,))
+    return count
+
+
+def _load(where: str, name: str, text: str) -> Any:
+    """``yaml.safe_load(text)``, refusing documents nested deeper than :data:`_DEEPEST` or larger than
+    :data:`_MOST_NODES` values once their aliases are expanded."""
+    import yaml
+
+    if _too_deep(yaml.parse(text, Loader=yaml.SafeLoader)):
+        raise InvalidSpec(where, f"cannot read {name}: it nests deeper than {_DEEPEST} levels")
+    loader = yaml.SafeLoader(text)
+    try:
+        node = loader.get_single_node()
+        if node is not None and _expanded_size(node) > _MOST_NODES:
+            raise InvalidSpec(
+                where, f"cannot read {name}: with its aliases expanded it holds over {_MOST_NODES:,} values"
+            )
+        return None if node is None else loader.construct_document(node)
+    finally:
+        loader.dispose()
+
+
 def _read(where: str, path: Path) -> dict[str, Any]:
     try:
         import yaml
     except ImportError:
         raise InvalidSpec(where, "reading rl-zoo3's files needs PyYAML, which is not installed", hint=_HINT) from None
+    name = repr(str(path))
     try:
-        entries = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as e:
-        raise InvalidSpec(where, f"cannot read {str(path)!r}: {type(e).__name__}: {e}") from None
+        entries = _load(where, name, path.read_bytes().decode("utf-8"))
+    except InvalidSpec:
+        raise
+    except OSError as e:
+        raise InvalidSpec(where, f"cannot read {name}: {type(e).__name__}: {e.strerror or e}") from None
+    except UnicodeDecodeError as e:
+        raise InvalidSpec(
+            where, f"cannot read {name}: not UTF-8 text (byte {e.object[e.start]:#04x} at offset {e.start})"
+        ) from None
+    except (yaml.YAMLError, ValueError, OverflowError) as e:  # ValueError: an integer of over 4,300 digits, ...
+        raise InvalidSpec(where, f"cannot read {name}: {_yaml_error(e)}") from None
     if not isinstance(entries, dict):
-        raise InvalidSpec(where, f"expected {str(path)!r} to map env ids to settings, got {type(entries).__name__}")
+        raise InvalidSpec(where, f"expected {name} to map env ids to settings, got {type(entries).__name__}")
     return entries
 
 
@@ -178,7 +256,7 @@ def _entry(where: str, entries: Mapping[str, Any], env_id: str, source: str, alg
     if env_id not in entries:
         ids = [str(k) for k in entries]
         close = difflib.get_close_matches(env_id, ids, n=3, cutoff=0.6)
-        maybe = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
+        maybe = f"; did you mean {' or '.join(value_text(c) for c in close)}?" if close else ""
         fallback = (
             f" (rl-zoo3 itself falls back to its 'default' entry: ask for it by name, zoo_settings({algorithm!r}, "
             "'default'))"
@@ -188,7 +266,7 @@ def _entry(where: str, entries: Mapping[str, Any], env_id: str, source: str, alg
         raise InvalidSpec(where, f"{source} has no entry for {env_id!r}{maybe}{fallback}")
     entry = entries[env_id]
     if not isinstance(entry, Mapping):
-        raise InvalidSpec(where, f"expected {source}'s entry {env_id!r} to be a mapping, got {entry!r}")
+        raise InvalidSpec(where, f"expected {source}'s entry {env_id!r} to be a mapping, got {value_text(entry)}")
     return dict(entry)
 
 
@@ -223,7 +301,7 @@ def _value(node: ast.expr, where: str) -> Any:
         items = [_value(e, where) for e in node.elts]
         return items if isinstance(node, ast.List) else tuple(items)
     elif isinstance(node, ast.Dict) and None not in node.keys:
-        return {_value(k, where): _value(v, where) for k, v in zip(node.keys, node.values) if k is not None}
+        return _dict(((_value(k, where), _value(v, where)) for k, v in zip(node.keys, node.values) if k), where)
     elif isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "dict" and not node.args:
         if all(k.arg is not None for k in node.keywords):
             return {k.arg: _value(k.value, where) for k in node.keywords}
@@ -233,9 +311,33 @@ def _value(node: ast.expr, where: str) -> Any:
         return _names()[node.id]
     raise InvalidSpec(
         where,
-        f"cannot evaluate {ast.unparse(node)!r}: a value here may be a literal, dict(...), nn.<Module class> "
+        f"cannot evaluate {value_text(ast.unparse(node))}: a value here may be a literal, dict(...), nn.<Module class> "
         f"or {', '.join(_names())}",
     )
+
+
+def _dict(items: Iterable[tuple[Any, Any]], where: str) -> dict[Any, Any]:
+    """A dict literal's value, refusing a key a dict cannot hold (``{[1]: 2}``, ``{([1],): 2}``)."""
+    value = {}
+    for key, item in items:
+        try:
+            value[key] = item
+        except TypeError:  # unhashable
+            raise InvalidSpec(
+                where, f"a dict key must be hashable (a number, text or tuple of them), got {value_text(key)}"
+            ) from None
+    return value
+
+
+def _too_deep_text(tree: ast.AST) -> bool:
+    """Whether ``tree`` nests deeper than :data:`_DEEPEST` nodes (walked without recursing: ``-`` 2,000 times)."""
+    stack = [(tree, 1)]
+    while stack:
+        node, depth = stack.pop()
+        if depth > _DEEPEST:
+            return True
+        stack.extend((child, depth + 1) for child in ast.iter_child_nodes(node))
+    return False
 
 
 def _from_text(key: str, text: str, where: str) -> Any:
@@ -243,7 +345,11 @@ def _from_text(key: str, text: str, where: str) -> Any:
     try:
         tree = ast.parse(text.strip(), mode="eval")
     except SyntaxError as e:
-        raise InvalidSpec(where, f"{key}: cannot parse {text!r}: {e.msg}") from None
+        raise InvalidSpec(where, f"{key}: cannot parse {value_text(text)}: {e.msg}") from None
+    except RecursionError:  # Python's parser gives up on ``not`` 5,000 times
+        tree = None
+    if tree is None or _too_deep_text(tree):
+        raise InvalidSpec(where, f"{key}: cannot evaluate {value_text(text)}: it nests deeper than {_DEEPEST} levels")
     return _value(tree.body, f"{where}, {key}")
 
 
@@ -260,7 +366,9 @@ def _schedule(key: str, value: Any, where: str) -> Any:
     except ValueError:
         start = None
     if kind != "lin" or start is None:
-        raise InvalidSpec(where, f"{key}: expected a number or a schedule 'lin_<initial value>', got {value!r}")
+        raise InvalidSpec(
+            where, f"{key}: expected a number or a schedule 'lin_<initial value>', got {value_text(value)}"
+        )
     return LinearSchedule(start)
 
 
@@ -272,7 +380,7 @@ def _normalize(value: Any, gamma: Any, where: str, not_taken: dict[str, str]) ->
     if options is None:
         return False
     if not isinstance(options, Mapping):
-        raise InvalidSpec(where, f"normalize: expected True, False or VecNormalize's options, got {value!r}")
+        raise InvalidSpec(where, f"normalize: expected True, False or VecNormalize's options, got {value_text(value)}")
     wanted = dict(options)
     if gamma is not None:  # rl-zoo3 discounts normalized rewards by the algorithm's gamma, over any it was given
         wanted["gamma"] = gamma
@@ -280,7 +388,7 @@ def _normalize(value: Any, gamma: Any, where: str, not_taken: dict[str, str]) ->
         wanted.pop("gamma", None)
     differs = {k: v for k, v in wanted.items() if _VECNORMALIZE.get(k, object()) != v}
     if differs:
-        said = ", ".join(f"{k}={v!r}" for k, v in differs.items())
+        said = ", ".join(f"{elide(str(k), MAX_VALUE)}={value_text(v)}" for k, v in differs.items())
         not_taken["normalize"] = (
             f"{said}: a spec's normalize=True is VecNormalize with its defaults "
             f"({', '.join(f'{k}={v!r}' for k, v in _VECNORMALIZE.items())})"
@@ -312,13 +420,20 @@ def _map(where: str, algorithm: str, entry: dict[str, Any]) -> tuple[dict[str, A
     hyperparameters: dict[str, Any] = {}
     for key, value in entry.items():
         if key in _NOT_TAKEN:
-            not_taken[key] = f"{value!r}: {_NOT_TAKEN[key]}"
+            not_taken[key] = f"{value_text(value)}: {_NOT_TAKEN[key]}"
         elif key in known:
             hyperparameters[key] = value
         else:
-            not_taken[key] = f"{value!r}: {algorithm}'s constructor takes no {key!r}"
+            not_taken[key] = f"{value_text(value)}: {algorithm}'s constructor takes no {value_text(key)}"
     fields["hyperparameters"] = hyperparameters
     return fields, not_taken
+
+
+def _is_timesteps(value: Any) -> bool:
+    """A zoo's ``n_timesteps``: a whole number ``>= 1``, as an integer or a float (``!!float 1e6``), never a bool."""
+    if isinstance(value, float):
+        return value >= 1 and value.is_integer()
+    return is_count(value)
 
 
 def zoo_settings(algorithm: str | type, env_id: str, *, file: str | Path | None = None) -> ZooSettings:
@@ -372,12 +487,14 @@ def zoo_settings(algorithm: str | type, env_id: str, *, file: str | Path | None 
     dict_observation = dict_policy(policy)  # the zoo's env gave a Dict
     policy = check_policy(f"{where}.policy", resolved, policy, dict_observation=dict_observation)
     timesteps, n_envs = fields["timesteps"], fields["n_envs"]
-    if not (isinstance(timesteps, (int, float)) and timesteps >= 1 and float(timesteps).is_integer()):
-        raise InvalidSpec(where, f"expected n_timesteps to be a whole number of steps, got {timesteps!r}")
+    if not _is_timesteps(timesteps):
+        raise InvalidSpec(
+            where, f"expected n_timesteps to be a whole number of steps >= 1, got {value_text(timesteps)}"
+        )
     if not (isinstance(n_envs, int) and not isinstance(n_envs, bool) and n_envs >= 1):
-        raise InvalidSpec(where, f"expected n_envs to be a count, got {n_envs!r}")
+        raise InvalidSpec(where, f"expected n_envs to be a count, got {value_text(n_envs)}")
     if not_taken:
-        lines = "\n".join(f"  {key}: {reason}" for key, reason in not_taken.items())
+        lines = "\n".join(f"  {elide(str(key), MAX_VALUE)}: {reason}" for key, reason in not_taken.items())
         warnings.warn(
             f"{where}: {source}: not taken as written (a spec cannot say them):\n{lines}", SpecWarning, stacklevel=2
         )

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import reprlib
 from collections.abc import Iterable, Mapping, Sequence
 
 __all__ = [
     "MAX_CELL",
+    "MAX_VALUE",
     "bounds_text",
     "elide",
     "interval_text",
@@ -13,11 +15,13 @@ __all__ = [
     "markdown_table",
     "per_seed_text",
     "render_table",
+    "value_text",
     "weights_text",
 ]
 
 
 MAX_CELL = 60  # the widest a table cell is drawn, but in the last column (never padded)
+MAX_VALUE = 200  # the most characters of a value read from a file that an error or warning quotes
 
 
 def elide(text: str, width: int) -> str:
@@ -31,6 +35,37 @@ def elide(text: str, width: int) -> str:
         return text
     head = width // 2
     return text[:head] + "…" + text[len(text) - (width - 1 - head) :]
+
+
+class _BoundedRepr(reprlib.Repr):
+    """:mod:`reprlib`'s repr, never building a whole repr of a value read from a file: integers too."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.maxlevel = 4
+        self.maxtuple = self.maxlist = self.maxdict = self.maxset = self.maxfrozenset = 8
+        self.maxstring = self.maxother = self.maxlong = MAX_VALUE
+
+    def repr_int(self, x: int, level: int) -> str:
+        if x.bit_length() > 4 * MAX_VALUE:  # its decimal text alone would be longer than any message quotes
+            return f"<an integer of {x.bit_length()} bits>"
+        return super().repr_int(x, level)
+
+
+_REPR = _BoundedRepr()
+
+
+def value_text(value: object, width: int = MAX_VALUE) -> str:
+    """``repr(value)`` bounded, for a message: containers cut after 4 levels and 8 items, the text after ``width``.
+
+    The whole repr is never built (a YAML document of nested aliases expands to a repr of gigabytes), and what is
+    left is elided in the middle (:func:`elide`), so both ends stay readable.
+
+    Example:
+        >>> value_text([[[[[1]]]]]), value_text(list(range(100))), value_text("x" * 500, 12)
+        ('[[[[[...]]]]]', '[0, 1, 2, 3, 4, 5, 6, 7, ...]', "'xxxxx…xxxx'")
+    """
+    return elide(_REPR.repr(value), width)
 
 
 def render_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
