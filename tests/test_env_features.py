@@ -244,3 +244,10 @@ def test_a_falsifier_start_set_on_the_env_is_read_by_the_env_features():
     assert obs.tolist() == [0.0, 0.0, 2.0]
     obs, _, terminated, _, _ = env.step(1)
     assert obs.tolist()[2] == 3.0 and terminated
+
+
+def test_a_missing_info_key_at_reset_is_refused_before_any_seed_trains():
+    # Found once only inside a training worker ("seed 0 failed", exit 1): now the start check's, a SpecError.
+    spec = sg.Spec(line(drop_key_at=0), RIGHT, budget=sg.Budget(timesteps=64, min_seeds=1), expect=0.5)
+    with pytest.raises(sg.StateMappingError, match=r"feature 'hit' reads info\['hit'\].*at reset"):
+        sg.run_spec(spec, workers=1, cache_dir=None, progress=None)

@@ -262,3 +262,41 @@ def test_falsify_progress_lines_reach_a_live_terminal_as_training_s_do_and_never
     for quiet in (_Config(isatty=False), _Config(verbosity=-1)):
         terminal_lines(quiet)("anything")
         assert quiet.reporter.lines == []
+
+
+def test_in_a_log_training_progress_shows_once_every_interval_and_each_seeds_last_line(monkeypatch):
+    # A CI log is not a terminal: a LunarLander item once printed nothing for 13 minutes.
+    from specguard.pytest_plugin import session
+    from specguard.training.progress import ProgressEvent
+
+    clock = [0.0]
+    monkeypatch.setattr(session.time, "monotonic", lambda: clock[0])
+    update = ProgressEvent("up", 0, "update", steps=10, budget=100, elapsed_s=1.0, success=None, episodes=0)
+    done = ProgressEvent("up", 0, "done", steps=100, budget=100, elapsed_s=9.0, success=1.0, episodes=4)
+    log = _Config(isatty=False)
+    write = session.terminal_progress(log, every=60)
+    for t in (10.0, 59.0, 61.0, 100.0, 122.0):
+        clock[0] = t
+        write(update)
+    assert len(log.reporter.lines) == 2  # at 61 s, then at 122 s (60 s after the last line shown)
+    write(done)
+    assert len(log.reporter.lines) == 3 and "done" in log.reporter.lines[-1]
+    silent = _Config(isatty=False)
+    write = session.terminal_progress(silent, every=0)  # --goal-specs-progress-every=0: each seed's last line
+    clock[0] = 1000.0
+    write(update), write(done)
+    assert len(silent.reporter.lines) == 1
+
+
+def test_a_training_worker_sends_a_line_at_least_every_heartbeat(monkeypatch):
+    from specguard.training import curve as curves
+
+    clock = [0.0]
+    monkeypatch.setattr(curves.time, "perf_counter", lambda: clock[0])
+    sent: list[tuple] = []
+    goal_curve = curves.GoalCurve(1000, None, 10_000, lambda *a: sent.append(a))
+    for step in range(100, 1000, 100):  # ticks every 1% of the budget, inside the first tenth
+        clock[0] = step / 10  # 10 s a tick
+        goal_curve.on_step(step, [False], [{}])
+    steps = [step for _, step, line in sent if line is not None]
+    assert steps == [300, 600, 900]  # every 30 s: a tenth of the budget that takes 90 s is not silent

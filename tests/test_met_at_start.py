@@ -88,6 +88,14 @@ def test_a_root_goal_met_at_some_starts_warns_with_its_share():
     assert warning.filename == __file__  # the line that built the env
 
 
+def test_the_warning_of_a_spec_points_at_the_users_line_too():
+    spec = sg.Spec(sg.InitialEnv(sometimes_inside, features=("x",)), UP, budget=sg.Budget(timesteps=64), expect=0.5)
+    with pytest.warns(SpecWarning) as caught:
+        spec.make_env().close()  # through Spec.make_env: the user's line, not one inside specguard/spec
+    (warning,) = [w for w in caught if issubclass(w.category, SpecWarning)]
+    assert warning.filename == __file__
+
+
 def test_only_the_root_goal_matters_and_a_goal_met_nowhere_is_silent():
     initial = sg.InitialEnv(always_inside, features=("x",))
     tree = sg.All(sg.Goal("start", x=(0.5, None)), sg.Goal("far", x=(1.5, None)), name="both")

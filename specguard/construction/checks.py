@@ -58,13 +58,13 @@ __all__ = [
 
 
 def _caller() -> int:
-    """The ``stacklevel`` for a warning of the calling function: the innermost frame outside ``specguard.construction``.
+    """The ``stacklevel`` for a warning of the calling function: the innermost frame outside ``specguard``.
 
-    That is the line that built the env (the caller of ``make_env``, or of an env factory), however many of
-    this package's frames lie between.
+    That is the user's line that built the env (the caller of ``make_env``, ``Spec.make_env``, ``run_spec``),
+    however many of specguard's frames lie between.
     """
     frame, level = sys._getframe(1), 1  # level 1: the function that warns
-    while frame.f_back is not None and str(frame.f_globals.get("__name__", "")).startswith("specguard.construction."):
+    while frame.f_back is not None and str(frame.f_globals.get("__name__", "")).startswith("specguard."):
         frame, level = frame.f_back, level + 1
     return level
 

@@ -522,7 +522,11 @@ def starts_in_root_goal(
 
     The resets are of a base env of their own, closed after: an env handed out stays as unseeded as a
     fresh one. None when a start cannot be judged (the env, ``state()`` or a goal's function raised): the
-    env's own reset reports that, with its message, where it happens.
+    env's own reset reports that, with its message, where it happens. A feature read from ``info`` or the
+    env that cannot be read at a reset (a missing key) is raised here, before anything trains.
+
+    Raises:
+        StateMappingError: a ``from_info`` or ``from_env`` feature cannot be read at a reset.
     """
     base = initial_env.make(**make_kwargs)
     evaluator = compiled.evaluator()
@@ -532,6 +536,8 @@ def starts_in_root_goal(
         for seed in range(samples):
             obs, info = base.reset(seed=seed)
             inside += evaluator.reset(read(obs, info, base, 0))[0]
+    except StateMappingError:
+        raise  # the user's mapping, not the env: refused before any seed trains
     except Exception:
         return None
     finally:

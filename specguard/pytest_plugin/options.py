@@ -16,6 +16,9 @@ import pytest
 from specguard.stats.sequential import DEFAULT_COMPARE_SEEDS
 from specguard.utils.files import DEFAULT_CACHE_DIR
 
+PROGRESS_EVERY_S = 60
+"""In a log (not a terminal), the most seconds between two progress lines while a run trains."""
+
 __all__ = ["Options", "add_options", "baseline_path", "parse_options"]
 
 
@@ -36,6 +39,7 @@ class Options:
     executor: str
     compare_seeds: int = DEFAULT_COMPARE_SEEDS
     plan: bool = False
+    progress_every: int = PROGRESS_EVERY_S  # in a log: seconds between progress lines (0: each seed's last only)
 
 
 # (option, ini name, ini type, default, help)
@@ -92,6 +96,14 @@ _SETTINGS: list[tuple[str, str, str, Any, str]] = [
         str(DEFAULT_COMPARE_SEEDS),
         "the most seeds a spec trains for a comparison that is still open, and the seeds --goal-specs-save stores "
         "per spec (a spec's own Budget.max_seeds when that is more)",
+    ),
+    (
+        "--goal-specs-progress-every",
+        "goal_specs_progress_every",
+        "string",
+        str(PROGRESS_EVERY_S),
+        "when the output is not a terminal (a CI log): print a progress line of a training run at least this "
+        "often, in seconds; 0: only each seed's last line (on a terminal every line is shown)",
     ),
     (
         "--goal-specs-baseline-dir",
@@ -180,7 +192,7 @@ def parse_options(config: pytest.Config) -> Options:
         ini = next(i for o, i, *_ in _SETTINGS if o == option)
         return _setting(config, option, ini)
 
-    from specguard.validation import parse_choice, parse_count, parse_positive
+    from specguard.validation import parse_choice, parse_count, parse_natural, parse_positive
 
     try:
         scale = parse_positive(get("--goal-specs-budget-scale"))
@@ -211,6 +223,10 @@ def parse_options(config: pytest.Config) -> Options:
         compare_seeds = parse_count(get("--goal-specs-compare-seeds"))
     except ValueError as e:
         raise pytest.UsageError(f"--goal-specs-compare-seeds: {e}") from None
+    try:
+        progress_every = parse_natural(get("--goal-specs-progress-every"), "seconds")
+    except ValueError as e:
+        raise pytest.UsageError(f"--goal-specs-progress-every: {e}") from None
     report = get("--goal-specs-report")
     return Options(
         enabled=bool(config.getoption("goal_specs") or config.getini("goal_specs")),
@@ -226,6 +242,7 @@ def parse_options(config: pytest.Config) -> Options:
         executor=_checked_executor(get("--goal-specs-executor")),
         compare_seeds=compare_seeds,
         plan=bool(config.getoption("goal_specs_plan")),
+        progress_every=progress_every,
     )
 
 

@@ -60,7 +60,7 @@ def pytest_configure(config: pytest.Config) -> None:
             state.executor = make_executor(options.executor, workers=1)
         except ExecutorError as e:
             raise pytest.UsageError(f"--goal-specs-executor: {e}") from None
-    state.progress = terminal_progress(config)
+    state.progress = terminal_progress(config, options.progress_every)
     config.stash[_SESSION] = state
     config.pluginmanager.register(Recorder(config, state), "specguard-recorder")
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -58,18 +59,26 @@ def scaled(state: Session, spec: Spec) -> Spec:
     return spec.as_run(options.budget_scale, checkpoints=options.checkpoints, undecided=options.undecided)
 
 
-def terminal_progress(config: pytest.Config) -> Callable[[Any], None]:
+def terminal_progress(config: pytest.Config, every: float = 60.0) -> Callable[[Any], None]:
     """The progress sink of a session: events as lines through pytest's terminal reporter.
 
     Not captured (no ``-s`` needed), each on a line of its own. On a terminal,
-    every event (a line per tenth of each seed's budget); in a log (not a tty,
-    or no markup), only the line that ends each seed's run; under ``-q``, none.
+    every event (a line per tenth of each seed's budget, and a worker's line at least every
+    minute); in a log (not a tty, or no markup), the line that ends each seed's run, and
+    another event's once ``every`` seconds passed since the last line shown (a CI log is
+    never silent for long; ``--goal-specs-progress-every``, 0: none); under ``-q``, none.
     """
+    shown = [time.monotonic()]
 
     def write(event: Any) -> None:
         from specguard.training.progress import format_event, print_event
 
-        _terminal_line(config, format_event(event), final=event.finished, fallback=lambda: print_event(event))
+        now = time.monotonic()
+        due = every > 0 and now - shown[0] >= every
+        if _terminal_line(
+            config, format_event(event), final=event.finished or due, fallback=lambda: print_event(event)
+        ):
+            shown[0] = now
 
     return write
 
@@ -83,22 +92,26 @@ def terminal_lines(config: pytest.Config) -> Callable[[str], None]:
     return write
 
 
-def _terminal_line(config: pytest.Config, text: str, *, final: bool, fallback: Callable[[], None]) -> None:
-    """``text`` on a line of its own, uncaptured: always if ``final``, else only on a live terminal; none under -q."""
+def _terminal_line(config: pytest.Config, text: str, *, final: bool, fallback: Callable[[], None]) -> bool:
+    """``text`` on a line of its own, uncaptured: always if ``final``, else only on a live terminal; none under -q.
+
+    Returns whether it was shown.
+    """
     if config.get_verbosity() < 0:
-        return
+        return False
     reporter = config.pluginmanager.get_plugin("terminalreporter")
     if reporter is None:  # e.g. -p no:terminal: stderr, as `specguard run` does
         if final:
             fallback()
-        return
+        return final
     live = reporter.isatty and config.get_terminal_writer().hasmarkup
     if not live and not final:
-        return
+        return False
     capture = config.pluginmanager.get_plugin("capturemanager")
     with capture.global_and_fixture_disabled() if capture is not None else contextlib.nullcontext():
         reporter.ensure_newline()
         reporter.write_line(text)
+    return True
 
 
 def run(state: Session, spec: Spec) -> SpecResult:

@@ -26,6 +26,7 @@ def count_episode(counts: dict[str, int], info: Mapping[str, Any]) -> None:
 
 
 TICKS = 100  # step reports per run (cheap; they tell where a run was when it died)
+HEARTBEAT_S = 30.0  # at a tick, a progress line once this long passed since the last (a long tenth is not silent)
 
 
 Look = Callable[[int], bool]
@@ -66,6 +67,7 @@ class GoalCurve:
         self._counts: dict[str, int] = {}
         self._episodes = 0
         self._next = self.every
+        self._said = self.start  # when the last progress line was sent
         self.hit_wall_clock = False
         self.met_early = False
 
@@ -78,7 +80,10 @@ class GoalCurve:
                     self.adapter.observe(info["goals"], info.get("safe"))
         if self.report is not None and num_timesteps >= self._next_tick:
             self._next_tick = num_timesteps + self._tick
-            self.report("train", num_timesteps, None)
+            if time.perf_counter() - self._said >= HEARTBEAT_S:
+                self._say(num_timesteps)  # the tenth's episodes so far: a line, the counts kept
+            else:
+                self.report("train", num_timesteps, None)
         looking = bool(self.checkpoints) and num_timesteps >= self.checkpoints[0]
         if num_timesteps >= self._next or looking:
             while self._next <= num_timesteps:
@@ -99,12 +104,18 @@ class GoalCurve:
     def _point(self, num_timesteps: int) -> None:
         rates = {p: c / self._episodes for p, c in self._counts.items()} if self._episodes else {}
         self._append(num_timesteps, self._episodes, rates)
-        if self.report is not None:  # numbers, as JSON: the parent makes the event (specguard.training.progress)
-            root = next(iter(rates.values())) if rates else None  # goals come first, the root first
-            elapsed = time.perf_counter() - self.start
-            line = encode_update(num_timesteps, self.total, elapsed, root, self._episodes)
-            self.report("train", num_timesteps, line)
+        self._say(num_timesteps)
         self._counts, self._episodes = {}, 0
+
+    def _say(self, num_timesteps: int) -> None:
+        """The progress line of the episodes since the last point: numbers, as JSON (the parent makes the event,
+        :mod:`specguard.training.progress`)."""
+        if self.report is None:
+            return
+        counts, episodes = self._counts, self._episodes
+        root = next(iter(counts.values())) / episodes if episodes and counts else None  # the root's goal first
+        self._said = now = time.perf_counter()
+        self.report("train", num_timesteps, encode_update(num_timesteps, self.total, now - self.start, root, episodes))
 
     def _append(self, num_timesteps: int, episodes: int, rates: dict[str, float]) -> None:
         point: dict[str, Any] = {"timesteps": num_timesteps, "episodes": episodes, "success": rates}
