@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import sb3_contrib
 import stable_baselines3
+from bad_modules import CASES, write_bad_modules
 
 import specguard as sg
 from example_specs import pendulum
@@ -107,6 +108,18 @@ def test_an_algorithm_by_module_and_class(tmp_path, monkeypatch):
 def test_an_unknown_algorithm_is_one_line_listing_what_is_accepted(given, message):
     with pytest.raises(sg.InvalidSpec, match=rf"^Spec 'pendulum'.algorithm: {message}") as e:
         spec(algorithm=given)
+    assert "\n" not in e.value.message
+
+
+@pytest.mark.parametrize(("module", "says"), CASES, ids=[m or "empty" for m, _ in CASES])
+def test_a_module_that_cannot_be_imported_is_one_error_naming_the_string(module, says, tmp_path, monkeypatch):
+    write_bad_modules(tmp_path)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    text = f"{module}:PPO"
+    with pytest.raises(sg.InvalidSpec) as e:  # not the module's own error, nor its SystemExit
+        spec(algorithm=text)
+    assert e.value.where == "Spec 'pendulum'.algorithm"
+    assert e.value.message.startswith(f"cannot import algorithm {text!r}: {says}")
     assert "\n" not in e.value.message
 
 

@@ -16,7 +16,6 @@ Example:
 
 from __future__ import annotations
 
-import importlib
 import keyword
 import math
 from collections import namedtuple
@@ -31,6 +30,8 @@ import numpy as np
 from gymnasium.envs.registration import EnvSpec
 
 from specguard.error import InitialEnvError, StateMappingError
+from specguard.utils.imports import MAX_SHOWN, ImportFailed, import_module, shown
+from specguard.utils.text import elide
 
 __all__ = ["InitialEnv", "check_identity_observation", "read_env_features", "registered_spec", "state_type"]
 
@@ -197,24 +198,25 @@ def registered_spec(env_id: str) -> EnvSpec:
         'gymnasium.envs.classic_control.pendulum:PendulumEnv'
 
     Raises:
-        InitialEnvError: the module cannot be imported, or the id is not registered.
+        InitialEnvError: the module cannot be imported (an empty or relative name, or importing it raised or
+            tried to end the process), or the id is not registered.
     """
-    module, _, name = env_id.rpartition(":")
-    if module:
+    module, colon, name = env_id.rpartition(":")
+    if colon:
         try:
-            importlib.import_module(module)
-        except Exception as e:  # ImportError, or the module's own code failing
+            import_module(module)
+        except ImportFailed as e:  # an empty or relative name, or the module's own code failing or exiting
             raise InitialEnvError(
-                f"InitialEnv {env_id!r}: the module {module!r} cannot be imported ({type(e).__name__}: {e})",
-                hint=f"'module:Id' imports the module that registers Id; check that {module!r} is installed "
-                "and importable (python -c 'import " + module + "')",
+                f"InitialEnv {shown(env_id)}: cannot import its module: {e}",
+                hint="'module:Id' imports the module that registers Id (an absolute name, installed and importable "
+                "here), as gymnasium.make does",
             ) from None
     try:
         return gym.spec(name)
     except gym.error.Error as e:
-        where = f" after importing {module!r}" if module else ""
+        where = f" after importing {shown(module)}" if module else ""
         raise InitialEnvError(
-            f"InitialEnv {env_id!r}: no such Gymnasium environment id{where} ({e})",
+            f"InitialEnv {shown(env_id)}: no such Gymnasium environment id{where} ({elide(str(e), MAX_SHOWN)})",
             hint="import the package that registers it in the spec module, or write 'package:Id'",
         ) from None
 

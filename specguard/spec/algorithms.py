@@ -19,13 +19,14 @@ Example:
 from __future__ import annotations
 
 import difflib
-import importlib
 import inspect
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from specguard.error import InvalidSpec
+from specguard.utils.imports import MAX_SHOWN, ImportFailed, import_module, shown
+from specguard.utils.text import elide
 from specguard.validation import is_count
 
 __all__ = [
@@ -81,6 +82,9 @@ _SET_BY_SPECGUARD = {
 }
 
 
+_IMPORT_HINT = "'module:Class' imports module (an absolute name, importable here) and takes its Class"
+
+
 def _accepted() -> str:
     return f"{', '.join([*SB3, *CONTRIB])}, a BaseAlgorithm subclass or 'module:Class'"
 
@@ -110,11 +114,12 @@ def _named_class(name: str, where: str) -> type:
 def _imported(where: str, text: str) -> Any:
     module_name, _, qualname = text.partition(":")
     try:
-        obj: Any = importlib.import_module(module_name)
+        obj: Any = import_module(module_name)
         for part in qualname.split("."):
             obj = getattr(obj, part)
-    except (ImportError, AttributeError) as e:
-        raise InvalidSpec(where, f"cannot import algorithm {text!r}: {type(e).__name__}: {e}") from None
+    except (ImportFailed, AttributeError) as e:
+        why = str(e) if isinstance(e, ImportFailed) else f"AttributeError: {elide(str(e), MAX_SHOWN)}"
+        raise InvalidSpec(where, f"cannot import algorithm {shown(text)}: {why}", hint=_IMPORT_HINT) from None
     return obj
 
 
@@ -130,10 +135,10 @@ def resolve_algorithm(where: str, value: object) -> str | type:
         name = _ALIASES.get(value, value)
         if name in ALGORITHMS:
             return name
-        raise InvalidSpec(where, f"unknown algorithm {value!r}; expected one of {_accepted()}")
+        raise InvalidSpec(where, f"unknown algorithm {shown(value)}; expected one of {_accepted()}")
     cls = _imported(where, value) if isinstance(value, str) else value
     if not (isinstance(cls, type) and issubclass(cls, _base_algorithm())):
-        raise InvalidSpec(where, f"expected algorithm to be one of {_accepted()}, got {value!r}")
+        raise InvalidSpec(where, f"expected algorithm to be one of {_accepted()}, got {shown(value)}")
     top = cls.__module__.split(".", 1)[0]
     named = top in ("stable_baselines3", "sb3_contrib") and cls.__name__ in ALGORITHMS
     return cls.__name__ if named and _named_class(cls.__name__, where) is cls else cls
