@@ -207,9 +207,12 @@ def test_combinations_that_cannot_work_are_refused(kwargs, message):
         spec(observation=kwargs.pop("observation", "features+env"), **kwargs)
 
 
-def test_a_dict_policy_for_the_flat_observation_is_refused():
-    with pytest.raises(sg.InvalidSpec, match=r"the agent's observation is a flat Box .*'MultiInputPolicy' does not"):
+def test_a_dict_policy_for_the_flat_observation_is_refused_naming_the_one_that_fits():
+    with pytest.raises(
+        sg.InvalidSpec, match=r"the agent's observation is a flat Box .*'MultiInputPolicy' does not"
+    ) as e:
         spec(policy="MultiInputPolicy")
+    assert e.value.message.endswith("one that does: MlpPolicy")  # not CnnPolicy: the features are no image
 
 
 def test_the_default_policy_follows_the_observation():

@@ -79,10 +79,13 @@ class Spec:
             ``falsify=True`` read it. Not part of the spec's identity: it
             changes no run and no verdict of its goals.
         policy: the algorithm's policy: one of its names (``"MlpPolicy"``, ``"CnnPolicy"``, ...)
-            or a ``BasePolicy`` subclass; ``None`` (default): ``"MlpPolicy"``, or the algorithm's
+            or a subclass of one of its policy classes; ``None`` (default): ``"MlpPolicy"``, or the algorithm's
             only MLP policy where it has no ``MlpPolicy`` (RecurrentPPO's ``"MlpLstmPolicy"``);
             with ``observation="features+env"``, ``"MultiInputPolicy"`` (RecurrentPPO's
-            ``"MultiInputLstmPolicy"``). Part of a run's key only when it is not that default.
+            ``"MultiInputLstmPolicy"``). A name must take what the agent sees: neither a ``Dict`` nor
+            an image (``"CnnPolicy"``) policy for the flat ``Box`` of ``"features"``, a ``Dict`` policy for
+            ``"features+env"`` (a baseline's, the env's own, is SB3's to check when it builds the model).
+            Part of a run's key only when it is not that default.
         observation: what the agent sees. ``"features"`` (default): the features, then the goal
             tree's own state, a flat ``Box``. ``"features+env"``: a ``Dict`` of that ``Box``
             under ``"spec"`` and the initial env's own observation beside it (a ``Dict``'s keys
@@ -135,9 +138,8 @@ class Spec:
             )
         with_env = self.observation == "features+env"
         policy = default_policy(algorithm, dict_observation=with_env) if self.policy is None else self.policy
-        object.__setattr__(
-            self, "policy", check_policy(f"{label}.policy", algorithm, policy, dict_observation=with_env)
-        )
+        seen = None if self.baseline else self.observation  # a baseline's is the env's own, unknown until it is built
+        object.__setattr__(self, "policy", check_policy(f"{label}.policy", algorithm, policy, seen))
         object.__setattr__(self, "n_envs", check_count(label, "n_envs", self.n_envs, "parallel environments per run"))
         if self.quorum is not None:
             object.__setattr__(self, "quorum", self._checked_quorum(label))

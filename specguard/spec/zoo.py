@@ -370,7 +370,7 @@ def zoo_settings(algorithm: str | type, env_id: str, *, file: str | Path | None 
     fields, not_taken = _map(f"{where}, {source}", resolved, entry)
     policy = fields["policy"] if fields["policy"] is not None else default_policy(resolved)
     dict_observation = dict_policy(policy)  # the zoo's env gave a Dict
-    policy = check_policy(f"{where}.policy", resolved, policy, dict_observation=dict_observation)
+    policy = check_policy(f"{where}.policy", resolved, policy)  # the zoo's env's own observation: any of its names
     timesteps, n_envs = fields["timesteps"], fields["n_envs"]
     if not (isinstance(timesteps, (int, float)) and timesteps >= 1 and float(timesteps).is_integer()):
         raise InvalidSpec(where, f"expected n_timesteps to be a whole number of steps, got {timesteps!r}")
