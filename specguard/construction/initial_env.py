@@ -30,8 +30,8 @@ import numpy as np
 from gymnasium.envs.registration import EnvSpec
 
 from specguard.error import InitialEnvError, StateMappingError
-from specguard.utils.imports import MAX_SHOWN, ImportFailed, import_module, shown
-from specguard.utils.text import elide
+from specguard.utils.imports import ImportFailed, import_module
+from specguard.utils.text import MAX_SHOWN, elide, shown
 
 __all__ = ["InitialEnv", "check_identity_observation", "read_env_features", "registered_spec", "state_type"]
 

@@ -25,8 +25,8 @@ from pathlib import Path
 from typing import Any
 
 from specguard.error import InvalidSpec
-from specguard.utils.imports import MAX_SHOWN, ImportFailed, import_module, shown
-from specguard.utils.text import elide
+from specguard.utils.imports import ImportFailed, import_module
+from specguard.utils.text import MAX_SHOWN, elide, shown
 from specguard.validation import is_count
 
 __all__ = [

@@ -92,7 +92,8 @@ class Spec:
             as the env gives them, any other observation under ``"observation"``), for an image
             the features leave out; the goals are judged on the features alone either way.
             Refused with ``baseline=True`` (the baseline sees the env's own observation), and
-            for a key stable-baselines3 cannot take (a ``Text``) when the env is built.
+            for a key stable-baselines3 cannot take (a ``Text``, a key that is no string, an empty
+            ``Box``) when the env is built.
             ``normalize=True`` normalizes the ``"spec"`` part only. Part of a run's key only
             when it is not the default.
     """

@@ -24,17 +24,9 @@ from types import ModuleType
 from typing import NoReturn
 
 from specguard.error import ExitAtImport
-from specguard.utils.text import elide
+from specguard.utils.text import MAX_SHOWN, elide, shown
 
-__all__ = ["MAX_SHOWN", "ImportFailed", "import_module", "no_exit", "shown"]
-
-MAX_SHOWN = 120
-"""The most characters of a user's value (or of an error's message) that a message shows."""
-
-
-def shown(value: object) -> str:
-    """``repr(value)``, elided in the middle past :data:`MAX_SHOWN` characters (a message stays bounded)."""
-    return elide(repr(value), MAX_SHOWN)
+__all__ = ["ImportFailed", "import_module", "no_exit"]
 
 
 class ImportFailed(Exception):

@@ -6,6 +6,7 @@ from collections.abc import Iterable, Mapping, Sequence
 
 __all__ = [
     "MAX_CELL",
+    "MAX_SHOWN",
     "bounds_text",
     "elide",
     "interval_text",
@@ -13,6 +14,7 @@ __all__ = [
     "markdown_table",
     "per_seed_text",
     "render_table",
+    "shown",
     "weights_text",
 ]
 
@@ -31,6 +33,20 @@ def elide(text: str, width: int) -> str:
         return text
     head = width // 2
     return text[:head] + "…" + text[len(text) - (width - 1 - head) :]
+
+
+MAX_SHOWN = 120
+"""The most characters of a user's value (or of an error's message) that a message shows."""
+
+
+def shown(value: object) -> str:
+    """``repr(value)``, elided in the middle past :data:`MAX_SHOWN` characters, so a message stays bounded.
+
+    Example:
+        >>> shown("x" * 200)[:8], len(shown("x" * 200))
+        ("'xxxxxxx", 120)
+    """
+    return elide(repr(value), MAX_SHOWN)
 
 
 def render_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
