@@ -22,7 +22,7 @@ from collections import namedtuple
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cache
-from numbers import Real
+from numbers import Integral, Real
 from typing import Any
 
 import gymnasium as gym
@@ -129,15 +129,29 @@ def _check_from_env(label: str, from_env: object) -> tuple[tuple[str, Callable[[
 
 
 def _feature_value(where: str, feature: str, source: str, value: object, when: str) -> float:
-    """A value read for a feature as a float: a finite real number or a bool (numpy's too), nothing else."""
+    """A value read for a feature as a float: a finite real number (one a float holds) or a bool (numpy's too)."""
     if isinstance(value, (bool, np.bool_)):
         return float(value)
-    if isinstance(value, Real) and math.isfinite(value):
-        return float(value)
+    if isinstance(value, Real):
+        try:
+            number = float(value)
+        except OverflowError:  # an int (or Fraction) past a float's range
+            number = math.inf
+        if math.isfinite(number):
+            return number
     raise StateMappingError(
-        f"{where}: feature {feature!r} {source} {value!r} {when}: expected a finite real number or a bool",
+        f"{where}: feature {feature!r} {source} {_value_text(value)} {when}: expected a finite real number or a bool",
         hint="a feature is one number; read a part of a composite value with from_env=fn(env) or state(obs)",
     )
+
+
+def _value_text(value: object) -> str:
+    """A refused value for a message, bounded; an int (refused only past a float's range) by its digits, as Python
+    refuses the repr of one past 4300 digits."""
+    if isinstance(value, Integral):
+        digits = math.floor(int(value).bit_length() * math.log10(2)) + 1
+        return f"an int of about {digits} digits, past a float's range,"
+    return shown(value)
 
 
 def read_env_features(
