@@ -253,6 +253,29 @@ def test_train_freq_as_a_list_is_a_tuple_and_a_bad_schedule_is_refused(tmp_path)
         sg.zoo_settings("SAC", "E-v0", file=path)
 
 
+@pytest.mark.parametrize("text", ["lin_inf", "lin_nan", "lin_1e999"])
+def test_a_schedule_that_is_not_finite_is_refused_naming_the_hyperparameter(tmp_path, text):
+    path = write(tmp_path, f"E-v0:\n  n_timesteps: 100\n  learning_rate: {text}\n")
+    with pytest.raises(
+        sg.InvalidSpec, match=rf"learning_rate: expected .*'lin_<initial value>', a finite one, got '{text}'"
+    ):
+        sg.zoo_settings("PPO", "E-v0", file=path)
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "message"),
+    [
+        ("learning_rate", LinearSchedule(float("inf")), r"expected learning_rate to be a finite number, got Linear"),
+        ("clip_range", float("nan"), r"expected clip_range to be a finite number, got nan"),
+        ("learning_rate", "lin_inf", r"expected learning_rate to be a number or a schedule .*, got the text 'lin_inf'"),
+    ],
+)
+def test_a_spec_refuses_a_schedule_that_is_not_finite_naming_the_hyperparameter(key, value, message):
+    # It trained to NaN logits, reported as "the environment raised ValueError".
+    with pytest.raises(sg.InvalidSpec, match=rf"^Spec 'right'.hyperparameters: {message}"):
+        sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=64), hyperparameters={key: value})
+
+
 # -- schedules ------------------------------------------------------------------------------------------
 
 

@@ -27,6 +27,7 @@ from __future__ import annotations
 import ast
 import difflib
 import importlib.util
+import math
 import warnings
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
@@ -259,8 +260,10 @@ def _schedule(key: str, value: Any, where: str) -> Any:
         start = float(initial)
     except ValueError:
         start = None
-    if kind != "lin" or start is None:
-        raise InvalidSpec(where, f"{key}: expected a number or a schedule 'lin_<initial value>', got {value!r}")
+    if kind != "lin" or start is None or not math.isfinite(start):
+        raise InvalidSpec(
+            where, f"{key}: expected a number or a schedule 'lin_<initial value>', a finite one, got {value!r}"
+        )
     return LinearSchedule(start)
 
 
