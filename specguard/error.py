@@ -201,10 +201,12 @@ class Broken(Exception):
 
 
 class ExitAtImport(BaseException):
-    """``os._exit`` called while a spec file was imported, raised instead of ending the process.
+    """``os._exit`` called while a spec file (or a ``"module:Class"`` or ``"module:Id"`` string's module) was imported,
+    raised instead of ending the process.
 
     A ``BaseException``, as ``SystemExit`` is: the spec file's own ``except Exception`` cannot swallow it.
-    :func:`specguard.spec.files.import_file` turns it into a :class:`SpecError` naming the file.
+    :func:`specguard.spec.files.import_file` turns it into a :class:`SpecError` naming the file,
+    :func:`specguard.utils.imports.import_module` into one naming the string.
     """
 
     def __init__(self, status: object) -> None:

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import sb3_contrib
 import stable_baselines3
+from bad_modules import CASES, write_bad_modules
 
 import specguard as sg
 from example_specs import pendulum
@@ -110,6 +111,18 @@ def test_an_unknown_algorithm_is_one_line_listing_what_is_accepted(given, messag
     assert "\n" not in e.value.message
 
 
+@pytest.mark.parametrize(("module", "says"), CASES, ids=[m or "empty" for m, _ in CASES])
+def test_a_module_that_cannot_be_imported_is_one_error_naming_the_string(module, says, tmp_path, monkeypatch):
+    write_bad_modules(tmp_path)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    text = f"{module}:PPO"
+    with pytest.raises(sg.InvalidSpec) as e:  # not the module's own error, nor its SystemExit
+        spec(algorithm=text)
+    assert e.value.where == "Spec 'pendulum'.algorithm"
+    assert e.value.message.startswith(f"cannot import algorithm {text!r}: {says}")
+    assert "\n" not in e.value.message
+
+
 def test_without_sb3_contrib_its_names_say_what_to_install(monkeypatch):
     import sys
 
@@ -129,10 +142,37 @@ def test_the_default_policy_is_mlp_and_the_recurrent_algorithms_lstm():
 
 
 def test_a_policy_by_name_or_class():
-    from stable_baselines3.common.policies import ActorCriticPolicy
+    from stable_baselines3.common.policies import ActorCriticCnnPolicy, ActorCriticPolicy
 
-    assert spec(policy="CnnPolicy").policy == "CnnPolicy"
+    assert spec(policy="MlpPolicy").policy == "MlpPolicy"
+    assert spec(policy="CnnPolicy", baseline=True).policy == "CnnPolicy"  # the env's own observation: SB3 checks it
     assert spec(policy=ActorCriticPolicy).policy is ActorCriticPolicy
+    assert spec(policy=ActorCriticCnnPolicy).policy is ActorCriticCnnPolicy  # a class: SB3 checks the observation
+
+
+@pytest.mark.parametrize(("algorithm", "policy"), [("PPO", "CnnPolicy"), ("RecurrentPPO", "CnnLstmPolicy")])
+def test_an_image_policy_on_the_flat_features_is_refused_naming_the_policy_that_fits(algorithm, policy):
+    with pytest.raises(sg.InvalidSpec) as e:
+        spec(algorithm=algorithm, policy=policy, hyperparameters=TINY)
+    assert e.value.where == "Spec 'pendulum'.policy"
+    fits = default_policy(algorithm)
+    assert e.value.message == (
+        f"the agent's observation is a flat Box of numbers, not an image (observation='features'), "
+        f"which {policy!r} does not take; one that does: {fits}"
+    )
+    assert "observation='features+env'" in str(e.value.hint)
+
+
+def test_a_policy_class_of_another_algorithm_is_refused_naming_the_policy():
+    from stable_baselines3.dqn.policies import DQNPolicy
+
+    with pytest.raises(sg.InvalidSpec) as e:
+        spec(policy=DQNPolicy)
+    assert e.value.where == "Spec 'pendulum'.policy"
+    assert e.value.message == (
+        "DQNPolicy is no policy of PPO: expected a subclass of one of its policy classes "
+        "(ActorCriticPolicy, ActorCriticCnnPolicy, MultiInputActorCriticPolicy)"
+    )
 
 
 @pytest.mark.parametrize(
@@ -260,7 +300,7 @@ def test_a_users_algorithm_is_keyed_by_its_code():
 def test_the_policy_is_in_the_key_only_when_it_is_not_the_default():
     default = fingerprint_spec(spec()).run_base
     assert fingerprint_spec(spec(policy="MlpPolicy")).run_base == default
-    assert fingerprint_spec(spec(policy="CnnPolicy")).run_base != default
+    assert fingerprint_spec(spec(policy=stable_baselines3.common.policies.ActorCriticPolicy)).run_base != default
     recurrent, named = spec(algorithm="RecurrentPPO"), spec(algorithm="RecurrentPPO", policy="MlpLstmPolicy")
     assert fingerprint_spec(recurrent).run_base == fingerprint_spec(named).run_base
 

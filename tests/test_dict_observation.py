@@ -182,6 +182,26 @@ def test_an_env_key_stable_baselines3_cannot_take_or_that_clashes_is_refused_one
     sg.make_env(talking, TREE)  # the features alone: the env's own keys are not the agent's
 
 
+class Bare(Corridor):
+    """A corridor whose observation has a key that is no string, and an empty part (both pass Gymnasium's Dict)."""
+
+    observation_space = gym.spaces.Dict(
+        {"view": Corridor.observation_space["view"], 7: gym.spaces.Discrete(2), "nothing": gym.spaces.Box(0, 1, (0,))}
+    )
+
+
+def test_an_env_key_that_is_no_string_or_an_empty_part_is_refused_naming_the_observation():
+    bare = sg.InitialEnv(Bare, from_env={"x": lambda env: env.x}, bounds={"x": (0, LENGTH - 1)})
+    with pytest.raises(sg.InvalidSpec) as caught:
+        sg.make_env(bare, TREE, observation="features+env")
+    assert str(caught.value).splitlines()[:2] == [
+        "end: observation='features+env': the env's observation has a key 7 of type int, and stable-baselines3 takes "
+        "only string keys in a Dict observation",
+        "observation='features+env': the env's key 'nothing' is an empty Box (shape (0,)): it shows nothing",
+    ]
+    sg.make_env(bare, TREE)  # the features alone: the env's own keys are not the agent's
+
+
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
@@ -207,9 +227,12 @@ def test_combinations_that_cannot_work_are_refused(kwargs, message):
         spec(observation=kwargs.pop("observation", "features+env"), **kwargs)
 
 
-def test_a_dict_policy_for_the_flat_observation_is_refused():
-    with pytest.raises(sg.InvalidSpec, match=r"the agent's observation is a flat Box .*'MultiInputPolicy' does not"):
+def test_a_dict_policy_for_the_flat_observation_is_refused_naming_the_one_that_fits():
+    with pytest.raises(
+        sg.InvalidSpec, match=r"the agent's observation is a flat Box .*'MultiInputPolicy' does not"
+    ) as e:
         spec(policy="MultiInputPolicy")
+    assert e.value.message.endswith("one that does: MlpPolicy")  # not CnnPolicy: the features are no image
 
 
 def test_the_default_policy_follows_the_observation():

@@ -17,6 +17,7 @@ import pytest
 # Imported before any test: pytester's fixture drops the modules a test imported when it ends, and these
 # (numpy's C extensions under scipy.stats, the engine's pickled functions) cannot be imported twice.
 import scipy.stats  # noqa: F401
+from bad_modules import CASES, write_bad_modules
 
 import specguard as sg
 import specguard.cache.versions
@@ -201,3 +202,51 @@ def test_a_spec_with_nothing_to_assert_is_refused_at_every_door_before_training(
     run = pytester.runpytest_subprocess("-p", "no:cacheprovider", "--goal-specs", "--goal-specs-workers=1")
     assert run.ret != 0
     run.stdout.fnmatch_lines(["*nothing to assert*"])
+
+
+BAD_IMPORT = """
+import specguard as sg
+
+cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "angle", "w"))
+tree = sg.Goal("upright", angle=(0.15, 0.2))
+budget = sg.Budget(timesteps=64)
+"""
+
+
+def bad_import_specs() -> list[tuple[str, str, str]]:
+    """``(name, the Spec's source, what its error says)``: an algorithm and an env of each module that cannot import."""
+    cases = []
+    for i, (module, says) in enumerate(CASES):
+        cases.append((f"algorithm_{i}", f'sg.Spec(cartpole, tree, budget, algorithm="{module}:PPO")', says))
+        cases.append(
+            (f"env_{i}", f'sg.Spec(sg.InitialEnv("{module}:CartPole-v1", features=("x",)), tree, budget)', says)
+        )
+    return cases
+
+
+@pytest.mark.parametrize(("name", "source", "says"), bad_import_specs(), ids=[n for n, _, _ in bad_import_specs()])
+def test_a_module_string_that_cannot_be_imported_is_one_line_from_the_cli(name, source, says, tmp_path, capsys):
+    write_bad_modules(tmp_path)  # beside the spec file: on its path
+    spec_file = tmp_path / "bad_import.py"
+    spec_file.write_text(textwrap.dedent(BAD_IMPORT) + f"spec = {source}\n")
+    assert main(["show", str(spec_file)]) == 2
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line and not line.startswith("Hint: ")]
+    assert len(lines) == 1 and "Traceback" not in err, err
+    assert lines[0].startswith("specguard: error: ") and says in lines[0], err
+    assert "importing it" not in lines[0]  # the spec file imported fine: the string is at fault, not the file
+
+
+def test_a_module_string_that_cannot_be_imported_fails_its_goal_spec_in_one_line(pytester: pytest.Pytester):
+    write_bad_modules(pytester.path)
+    tests = "".join(
+        f"\n\n@sg.goal_spec(expect=0.5)\ndef test_{name}():\n    return {source}\n"
+        for name, source, _ in bad_import_specs()
+    )
+    pytester.makepyfile(test_bad_imports=textwrap.dedent(BAD_IMPORT) + tests)
+    run = pytester.runpytest_subprocess("-p", "no:cacheprovider", "--goal-specs", "--goal-specs-workers=1")
+    run.assert_outcomes(failed=len(bad_import_specs()))
+    text = run.stdout.str()
+    assert "Traceback" not in text and "specguard/spec/" not in text and "specguard/construction/" not in text, text
+    for name, _, says in bad_import_specs():
+        run.stdout.fnmatch_lines([f"*test_bad_imports.py::test_{name}[[]root[]]: *cannot import*{says}*"])

@@ -173,6 +173,26 @@ def test_an_info_value_that_is_not_a_number_or_a_bool_names_the_feature(value):
         env.reset(seed=0)
 
 
+@pytest.mark.parametrize("digits", [400, 5000])  # past 4300 digits, Python refuses even the int's repr
+def test_an_int_past_a_floats_range_names_the_feature_and_the_step_in_bounded_words(digits):
+    big = 10 ** (digits - 1)
+    env = sg.make_env(line(), RIGHT)
+    env.unwrapped.bad_value = big
+    with pytest.raises(sg.StateMappingError) as e:  # not an OverflowError naming nothing
+        env.reset(seed=0)
+    assert e.value.message.endswith(
+        f"feature 'hit' reads info['hit'] = an int of about {digits} digits, past a float's range, at reset: "
+        "expected a finite real number or a bool"
+    )
+    initial = sg.InitialEnv(LineEnv, features=("noise",), from_env={"x": lambda env: big if env.t == 2 else 0})
+    env = sg.make_env(initial, RIGHT)
+    env.reset(seed=0)
+    env.step(1)
+    with pytest.raises(sg.StateMappingError, match=r"feature 'x' reads from_env\['x'\]\(env\) = an int of about") as e:
+        env.step(1)
+    assert "at step 2: expected" in e.value.message and len(e.value.message) < 300
+
+
 def test_an_env_feature_that_raises_or_returns_a_non_number_names_the_feature_and_the_step():
     initial = sg.InitialEnv(LineEnv, features=("noise",), from_env={"x": lambda env: env.nope})
     with pytest.raises(

@@ -14,6 +14,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from bad_modules import CASES, write_bad_modules
 
 import specguard as sg
 from specguard.error import InitialEnvError
@@ -63,10 +64,20 @@ def test_the_module_form_imports_the_module_as_gymnasium_make_does(on_path):
 
 
 def test_the_module_form_names_a_module_that_cannot_be_imported():
-    with pytest.raises(InitialEnvError, match=r"'sgreg_no_such_module'.*cannot be imported"):
+    with pytest.raises(InitialEnvError, match=r"'sgreg_no_such_module:Line-v0': cannot import its module: ModuleNot"):
         sg.InitialEnv("sgreg_no_such_module:Line-v0", features=("x",))
     with pytest.raises(InitialEnvError, match="no such Gymnasium environment id"):
         sg.InitialEnv("gymnasium:NoSuchEnv-v0", features=("x",))
+
+
+@pytest.mark.parametrize(("module", "says"), CASES, ids=[m or "empty" for m, _ in CASES])
+def test_a_module_that_cannot_be_imported_is_one_error_naming_the_id(module, says, on_path):
+    write_bad_modules(on_path)
+    env_id = f"{module}:CartPole-v1"
+    with pytest.raises(InitialEnvError) as e:  # not the module's own error, nor its SystemExit
+        sg.InitialEnv(env_id, features=("x",))
+    assert e.value.message.startswith(f"InitialEnv {env_id!r}: cannot import its module: {says}")
+    assert "\n" not in e.value.message
 
 
 def test_a_registered_id_builds_where_the_registry_does_not_have_it(on_path):

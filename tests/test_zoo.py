@@ -92,8 +92,9 @@ def test_what_a_spec_cannot_say_is_warned_and_kept():
 
 
 def test_every_entry_of_the_zoos_files_maps_onto_a_spec():
-    """Each entry of each file maps, and a spec takes its fields; the one refusal is a policy the algorithm lacks."""
-    mapped = refused = 0
+    """Each entry of each file maps, and a spec takes its fields; the refusals are a policy the algorithm lacks, and
+    an image policy (the zoo's Atari entries), which the features of CartPole are not."""
+    mapped = refused = images = 0
     for algorithm, stem in ZOO_FILES.items():
         path, _ = _zoo_file("test", stem)
         for env_id in yaml.safe_load(path.read_text()):
@@ -103,9 +104,22 @@ def test_every_entry_of_the_zoos_files_maps_onto_a_spec():
                 assert ".policy: expected policy to be one of" in str(e), (algorithm, env_id, str(e))
                 refused += 1
                 continue
-            sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=settings.timesteps), **settings)
+            try:
+                sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=settings.timesteps), **settings)
+            except sg.InvalidSpec as e:
+                assert str(settings.policy).startswith("Cnn") and "not an image" in str(e), (algorithm, env_id)
+                images += 1
+                continue
             mapped += 1
-    assert mapped > 200 and refused <= 2
+    assert mapped > 200 and refused <= 2 and images >= 1
+
+
+def test_the_atari_entry_on_a_spec_of_numbers_is_refused_naming_the_policy():
+    settings, _ = zoo("PPO", "atari")
+    with pytest.raises(sg.InvalidSpec) as e:
+        sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=1000), **settings)
+    assert e.value.where == "Spec 'right'.policy"
+    assert "which 'CnnPolicy' does not take; one that does: MlpPolicy" in e.value.message
 
 
 def test_an_entry_whose_policy_takes_a_dict_lets_the_agent_see_the_envs_own_observation():
@@ -305,6 +319,29 @@ def test_an_alias_bomb_is_refused_and_what_is_not_taken_is_bounded(tmp_path):
     assert settings.not_taken["long"].startswith("'xxxx") and "..." in settings.not_taken["long"]
     assert settings.not_taken["l4"].startswith("[[[[[...], [...],")
     refused(write(tmp_path, laughs(4) + "  policy: *l3\n"), r"expected policy to be one of .*, got \[\[\[\['lol', .*…")
+
+
+@pytest.mark.parametrize("text", ["lin_inf", "lin_nan", "lin_1e999"])
+def test_a_schedule_that_is_not_finite_is_refused_naming_the_hyperparameter(tmp_path, text):
+    path = write(tmp_path, f"E-v0:\n  n_timesteps: 100\n  learning_rate: {text}\n")
+    with pytest.raises(
+        sg.InvalidSpec, match=rf"learning_rate: expected .*'lin_<initial value>', a finite one, got '{text}'"
+    ):
+        sg.zoo_settings("PPO", "E-v0", file=path)
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "message"),
+    [
+        ("learning_rate", LinearSchedule(float("inf")), r"expected learning_rate to be a finite number, got Linear"),
+        ("clip_range", float("nan"), r"expected clip_range to be a finite number, got nan"),
+        ("learning_rate", "lin_inf", r"expected learning_rate to be a number or a schedule .*, got the text 'lin_inf'"),
+    ],
+)
+def test_a_spec_refuses_a_schedule_that_is_not_finite_naming_the_hyperparameter(key, value, message):
+    # It trained to NaN logits, reported as "the environment raised ValueError".
+    with pytest.raises(sg.InvalidSpec, match=rf"^Spec 'right'.hyperparameters: {message}"):
+        sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=64), hyperparameters={key: value})
 
 
 # -- schedules ------------------------------------------------------------------------------------------

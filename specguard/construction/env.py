@@ -37,6 +37,7 @@ from specguard.construction.initial_env import InitialEnv, check_identity_observ
 from specguard.construction.reference import ReferenceEvaluator
 from specguard.error import EvaluationError, InitialEnvError, InvalidSpec, SpecError, StateMappingError
 from specguard.tree.nodes import Node
+from specguard.utils.text import shown
 from specguard.validation import check_choice
 
 _FLOAT32 = np.dtype(np.float32)
@@ -77,20 +78,28 @@ def env_parts(where: str, space: gym.Space[Any]) -> dict[str, gym.Space[Any]]:
     :data:`SPEC_KEY`: a ``Dict``'s keys as the env gives them, any other space under :data:`ENV_KEY`.
 
     Raises:
-        InvalidSpec: one line per key refused: a key named :data:`SPEC_KEY`, or a space stable-baselines3 cannot
-            take in a ``Dict`` observation (a ``Text``, MiniGrid's ``MissionSpace``, a nested ``Dict`` or ``Tuple``).
+        InvalidSpec: one line per key refused: a key named :data:`SPEC_KEY`, a key that is not a string, a space
+            stable-baselines3 cannot take in a ``Dict`` observation (a ``Text``, MiniGrid's ``MissionSpace``, a
+            nested ``Dict`` or ``Tuple``), or an empty one (a ``Box`` of shape ``(0,)``).
     """
     parts = dict(space.spaces) if isinstance(space, gym.spaces.Dict) else {ENV_KEY: space}
     lines = []
     for key, part in parts.items():
-        if key == SPEC_KEY:
+        seen = f"key {shown(key)}" if isinstance(space, gym.spaces.Dict) else "observation"
+        if not isinstance(key, str):
+            lines.append(
+                f"the env's observation has a key {shown(key)} of type {type(key).__name__}, and stable-baselines3 "
+                "takes only string keys in a Dict observation"
+            )
+        elif key == SPEC_KEY:
             lines.append(f"the env's observation has a key {SPEC_KEY!r}, where the features and own state go")
         elif not isinstance(part, _DICT_PARTS):
-            seen = f"key {key!r}" if isinstance(space, gym.spaces.Dict) else "observation"
             lines.append(
                 f"the env's {seen} is a {type(part).__name__}, which stable-baselines3 cannot take in a Dict "
                 "observation (it takes Box, Discrete, MultiDiscrete and MultiBinary)"
             )
+        elif math.prod(part.shape or ()) == 0:
+            lines.append(f"the env's {seen} is an empty {type(part).__name__} (shape {part.shape}): it shows nothing")
     if lines:
         raise InvalidSpec(
             where,

@@ -16,14 +16,13 @@ Example:
 
 from __future__ import annotations
 
-import importlib
 import keyword
 import math
 from collections import namedtuple
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cache
-from numbers import Real
+from numbers import Integral, Real
 from typing import Any
 
 import gymnasium as gym
@@ -31,6 +30,8 @@ import numpy as np
 from gymnasium.envs.registration import EnvSpec
 
 from specguard.error import InitialEnvError, StateMappingError
+from specguard.utils.imports import ImportFailed, import_module
+from specguard.utils.text import MAX_SHOWN, elide, shown
 
 __all__ = ["InitialEnv", "check_identity_observation", "read_env_features", "registered_spec", "state_type"]
 
@@ -128,15 +129,29 @@ def _check_from_env(label: str, from_env: object) -> tuple[tuple[str, Callable[[
 
 
 def _feature_value(where: str, feature: str, source: str, value: object, when: str) -> float:
-    """A value read for a feature as a float: a finite real number or a bool (numpy's too), nothing else."""
+    """A value read for a feature as a float: a finite real number (one a float holds) or a bool (numpy's too)."""
     if isinstance(value, (bool, np.bool_)):
         return float(value)
-    if isinstance(value, Real) and math.isfinite(value):
-        return float(value)
+    if isinstance(value, Real):
+        try:
+            number = float(value)
+        except OverflowError:  # an int (or Fraction) past a float's range
+            number = math.inf
+        if math.isfinite(number):
+            return number
     raise StateMappingError(
-        f"{where}: feature {feature!r} {source} {value!r} {when}: expected a finite real number or a bool",
+        f"{where}: feature {feature!r} {source} {_value_text(value)} {when}: expected a finite real number or a bool",
         hint="a feature is one number; read a part of a composite value with from_env=fn(env) or state(obs)",
     )
+
+
+def _value_text(value: object) -> str:
+    """A refused value for a message, bounded; an int (refused only past a float's range) by its digits, as Python
+    refuses the repr of one past 4300 digits."""
+    if isinstance(value, Integral):
+        digits = math.floor(int(value).bit_length() * math.log10(2)) + 1
+        return f"an int of about {digits} digits, past a float's range,"
+    return shown(value)
 
 
 def read_env_features(
@@ -197,24 +212,25 @@ def registered_spec(env_id: str) -> EnvSpec:
         'gymnasium.envs.classic_control.pendulum:PendulumEnv'
 
     Raises:
-        InitialEnvError: the module cannot be imported, or the id is not registered.
+        InitialEnvError: the module cannot be imported (an empty or relative name, or importing it raised or
+            tried to end the process), or the id is not registered.
     """
-    module, _, name = env_id.rpartition(":")
-    if module:
+    module, colon, name = env_id.rpartition(":")
+    if colon:
         try:
-            importlib.import_module(module)
-        except Exception as e:  # ImportError, or the module's own code failing
+            import_module(module)
+        except ImportFailed as e:  # an empty or relative name, or the module's own code failing or exiting
             raise InitialEnvError(
-                f"InitialEnv {env_id!r}: the module {module!r} cannot be imported ({type(e).__name__}: {e})",
-                hint=f"'module:Id' imports the module that registers Id; check that {module!r} is installed "
-                "and importable (python -c 'import " + module + "')",
+                f"InitialEnv {shown(env_id)}: cannot import its module: {e}",
+                hint="'module:Id' imports the module that registers Id (an absolute name, installed and importable "
+                "here), as gymnasium.make does",
             ) from None
     try:
         return gym.spec(name)
     except gym.error.Error as e:
-        where = f" after importing {module!r}" if module else ""
+        where = f" after importing {shown(module)}" if module else ""
         raise InitialEnvError(
-            f"InitialEnv {env_id!r}: no such Gymnasium environment id{where} ({e})",
+            f"InitialEnv {shown(env_id)}: no such Gymnasium environment id{where} ({elide(str(e), MAX_SHOWN)})",
             hint="import the package that registers it in the spec module, or write 'package:Id'",
         ) from None
 

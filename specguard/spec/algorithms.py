@@ -19,14 +19,14 @@ Example:
 from __future__ import annotations
 
 import difflib
-import importlib
 import inspect
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from specguard.error import InvalidSpec
-from specguard.utils.text import value_text
+from specguard.utils.imports import ImportFailed, import_module
+from specguard.utils.text import MAX_SHOWN, elide, shown, value_text
 from specguard.validation import is_count
 
 __all__ = [
@@ -82,6 +82,9 @@ _SET_BY_SPECGUARD = {
 }
 
 
+_IMPORT_HINT = "'module:Class' imports module (an absolute name, importable here) and takes its Class"
+
+
 def _accepted() -> str:
     return f"{', '.join([*SB3, *CONTRIB])}, a BaseAlgorithm subclass or 'module:Class'"
 
@@ -111,11 +114,12 @@ def _named_class(name: str, where: str) -> type:
 def _imported(where: str, text: str) -> Any:
     module_name, _, qualname = text.partition(":")
     try:
-        obj: Any = importlib.import_module(module_name)
+        obj: Any = import_module(module_name)
         for part in qualname.split("."):
             obj = getattr(obj, part)
-    except (ImportError, AttributeError) as e:
-        raise InvalidSpec(where, f"cannot import algorithm {text!r}: {type(e).__name__}: {e}") from None
+    except (ImportFailed, AttributeError) as e:
+        why = str(e) if isinstance(e, ImportFailed) else f"AttributeError: {elide(str(e), MAX_SHOWN)}"
+        raise InvalidSpec(where, f"cannot import algorithm {shown(text)}: {why}", hint=_IMPORT_HINT) from None
     return obj
 
 
@@ -131,10 +135,10 @@ def resolve_algorithm(where: str, value: object) -> str | type:
         name = _ALIASES.get(value, value)
         if name in ALGORITHMS:
             return name
-        raise InvalidSpec(where, f"unknown algorithm {value!r}; expected one of {_accepted()}")
+        raise InvalidSpec(where, f"unknown algorithm {shown(value)}; expected one of {_accepted()}")
     cls = _imported(where, value) if isinstance(value, str) else value
     if not (isinstance(cls, type) and issubclass(cls, _base_algorithm())):
-        raise InvalidSpec(where, f"expected algorithm to be one of {_accepted()}, got {value!r}")
+        raise InvalidSpec(where, f"expected algorithm to be one of {_accepted()}, got {shown(value)}")
     top = cls.__module__.split(".", 1)[0]
     named = top in ("stable_baselines3", "sb3_contrib") and cls.__name__ in ALGORITHMS
     return cls.__name__ if named and _named_class(cls.__name__, where) is cls else cls
@@ -154,11 +158,25 @@ def algorithm_name(algorithm: str | type) -> str:
 
 
 _DICT_PREFIX = "MultiInput"  # SB3's policy names for a Dict observation: MultiInputPolicy, MultiInputLstmPolicy
+_IMAGE_PREFIX = "Cnn"  # SB3's policy names for an image Box: CnnPolicy, CnnLstmPolicy
+
+# What the agent sees, by Spec.observation, in words; a policy name fits it when it takes it (None: the env's own).
+_SEEN = {
+    "features": "a flat Box of numbers, not an image (observation='features')",
+    "features+env": "a Dict (observation='features+env')",
+}
 
 
 def dict_policy(policy: object) -> bool:
     """``policy`` is named for a ``Dict`` observation (SB3's ``MultiInputPolicy``, ``MultiInputLstmPolicy``, ...)."""
     return isinstance(policy, str) and policy.startswith(_DICT_PREFIX)
+
+
+def _takes(name: str, observation: str) -> bool:
+    """The policy ``name`` takes what the agent sees: a Dict policy a Dict, any other but an image one a flat Box."""
+    if observation == "features+env":
+        return dict_policy(name)
+    return not dict_policy(name) and not name.startswith(_IMAGE_PREFIX)
 
 
 def default_policy(algorithm: str | type, *, dict_observation: bool = False) -> str:
@@ -173,33 +191,59 @@ def default_policy(algorithm: str | type, *, dict_observation: bool = False) -> 
     return named[0] if len(named) == 1 else plain
 
 
-def check_policy(where: str, algorithm: str | type, policy: object, *, dict_observation: bool = False) -> str | type:
-    """``policy`` if ``algorithm`` can take it: one of its policy names, or a subclass of SB3's ``BasePolicy``.
+def check_policy(where: str, algorithm: str | type, policy: object, observation: str | None = None) -> str | type:
+    """``policy`` if ``algorithm`` can take it: one of its policy names, or a subclass of one of its policy classes.
 
-    A name fits the observation: a ``MultiInput`` policy for a ``Dict`` observation (``dict_observation``), another
-    for a ``Box``; a class is SB3's to check.
+    A name fits what the agent sees (``observation``, a ``Spec.observation``): a ``MultiInput`` policy a ``Dict``
+    (``"features+env"``), one neither for a ``Dict`` nor for images (``Cnn``) a flat ``Box`` (``"features"``);
+    ``None`` (the initial env's own, unknown before it is built): any of the algorithm's names. A class is
+    SB3's to check against the observation.
 
     Raises:
-        InvalidSpec: naming the policy, the algorithm and its policy names; or the observation it does not fit.
+        InvalidSpec: naming the policy, the algorithm and its policy names (or classes); or the observation it does
+            not fit, with the algorithm's policies that do.
     """
     from stable_baselines3.common.policies import BasePolicy
 
-    aliases = list(getattr(algorithm_class(algorithm, where), "policy_aliases", {}))
+    named = dict(getattr(algorithm_class(algorithm, where), "policy_aliases", {}))
     if isinstance(policy, type) and issubclass(policy, BasePolicy):
-        return policy
-    fitting = [a for a in aliases if dict_policy(a) == dict_observation]
+        return _check_policy_class(where, algorithm, policy, tuple(named.values()))
+    aliases = list(named)
+    fitting = aliases if observation is None else [a for a in aliases if _takes(a, observation)]
     if isinstance(policy, str) and policy in fitting:
         return policy
-    if isinstance(policy, str) and (policy in aliases or not fitting):  # a policy of the other observation, or none
-        seen = "a Dict (observation='features+env')" if dict_observation else "a flat Box (observation='features')"
+    if isinstance(policy, str) and observation is not None and (policy in aliases or not fitting):
         which = ", ".join(fitting) or f"none: {algorithm_name(algorithm)} has no policy for it"
+        hint = _IMAGE_HINT if policy.startswith(_IMAGE_PREFIX) and observation == "features" else None
         raise InvalidSpec(
-            where, f"the agent's observation is {seen}, which {policy!r} does not take; one that does: {which}"
+            where,
+            f"the agent's observation is {_SEEN[observation]}, which {shown(policy)} does not take; "
+            f"one that does: {which}",
+            hint=hint,
         )
     raise InvalidSpec(
         where,
         f"expected policy to be one of {', '.join(aliases)} ({algorithm_name(algorithm)}'s policy names) "
         f"or a BasePolicy subclass, got {value_text(policy)}",
+    )
+
+
+_IMAGE_HINT = (
+    "an image policy reads the env's image: give the agent the env's own observation beside the features "
+    "with observation='features+env' (MultiInputPolicy reads an image part with a CNN)"
+)
+
+
+def _check_policy_class(where: str, algorithm: str | type, policy: type, classes: tuple[type, ...]) -> type:
+    """``policy`` if it is (a subclass of) one of ``algorithm``'s policy classes, or the algorithm names none."""
+    if not classes or issubclass(policy, classes):
+        return policy
+    names = ", ".join(dict.fromkeys(c.__name__ for c in classes))
+    raise InvalidSpec(
+        where,
+        f"{policy.__qualname__} is no policy of {algorithm_name(algorithm)}: expected a subclass of one of its "
+        f"policy classes ({names})",
+        hint="derive your policy from the algorithm's own (SB3's custom policies do), or give a policy name",
     )
 
 

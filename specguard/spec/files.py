@@ -7,19 +7,17 @@ the values of its module-level dicts of specs (named by key). The CLI's
 
 from __future__ import annotations
 
-import contextlib
 import importlib.util
-import os
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
-from typing import Any, NoReturn
+from typing import Any
 
 import cloudpickle
 
 from specguard.error import ExitAtImport, SpecError
 from specguard.spec.spec import Spec
+from specguard.utils.imports import no_exit
 
 __all__ = ["import_file", "load_objects", "spec_path"]
 
@@ -62,28 +60,6 @@ def import_file(path: Path) -> ModuleType:
     return _IMPORTED[key]
 
 
-@contextlib.contextmanager
-def _no_exit() -> Iterator[None]:
-    """While a spec file is imported, ``os._exit`` in this process raises :class:`ExitAtImport` instead.
-
-    ``sys.exit`` raises ``SystemExit``, which the import catches; ``os._exit``
-    would end the command at once, with no output and exit status 0. A process
-    the file forks keeps the real ``os._exit``.
-    """
-    real, importer = os._exit, os.getpid()
-
-    def guarded(status: int) -> NoReturn:
-        if os.getpid() != importer:
-            real(status)
-        raise ExitAtImport(status)
-
-    os._exit = guarded
-    try:
-        yield
-    finally:
-        os._exit = real
-
-
 def _import_file(path: Path) -> ModuleType:
     name = f"specguard_user_{abs(hash(path.resolve()))}"
     for folder in _import_roots(path):  # let the file import its neighbours, and its package by name
@@ -96,7 +72,7 @@ def _import_file(path: Path) -> ModuleType:
     sys.modules[name] = module
     hint = 'keep scripts\' own runs under `if __name__ == "__main__":`'
     try:
-        with _no_exit():
+        with no_exit():
             module_spec.loader.exec_module(module)
     except SpecError:
         raise

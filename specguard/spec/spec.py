@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from numbers import Real
 from typing import Any
 
 from specguard.construction.env import OBSERVATIONS, BaselineEnv, EnvFactory, SpecEnv
@@ -26,10 +27,12 @@ from specguard.error import InvalidSpec
 from specguard.falsify.starts import StartSpace, as_start_space
 from specguard.spec.algorithms import check_hyperparameters, check_policy, default_policy, resolve_algorithm
 from specguard.spec.budget import Budget
+from specguard.spec.zoo import SCHEDULED, LinearSchedule
 from specguard.stats.intervals import UNDECIDED_OUTCOMES
 from specguard.tree.keys import check_expect, check_xfail, check_xfail_thresholded, resolve_goal
 from specguard.tree.nodes import Node
-from specguard.validation import check_choice, check_count, check_open_fraction
+from specguard.utils.text import shown
+from specguard.validation import check_choice, check_count, check_open_fraction, is_finite
 
 __all__ = ["Spec"]
 
@@ -50,7 +53,8 @@ class Spec:
             subclass, as a class or ``"module:Class"``
             (:func:`~specguard.spec.algorithms.resolve_algorithm`; a named class is kept as its name).
         hyperparameters: keyword arguments for the algorithm (``n_steps``, ...); a name its
-            constructor does not take is refused here, before anything trains.
+            constructor does not take is refused here, before anything trains, and so is a
+            schedule (``learning_rate``, ``clip_range``, ...) that is not a finite number or schedule.
         n_envs: parallel environments per run (a ``DummyVecEnv``).
         normalize: wrap the training env in ``VecNormalize``.
         quorum: runs that must meet each threshold; default every run
@@ -79,17 +83,21 @@ class Spec:
             ``falsify=True`` read it. Not part of the spec's identity: it
             changes no run and no verdict of its goals.
         policy: the algorithm's policy: one of its names (``"MlpPolicy"``, ``"CnnPolicy"``, ...)
-            or a ``BasePolicy`` subclass; ``None`` (default): ``"MlpPolicy"``, or the algorithm's
+            or a subclass of one of its policy classes; ``None`` (default): ``"MlpPolicy"``, or the algorithm's
             only MLP policy where it has no ``MlpPolicy`` (RecurrentPPO's ``"MlpLstmPolicy"``);
             with ``observation="features+env"``, ``"MultiInputPolicy"`` (RecurrentPPO's
-            ``"MultiInputLstmPolicy"``). Part of a run's key only when it is not that default.
+            ``"MultiInputLstmPolicy"``). A name must take what the agent sees: neither a ``Dict`` nor
+            an image (``"CnnPolicy"``) policy for the flat ``Box`` of ``"features"``, a ``Dict`` policy for
+            ``"features+env"`` (a baseline's, the env's own, is SB3's to check when it builds the model).
+            Part of a run's key only when it is not that default.
         observation: what the agent sees. ``"features"`` (default): the features, then the goal
             tree's own state, a flat ``Box``. ``"features+env"``: a ``Dict`` of that ``Box``
             under ``"spec"`` and the initial env's own observation beside it (a ``Dict``'s keys
             as the env gives them, any other observation under ``"observation"``), for an image
             the features leave out; the goals are judged on the features alone either way.
             Refused with ``baseline=True`` (the baseline sees the env's own observation), and
-            for a key stable-baselines3 cannot take (a ``Text``) when the env is built.
+            for a key stable-baselines3 cannot take (a ``Text``, a key that is no string, an empty
+            ``Box``) when the env is built.
             ``normalize=True`` normalizes the ``"spec"`` part only. Part of a run's key only
             when it is not the default.
     """
@@ -126,6 +134,7 @@ class Spec:
         if not isinstance(self.hyperparameters, Mapping):
             raise InvalidSpec(f"{label}.hyperparameters", f"expected a mapping, got {self.hyperparameters!r}")
         check_hyperparameters(f"{label}.hyperparameters", algorithm, self.hyperparameters)
+        self._check_schedules(f"{label}.hyperparameters")
         check_choice(label, "observation", self.observation, OBSERVATIONS)
         if self.baseline and self.observation != "features":
             raise InvalidSpec(
@@ -135,9 +144,8 @@ class Spec:
             )
         with_env = self.observation == "features+env"
         policy = default_policy(algorithm, dict_observation=with_env) if self.policy is None else self.policy
-        object.__setattr__(
-            self, "policy", check_policy(f"{label}.policy", algorithm, policy, dict_observation=with_env)
-        )
+        seen = None if self.baseline else self.observation  # a baseline's is the env's own, unknown until it is built
+        object.__setattr__(self, "policy", check_policy(f"{label}.policy", algorithm, policy, seen))
         object.__setattr__(self, "n_envs", check_count(label, "n_envs", self.n_envs, "parallel environments per run"))
         if self.quorum is not None:
             object.__setattr__(self, "quorum", self._checked_quorum(label))
@@ -213,6 +221,25 @@ class Spec:
         """Runs that must meet each threshold."""
         assert self.budget.max_seeds is not None
         return self.quorum if self.quorum is not None else self.budget.max_seeds
+
+    def _check_schedules(self, where: str) -> None:
+        """A scheduled hyperparameter (``learning_rate``, ``clip_range``, ...) as a number or rl-zoo3's linear
+        schedule is finite; written as rl-zoo3's text (``"lin_3e-4"``), it is ``sg.zoo_settings``'s to read.
+
+        Its other values (a callable, ``None``) are the algorithm's to check.
+        """
+        for key in SCHEDULED:
+            value = self.hyperparameters.get(key)
+            start = value.initial_value if isinstance(value, LinearSchedule) else value
+            if isinstance(start, str):
+                raise InvalidSpec(
+                    where,
+                    f"expected {key} to be a number or a schedule (a callable), got the text {shown(value)}",
+                    hint="rl-zoo3's 'lin_<x>' is sg.zoo_settings's to read, or write LinearSchedule(x) "
+                    "(from specguard.spec.zoo)",
+                )
+            if isinstance(start, Real) and not is_finite(start):
+                raise InvalidSpec(where, f"expected {key} to be a finite number, got {shown(value)}")
 
     def _checked_quorum(self, label: str) -> int:
         """A quorum is a count of runs (validation.check_count) that the budget can train."""

@@ -27,6 +27,7 @@ from __future__ import annotations
 import ast
 import difflib
 import importlib.util
+import math
 import warnings
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
@@ -365,9 +366,10 @@ def _schedule(key: str, value: Any, where: str) -> Any:
         start = float(initial)
     except ValueError:
         start = None
-    if kind != "lin" or start is None:
+    if kind != "lin" or start is None or not math.isfinite(start):
         raise InvalidSpec(
-            where, f"{key}: expected a number or a schedule 'lin_<initial value>', got {value_text(value)}"
+            where,
+            f"{key}: expected a number or a schedule 'lin_<initial value>', a finite one, got {value_text(value)}",
         )
     return LinearSchedule(start)
 
@@ -485,7 +487,7 @@ def zoo_settings(algorithm: str | type, env_id: str, *, file: str | Path | None 
     fields, not_taken = _map(f"{where}, {source}", resolved, entry)
     policy = fields["policy"] if fields["policy"] is not None else default_policy(resolved)
     dict_observation = dict_policy(policy)  # the zoo's env gave a Dict
-    policy = check_policy(f"{where}.policy", resolved, policy, dict_observation=dict_observation)
+    policy = check_policy(f"{where}.policy", resolved, policy)  # the zoo's env's own observation: any of its names
     timesteps, n_envs = fields["timesteps"], fields["n_envs"]
     if not _is_timesteps(timesteps):
         raise InvalidSpec(

@@ -7,6 +7,7 @@ from collections.abc import Iterable, Mapping, Sequence
 
 __all__ = [
     "MAX_CELL",
+    "MAX_SHOWN",
     "MAX_VALUE",
     "bounds_text",
     "elide",
@@ -15,6 +16,7 @@ __all__ = [
     "markdown_table",
     "per_seed_text",
     "render_table",
+    "shown",
     "value_text",
     "weights_text",
 ]
@@ -66,6 +68,20 @@ def value_text(value: object, width: int = MAX_VALUE) -> str:
         ('[[[[[...]]]]]', '[0, 1, 2, 3, 4, 5, 6, 7, ...]', "'xxxxx…xxxx'")
     """
     return elide(_REPR.repr(value), width)
+
+
+MAX_SHOWN = 120
+"""The most characters of a user's value (or of an error's message) that a message shows."""
+
+
+def shown(value: object) -> str:
+    """:func:`value_text` at :data:`MAX_SHOWN` characters: a user's value or an error's message, bounded.
+
+    Example:
+        >>> shown("x" * 200)[:8], len(shown("x" * 200))
+        ("'xxxxxxx", 120)
+    """
+    return value_text(value, MAX_SHOWN)
 
 
 def render_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
