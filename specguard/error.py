@@ -18,6 +18,7 @@ __all__ = [
     "FingerprintError",
     "GoalMetAtStart",
     "GoalMissed",
+    "ImportFailed",
     "InitialEnvError",
     "InvalidSpec",
     "NoFrames",
@@ -212,6 +213,14 @@ class ExitAtImport(BaseException):
     def __init__(self, status: object) -> None:
         super().__init__(status)
         self.status = status
+
+
+class ImportFailed(Exception):
+    """A module named by a user's string could not be imported; the message says why, in one bounded line.
+
+    Internal: :func:`specguard.utils.imports.import_module` raises it, and each caller turns it into the
+    :class:`SpecError` of its field (an algorithm's ``InvalidSpec``, an env's ``InitialEnvError``).
+    """
 
 
 class NoFrames(Exception):

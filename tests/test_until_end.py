@@ -340,6 +340,8 @@ def test_a_run_counts_the_episodes_the_env_ended_before_the_horizon(until):
     assert result.passed is (until == "termination")
     line = f"{run.episodes} of {run.episodes} evaluation episodes were ended by termination before their horizon"
     assert line in result.table()
+    good_end = "until='termination' takes that as a good end: they were judged on their last state"
+    assert (good_end in result.table()) is (until == "termination")
     assert result.to_dict()["runs"][0]["terminated"] == run.episodes
 
 

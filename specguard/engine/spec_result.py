@@ -13,6 +13,7 @@ from specguard.spec.spec import Spec
 from specguard.stats.intervals import GoalOutcome, QuorumVerdict, RunVerdict, success_interval
 from specguard.training.result import RunResult
 from specguard.tree.keys import GOAL, kind, label
+from specguard.tree.nodes import Always
 from specguard.utils.text import interval_text, render_table, weights_text
 
 if TYPE_CHECKING:
@@ -311,10 +312,15 @@ class SpecResult:
             )
         terminated = sum(r.terminated for r in self.runs)
         if terminated:
+            horizon = any(isinstance(n, Always) and n.until == "horizon" for _, n in tree.walk())
+            why = (
+                "an Always goal does not keep such an episode unless until='termination'"
+                if horizon
+                else "until='termination' takes that as a good end: they were judged on their last state"
+            )
             lines.append(
                 f"{terminated} of {episodes} evaluation episodes were ended by termination before their horizon "
-                f"(the env's: a fall, a crash): the root goal {root!r} holds until the end, and an Always goal "
-                "does not keep such an episode unless until='termination'"
+                f"(the env's: a fall, a crash): the root goal {root!r} holds until the end, and {why}"
             )
         return lines
 

@@ -23,14 +23,10 @@ from collections.abc import Iterator
 from types import ModuleType
 from typing import NoReturn
 
-from specguard.error import ExitAtImport
+from specguard.error import ExitAtImport, ImportFailed
 from specguard.utils.text import MAX_SHOWN, elide, shown
 
-__all__ = ["ImportFailed", "import_module", "no_exit"]
-
-
-class ImportFailed(Exception):
-    """A module named by a user's string could not be imported; the message says why, in one bounded line."""
+__all__ = ["import_module", "no_exit"]
 
 
 @contextlib.contextmanager
