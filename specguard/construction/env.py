@@ -530,12 +530,13 @@ def starts_in_root_goal(
     """How many of ``samples`` seeded resets (seeds ``0 .. samples - 1``) start inside the root goal.
 
     The resets are of a base env of their own, closed after: an env handed out stays as unseeded as a
-    fresh one. None when a start cannot be judged (the env, ``state()`` or a goal's function raised): the
-    env's own reset reports that, with its message, where it happens. A feature read from ``info`` or the
-    env that cannot be read at a reset (a missing key) is raised here, before anything trains.
+    fresh one. None when a start cannot be judged (the env or a goal's function raised): the env's own reset
+    reports that, with its message, where it happens. A feature that cannot be read at a reset (``state()``
+    raised or gave no finite numbers, a missing ``info`` key, a ``from_env`` function that raised) is
+    raised here, before anything trains.
 
     Raises:
-        StateMappingError: a ``from_info`` or ``from_env`` feature cannot be read at a reset.
+        StateMappingError: a feature cannot be read at a reset.
     """
     base = initial_env.make(**make_kwargs)
     evaluator = compiled.evaluator()
