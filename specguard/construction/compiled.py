@@ -37,6 +37,7 @@ from typing import Any, NoReturn
 import numpy as np
 
 from specguard.construction.codegen import build_namespace, source_of
+from specguard.construction.evaluator import StepResult
 from specguard.construction.initial_env import state_type
 from specguard.construction.reference import FLOAT_MAX, check_distance, distance_value
 from specguard.error import EvaluationError, InvalidSpec, UnknownFeature
@@ -55,9 +56,10 @@ from specguard.extend import (
 )
 from specguard.validation import check_truth, child_path
 
-__all__ = ["CompiledTree", "Evaluator", "compile_tree"]
+__all__ = ["CompiledTree", "FlatEvaluator", "compile_tree"]
 
 _isfinite = math.isfinite
+_result = tuple.__new__  # a StepResult from a tuple, without NamedTuple.__new__'s argument handling
 
 
 @dataclass(frozen=True)
@@ -210,8 +212,8 @@ class CompiledTree:
             actions: ``B`` actions.
             next_states: ``(B, features...)`` the next states' features (extra columns ignored).
             last: ``B`` flags: the base env ended the episode in the next state, which is judged
-                (:meth:`Evaluator.step`); ``None``: no base env ended one.
-            terminated: ``B`` flags: the base env's end was a termination (``Evaluator.step``'s
+                (:meth:`FlatEvaluator.step`); ``None``: no base env ended one.
+            terminated: ``B`` flags: the base env's end was a termination (``FlatEvaluator.step``'s
                 ``terminated``); ``None``: none was.
 
         Returns:
@@ -228,10 +230,10 @@ class CompiledTree:
         falls = [False] * len(obs) if terminated is None else [bool(v) for v in terminated]
         for row, a, f2, base_end, fell in zip(obs.tolist(), list(actions), s2.tolist(), ends, falls, strict=True):
             ev.restore(row[:n], row[n:])
-            r, end, m2, _ = ev.step(a, f2, base_end, fell)
-            rewards.append(r)
-            ended.append(end)
-            goals.append(m2)
+            result = ev.step(a, f2, base_end, fell)
+            rewards.append(result.reward)
+            ended.append(result.terminated)
+            goals.append(result.goals)
             own.append(list(ev.own_state))
         shape = (len(obs), len(self.slots))
         return np.asarray(rewards), np.asarray(ended), np.asarray(goals, dtype=bool), np.asarray(own).reshape(shape)
@@ -254,7 +256,7 @@ class CompiledTree:
         out = []
         for row, a, f2 in zip(s.tolist(), list(actions), s2.tolist()):
             ev.restore(row[:n], row[n : n + len(self.slots)])
-            out.append(list(ev.step(a, f2, None)[3].values()))
+            out.append(list(ev.step(a, f2, None).terms.values()))
         return np.asarray(out, dtype=np.float64).reshape(len(s), len(self.terms))
 
     def _apply(self, t: _Term, s: np.ndarray, actions: Any = None) -> np.ndarray:
@@ -299,9 +301,9 @@ class CompiledTree:
         """:attr:`source` compiled, once per compiled tree: every evaluator runs it in a namespace of its own."""
         return compile(self.source, f"<specguard evaluator of {self.paths[0]!r}>", "exec")
 
-    def evaluator(self) -> Evaluator:
+    def evaluator(self) -> FlatEvaluator:
         """A fresh per-episode evaluator (one per env); evaluators of one compiled tree share its generated code."""
-        return Evaluator(self)
+        return FlatEvaluator(self)
 
 
 def _box_rows(
@@ -481,8 +483,9 @@ def _annotation_term(key: str, a: Annotation, coef: float, slots: list[tuple[str
     return _Term(key, "annotation", coef, slot=start if len(slots) > start else -1, annotation=a, owner=owner)
 
 
-class Evaluator:
-    """Steps a :class:`CompiledTree` along one episode at a time.
+class FlatEvaluator:
+    """Steps a :class:`CompiledTree` along one episode at a time: an
+    :class:`~specguard.construction.evaluator.Evaluator`.
 
     Holds the episode's state: the previous memberships, distances and
     feature namedtuple, and the own-state slots (counters, stages).
@@ -553,9 +556,7 @@ class Evaluator:
         """:attr:`safe` by safety key, a new dict (the env's ``info["safe"]``)."""
         return self._safe_info(self.own_state)
 
-    def step(
-        self, action: Any, f: Sequence[float], last: bool | None = False, terminated: bool = False
-    ) -> tuple[float, bool, tuple[bool, ...], dict[str, float]]:
+    def step(self, action: Any, f: Sequence[float], last: bool | None = False, terminated: bool = False) -> StepResult:
         """Advance by one transition to features ``f``.
 
         When the episode ends at ``f`` (the spec ends it, or ``last``: the base env terminated or truncated),
@@ -565,9 +566,9 @@ class Evaluator:
         end (:attr:`horizon`), the episode ended before its horizon (:meth:`~specguard.extend.Node.terminated_state`).
 
         Returns:
-            The reward, whether the spec ends the episode (root goal reached, a
-            counter at 0, or a node's own termination), every node's membership
-            of ``f`` and the weighted reward terms by key (Algorithm 1's processing order).
+            The :class:`~specguard.construction.evaluator.StepResult`: the reward, whether the spec ends the
+            episode (root goal reached, a counter at 0, or a node's own termination), every node's
+            membership of ``f`` and the weighted reward terms by key (Algorithm 1's processing order).
         """
         own = self.own_state[:]  # the episode state changes only once the step succeeded
         fell = self._fell
@@ -584,7 +585,7 @@ class Evaluator:
             bad = {k: v for k, v in terms.items() if not math.isfinite(v)}
             raise EvaluationError(f"non-finite reward {r}: the terms {bad} are not finite")
         self._m, self.goals, self._s, self._q, self.own_state = m2, goals, s2, q2, own
-        return float(r), ended, m2, terms
+        return _result(StepResult, (float(r), ended, m2, terms))
 
     def _diagnose(self, action: Any, f: Sequence[float], error: Exception) -> NoReturn:
         """Re-run the user functions one by one to name the one at fault."""

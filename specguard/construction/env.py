@@ -33,6 +33,7 @@ from gymnasium.utils import RecordConstructorArgs
 from specguard.construction.cap import capped
 from specguard.construction.checks import START_SAMPLES, check_goals, check_starts
 from specguard.construction.compiled import CompiledTree, compile_tree
+from specguard.construction.evaluator import Evaluator
 from specguard.construction.initial_env import InitialEnv, check_identity_observation, read_env_features
 from specguard.construction.reference import ReferenceEvaluator
 from specguard.error import EvaluationError, InitialEnvError, InvalidSpec, SpecError, StateMappingError
@@ -275,7 +276,7 @@ class SpecEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         self.features = tuple(features)
         self.compiled = _compiled_for(tree, self.features, compiled)
         if evaluator == "flat":
-            self.evaluator: Any = self.compiled.evaluator()
+            self.evaluator: Evaluator = self.compiled.evaluator()
         elif evaluator == "reference":
             self.evaluator = ReferenceEvaluator(tree, self.features)
         else:
@@ -402,17 +403,17 @@ class SpecEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
             f = self._read(obs, info, self.env, self._t)
         ev = self.evaluator
         # The last state is judged too; a termination by the initial env is one before the horizon.
-        reward, ended, _, terms = ev.step(action, f, terminated or truncated, terminated)
+        result = ev.step(action, f, terminated or truncated, terminated)
         info["goals"] = ev.goals  # a new dict each step, as are the others
         info["safe"] = ev.safe_info() if self._safety_keys else {}
-        info["reward_terms"] = terms
+        info["reward_terms"] = result.terms
         info["base_reward"] = float(base_reward)
         # A new array each step (a consumer may keep it, e.g. SB3's terminal_observation); or, when
         # nothing is added or converted, the base env's own observation untouched.
         observation: Any = obs if self._passthrough else np.array(f + ev.own_state, _FLOAT32)
         if self._with_env:
             observation = self._beside(obs, observation)
-        return observation, reward, bool(terminated or ended), bool(truncated), info
+        return observation, result.reward, bool(terminated or result.terminated), bool(truncated), info
 
 
 class BaselineEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
@@ -474,7 +475,7 @@ class BaselineEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         # Own state (stages, counters) follows the episode, though the spec's reward and termination do not
         # apply; without own state, membership of one state is all there is (no rewards computed for nothing).
         members = (
-            self.evaluator.step(action, f, terminated or truncated, terminated)[2]
+            self.evaluator.step(action, f, terminated or truncated, terminated).goals
             if self.evaluator.slots
             else self.evaluator.members(f)
         )

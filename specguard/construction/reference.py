@@ -19,6 +19,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
+from specguard.construction.evaluator import StepResult
 from specguard.construction.initial_env import state_type
 from specguard.error import EvaluationError
 from specguard.extend import Annotation, Context, Node, Slot, annotation_key, component_weights, until_end
@@ -278,7 +279,8 @@ def _weighted(last: tuple[dict[str, tuple[float, ...]], Terms], w: float) -> tup
 class ReferenceEvaluator:
     """Steps the requirements of :func:`process` along a trajectory of feature vectors.
 
-    Same interface as :class:`specguard.construction.compiled.Evaluator`, so the constructed
+    An :class:`~specguard.construction.evaluator.Evaluator`, as the flat one
+    (:class:`specguard.construction.compiled.FlatEvaluator`) is, so the constructed
     env can run either (``make_env(..., evaluator="reference")``).
     """
 
@@ -342,9 +344,7 @@ class ReferenceEvaluator:
         """:attr:`safe` by safety key."""
         return dict(zip(self.safety_keys, self.safe))
 
-    def step(
-        self, action: Any, f: Sequence[float], last: bool | None = False, terminated: bool = False
-    ) -> tuple[float, bool, tuple[bool, ...], Terms]:
+    def step(self, action: Any, f: Sequence[float], last: bool | None = False, terminated: bool = False) -> StepResult:
         """Advance by one transition to features ``f``: reward, spec termination, goals, weighted terms.
 
         When the episode ends at ``f`` (the spec ends it, or ``last``: the base env terminated or truncated),
@@ -367,4 +367,4 @@ class ReferenceEvaluator:
                     terms[key] += v
                 ended = self.req.terminal(x2)
         self._x = x2
-        return float(sum(terms.values())), ended, self._members(x2), terms
+        return StepResult(float(sum(terms.values())), ended, self._members(x2), terms)

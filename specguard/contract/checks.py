@@ -29,13 +29,14 @@ import os
 import re
 import subprocess
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import Any
 
 import cloudpickle
 import numpy as np
 
 from specguard.construction.compiled import CompiledTree, compile_tree
+from specguard.construction.evaluator import Evaluator, StepResult
 from specguard.construction.reference import ReferenceEvaluator, process
 from specguard.contract.trees import (
     FEATURES,
@@ -397,21 +398,21 @@ def check_flat_matches_reference(cls: type, max_examples: int = MAX_EXAMPLES) ->
         flat = compile_tree(case.tree, FEATURES).evaluator()
         ref = ReferenceEvaluator(case.tree, FEATURES)
         sides = ((flat, flat.reset(case.trajectory[0])), (ref, ref.reset(case.trajectory[0])))
-        _agree(0, *(_seen(ev, None, False, goals, {}) for ev, goals in sides))
+        _agree(0, *(_seen(ev, StepResult(None, False, goals, {})) for ev, goals in sides))  # type: ignore[arg-type]
         end = min(len(case.actions), len(case.trajectory) - 1)
         for t, (a, f) in enumerate(zip(case.actions, case.trajectory[1:]), 1):
             steps = [(ev, ev.step(a, f, t == end, t == end and case.terminate)) for ev in (flat, ref)]
-            _agree(t, *(_seen(ev, r, end, goals, terms) for ev, (r, end, goals, terms) in steps))
+            _agree(t, *(_seen(ev, result) for ev, result in steps))
 
     run_property(check_flat_matches_reference, cls, max_examples, body)
 
 
-def _seen(ev: Any, reward: Any, ended: bool, goals: Sequence[bool], terms: dict[str, float]) -> dict[str, Any]:
+def _seen(ev: Evaluator, result: StepResult) -> dict[str, Any]:
     return {
-        "reward": reward,
-        "terminated": bool(ended),
-        "goals": dict(zip(ev.paths, map(bool, goals))),
-        "terms": dict(terms),
+        "reward": result.reward,
+        "terminated": bool(result.terminated),
+        "goals": dict(zip(ev.paths, map(bool, result.goals))),
+        "terms": dict(result.terms),
         "own_state": [float(v) for v in ev.own_state],
         "safe": dict(zip(ev.safety_keys, map(bool, ev.safe))),
     }
