@@ -62,6 +62,7 @@ _EXPORTS = {
     "UnknownFeature": "specguard.error",
     "UnreachableGoal": "specguard.error",
     "VersionMismatch": "specguard.error",
+    "check_spec": "specguard.spec.spec",
     "compile_tree": "specguard.construction.compiled",
     "formula": "specguard.tree.formula",
     "goal_spec": "specguard.pytest_plugin.declare",
@@ -128,6 +129,7 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.pytest_plugin.declare import goal_specs as goal_specs
     from specguard.spec.budget import Budget as Budget
     from specguard.spec.spec import Spec as Spec
+    from specguard.spec.spec import check_spec as check_spec
     from specguard.spec.zoo import zoo_settings as zoo_settings
     from specguard.tree.builtin_annotations import Constraint as Constraint
     from specguard.tree.builtin_annotations import Distance as Distance

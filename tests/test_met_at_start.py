@@ -7,6 +7,7 @@ evaluation episodes started inside the root goal.
 
 from __future__ import annotations
 
+import pickle
 import warnings
 
 import gymnasium as gym
@@ -159,3 +160,26 @@ def test_the_table_says_nothing_when_no_episode_started_in_the_root_goal():
 
     run = RunResult(spec="s", seed=0, timesteps=1, episodes=3, successes={"up": 1}, train_seconds=0.0)
     assert "started inside" not in SpecResult(spec="s", runs=[run], goals={}).table()
+
+
+def test_a_spec_is_checked_once_however_many_envs_it_builds():
+    spec = sg.Spec(sg.InitialEnv(sometimes_inside, features=("x",)), UP, budget=sg.Budget(timesteps=64), expect=0.5)
+    with pytest.warns(SpecWarning) as caught:
+        sg.check_spec(spec)  # as Gymnasium's check_env: explicit, once
+        for _ in range(3):
+            spec.make_env().close()
+        assert spec.env_factory() is spec.env_factory()  # one factory: compiled once
+    assert len([w for w in caught if issubclass(w.category, SpecWarning)]) == 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        pickle.loads(pickle.dumps(spec)).make_env().close()  # a worker receives it checked: no warning again
+
+
+def test_check_false_builds_without_the_checks_and_check_spec_refuses():
+    spec = sg.Spec(sg.InitialEnv(always_inside, features=("x",)), UP, budget=sg.Budget(timesteps=64), expect=0.5)
+    spec.make_env(check=False).close()  # met at every start, but not checked: built, as disable_env_checker
+    sg.make_env(spec.initial_env, UP, check=False).close()
+    with pytest.raises(GoalMetAtStart):
+        sg.check_spec(spec)
+    with pytest.raises(GoalMetAtStart):
+        spec.make_env()

@@ -8,14 +8,13 @@ from __future__ import annotations
 
 import copy
 import hashlib
-import warnings
 from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
 
 from specguard.cache.canonical import canonical, dumps
-from specguard.error import FingerprintError, SpecWarning
+from specguard.error import FingerprintError
 
 __all__ = ["PROBE_STEPS", "probe"]
 
@@ -37,9 +36,7 @@ def probe(spec: Any, steps: int = PROBE_STEPS, build: Callable[[], Any] | None =
     h = hashlib.sha256()
     env = None
     try:
-        with warnings.catch_warnings():  # a spec's warnings are given once, where it is checked, not by its key
-            warnings.simplefilter("ignore", SpecWarning)
-            env = spec.make_env() if build is None else build()
+        env = spec.make_env() if build is None else build()  # the spec's factory checks it once, where it is run
         h.update(dumps(canonical((env.observation_space, env.action_space), "spaces")).encode())
         actions = copy.deepcopy(env.action_space)  # seeding the user's own space would change it
         actions.seed(0)

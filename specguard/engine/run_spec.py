@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import contextlib
 import time
-import warnings
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,10 +27,10 @@ from specguard.cache.store import Cache
 from specguard.engine.judging import judge, seeds_still_needed
 from specguard.engine.runs import Runs
 from specguard.engine.spec_result import SpecResult
-from specguard.error import SpecError, SpecWarning
+from specguard.error import SpecError
 from specguard.parallel.executors import LOCAL, Executor, make_executor
 from specguard.parallel.workers import resolve_workers
-from specguard.spec.spec import Spec
+from specguard.spec.spec import Spec, check_spec
 from specguard.training.progress import ProgressEvent, print_event
 from specguard.utils.files import DEFAULT_CACHE_DIR
 
@@ -157,7 +156,7 @@ def check_before_training(spec: Spec) -> None:
     Raises:
         SpecError: the env cannot be built, or its construction refuses the spec.
     """
-    spec.make_env().close()
+    check_spec(spec)
 
 
 @contextlib.contextmanager
@@ -171,9 +170,7 @@ def _seeds_of(spec: Spec, options: RunOptions) -> Iterator[tuple[Runs, SpecResul
     owned = isinstance(executor, str)
     runner = make_executor(executor, workers=n_workers) if isinstance(executor, str) else executor
     try:
-        with warnings.catch_warnings():  # the fingerprint's probes build the env again: warned once, above
-            warnings.simplefilter("ignore", SpecWarning)
-            runs = Runs(spec, result, cache, runner, options.lock_timeout, say)
+        runs = Runs(spec, result, cache, runner, options.lock_timeout, say)  # its probes build checked envs
         result.spec_key = None if runs.fingerprint is None else runs.fingerprint.spec_key
         result.cache_dir = None if runs.cache is None else runs.cache.root
         yield runs, result

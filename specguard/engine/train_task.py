@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Mapping
 from typing import Any
 
 from specguard.cache.versions import check_versions
-from specguard.error import SpecError, SpecWarning, TrainingError
+from specguard.error import SpecError, TrainingError
 from specguard.parallel.protocol import Failure, Report
 from specguard.spec.spec import Spec
 
@@ -29,9 +28,7 @@ def train_task(spec: Spec, seed: int, keyed_versions: Mapping[str, str] | None, 
     if keyed_versions is not None:
         check_versions(keyed_versions, f"Spec {spec.label!r}, seed {seed}")
     with_model = keyed_versions is not None
-    with warnings.catch_warnings():  # the caller's process gave them once, before any seed (run_spec)
-        warnings.simplefilter("ignore", SpecWarning)
-        result, model = train_run(spec, seed, report=report)
+    result, model = train_run(spec, seed, report=report)  # the spec arrives checked (Spec.env_factory)
     files = model_files(model, normalize=spec.normalize) if with_model else {}
     return {"result": result.to_dict(), "files": files}
 

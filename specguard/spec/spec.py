@@ -19,7 +19,7 @@ import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from numbers import Real
-from typing import Any
+from typing import Any, cast
 
 from specguard.construction.env import OBSERVATIONS, BaselineEnv, EnvFactory, SpecEnv
 from specguard.construction.initial_env import InitialEnv
@@ -34,7 +34,7 @@ from specguard.tree.nodes import Node
 from specguard.utils.text import shown
 from specguard.validation import check_choice, check_count, check_open_fraction, is_finite
 
-__all__ = ["Spec"]
+__all__ = ["Spec", "check_spec"]
 
 
 @dataclass(frozen=True)
@@ -160,17 +160,23 @@ class Spec:
         return self.name or str(getattr(self.tree, "name", "?"))
 
     def env_factory(self) -> EnvFactory:
-        """Builds the envs this spec trains on, compiling its tree once for all of them (one run's envs share one)."""
-        return EnvFactory(self.initial_env, self.tree, baseline=self.baseline, observation=self.observation)
+        """Builds the envs this spec trains on: one factory per spec, so its tree is compiled and checked once in
+        a process (and a worker that receives the spec receives it checked)."""
+        factory = self.__dict__.get("_factory")
+        if factory is None:  # not a field: neither the spec's identity, nor its key
+            factory = EnvFactory(self.initial_env, self.tree, baseline=self.baseline, observation=self.observation)
+            object.__setattr__(self, "_factory", factory)
+        return cast(EnvFactory, factory)
 
-    def make_env(self, **make_kwargs: Any) -> SpecEnv | BaselineEnv:
+    def make_env(self, *, check: bool = True, **make_kwargs: Any) -> SpecEnv | BaselineEnv:
         """The env this spec trains on, built afresh, as Gymnasium's ``EnvSpec.make`` builds a registered env.
 
         The constructed env (:class:`~specguard.construction.env.SpecEnv`), or for a
         baseline spec the initial env with goal info (:class:`~specguard.construction.env.BaselineEnv`);
         ``make_kwargs`` override the base env's ``gymnasium.make`` kwargs (e.g. ``render_mode="rgb_array"``).
+        The spec's checks (:func:`check_spec`) run on the first call unless ``check=False``, and never again.
         """
-        return self.env_factory()(**make_kwargs)
+        return self.env_factory()(check=check, **make_kwargs)
 
     def scaled(self, factor: float, *, checkpoints: int | None = None) -> Spec:
         """This spec with its training budget multiplied by ``factor`` (the one place budgets are scaled).
@@ -260,3 +266,27 @@ class Spec:
     def _resolve_thresholds(self, label: str) -> dict[str, float]:
         thresholds = check_expect(label, self.expect)
         return {resolve_goal(self.tree, k, f"{label}.expect[{k!r}]"): t for k, t in thresholds.items()}
+
+
+def check_spec(spec: Spec) -> None:
+    """Check a spec's construction once, as Gymnasium's ``check_env`` checks an env: before anything trains.
+
+    A goal no state can be in (``UnreachableGoal``), a root goal met at every sampled start
+    (``GoalMetAtStart``) or, held until the end, at none; a feature that cannot be read at a start. A root
+    goal met (or failed) at some starts warns once (``SpecWarning``). Every door (``run_spec``,
+    ``specguard run``, ``pytest --goal-specs``) calls it; the spec's envs then build without repeating it.
+
+    Example:
+        >>> import specguard as sg
+        >>> cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+        >>> spec = sg.Spec(cartpole, sg.Goal("far", x=(10, None)), budget=sg.Budget(timesteps=1000))
+        >>> sg.check_spec(spec)
+        Traceback (most recent call last):
+        ...
+        specguard.error.UnreachableGoal: far: goal box x in [10, inf] lies outside the bounds of x, [-4.8, 4.8]: ...
+        Hint: ...
+
+    Raises:
+        SpecError: the spec's env cannot be built, or a check refuses it (the message names the node path).
+    """
+    spec.env_factory().check()
