@@ -317,14 +317,14 @@ class ReferenceEvaluator:
 
     @property
     def state(self) -> Any:
-        """The features of the last state reset or stepped to (``s.x`` by name)."""
-        assert self._x is not None
-        return self._x.s
+        """The features of the last state reset or stepped to (``s.x`` by name); None before a reset."""
+        return None if self._x is None else self._x.s
 
     @property
     def own_state(self) -> list[float]:
-        """The own-state slots in observation order."""
-        assert self._x is not None
+        """The own-state slots in observation order (zeros before a reset, as the flat evaluator's)."""
+        if self._x is None:
+            return [0.0] * len(self.slots)
         out: list[float] = []
         done: set[str] = set()
         for key, _ in self.slots:
@@ -335,9 +335,10 @@ class ReferenceEvaluator:
 
     @property
     def safe(self) -> tuple[bool, ...]:
-        """Per safety annotation, whether the episode has had no violation so far."""
-        assert self._x is not None
+        """Per safety annotation, whether the episode has had no violation so far (none before a reset)."""
         x = self._x
+        if x is None:
+            return (True,) * len(self.safety_keys)
         return tuple(v(x) == 0 for v in self.req.violations.values())
 
     def safe_info(self) -> dict[str, bool]:
