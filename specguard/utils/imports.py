@@ -11,7 +11,7 @@ Example:
     >>> import_module(".rel")
     Traceback (most recent call last):
     ...
-    specguard.utils.imports.ImportFailed: its module '.rel' is relative; name it from its top package (package.rel)
+    specguard.error.ImportFailed: its module '.rel' is relative; name it from its top package (package.rel)
 """
 
 from __future__ import annotations
