@@ -13,7 +13,7 @@ from specguard.spec.spec import Spec
 from specguard.stats.intervals import GoalOutcome, QuorumVerdict, RunVerdict, success_interval
 from specguard.training.result import RunResult
 from specguard.tree.keys import GOAL, kind, label
-from specguard.tree.nodes import Always
+from specguard.tree.nodes import keeps_to_horizon
 from specguard.utils.text import interval_text, render_table, weights_text
 
 if TYPE_CHECKING:
@@ -312,7 +312,7 @@ class SpecResult:
             )
         terminated = sum(r.terminated for r in self.runs)
         if terminated:
-            horizon = any(isinstance(n, Always) and n.until == "horizon" for _, n in tree.walk())
+            horizon = keeps_to_horizon(tree)
             why = (
                 "an Always goal does not keep such an episode unless until='termination'"
                 if horizon

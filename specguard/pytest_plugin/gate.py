@@ -16,7 +16,7 @@ from specguard.extend import SHAPING, Node, until_end
 from specguard.spec.spec import Spec
 from specguard.stats.intervals import GoalOutcome, RunVerdict, run_verdict, success_interval
 from specguard.tree.keys import GOAL, SAFETY, kind, require_thresholds, resolve_goal
-from specguard.tree.nodes import Always
+from specguard.tree.nodes import keeps_to_horizon
 from specguard.utils.text import interval_text
 from specguard.validation import child_path
 
@@ -165,7 +165,7 @@ def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[RunVerdict])
         return _safety_hint(spec, path, result, verdicts)
     runs = result.runs
     fell = sum(r.terminated for r in runs)
-    horizon = any(isinstance(n, Always) and n.until == "horizon" for _, n in spec.tree.walk())
+    horizon = keeps_to_horizon(spec.tree)
     if fell and horizon and until_end(spec.tree):
         episodes = sum(r.episodes for r in runs)
         share = "every" if fell == episodes else f"{fell} of {episodes}"

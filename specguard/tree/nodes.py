@@ -43,7 +43,17 @@ from specguard.validation import ANNOTATION_SEPARATOR, PATH_SEPARATOR, check_cho
 if TYPE_CHECKING:
     from hypothesis.strategies import SearchStrategy
 
-__all__ = ["All", "Always", "Annotation", "Constraint", "Distance", "Goal", "Node", "component_weights"]
+__all__ = [
+    "All",
+    "Always",
+    "Annotation",
+    "Constraint",
+    "Distance",
+    "Goal",
+    "Node",
+    "component_weights",
+    "keeps_to_horizon",
+]
 
 # Re-exported: modules written before the extension API import these from here.
 AUTO: Literal["auto"] = "auto"  # All(weights=AUTO): adapted during training (specguard.training.auto_weights)
@@ -362,3 +372,14 @@ class Always(Node):
         kids = ", ".join(map(repr, self.nodes))
         until = "" if self.until == "horizon" else f", until={self.until!r}"
         return f"Always({kids}, name={self.name!r}{until}){self._annotations_repr()}"
+
+
+def keeps_to_horizon(tree: Node) -> bool:
+    """Whether ``tree`` has an ``Always`` that an episode the env terminates does not keep (``until="horizon"``).
+
+    Example:
+        >>> up = Goal("up", x=(0, 1))
+        >>> keeps_to_horizon(Always(up, name="a")), keeps_to_horizon(Always(up, name="a", until="termination"))
+        (True, False)
+    """
+    return any(isinstance(n, Always) and n.until == "horizon" for _, n in tree.walk())
