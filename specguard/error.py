@@ -1,28 +1,28 @@
-"""The errors specguard raises, in one place (as Gymnasium keeps its ``error.py``).
+"""The errors and warnings a user may catch, in one place (as Gymnasium keeps its ``error.py``).
 
 Every message says *where* the problem is (the node path, annotation or option),
 *what was expected* and *what was given*, and where it helps, a hint. Callers can
 catch :class:`SpecError` to handle all of them.
+
+The signals specguard raises and catches itself, which never reach a user, live
+beside the code that raises them: ``Broken`` in :mod:`specguard.contract.trees`,
+``ExitAtImport`` and ``ImportFailed`` in :mod:`specguard.utils.imports`, ``NoFrames`` in
+:mod:`specguard.report.gifs` and ``NoOffscreen`` in :mod:`specguard.report.offscreen`.
 """
 
 from __future__ import annotations
 
 __all__ = [
     "BaselineError",
-    "Broken",
     "CacheLockTimeout",
     "CacheWarning",
     "EvaluationError",
     "ExecutorError",
-    "ExitAtImport",
     "FingerprintError",
     "GoalMetAtStart",
     "GoalMissed",
-    "ImportFailed",
     "InitialEnvError",
     "InvalidSpec",
-    "NoFrames",
-    "NoOffscreen",
     "PluginWarning",
     "SpecError",
     "SpecWarning",
@@ -194,41 +194,4 @@ class RunsCrashed(AssertionError):
     """Runs of a spec crashed (a worker raised, was killed or died): its items fail, even a goal expected to miss.
 
     Not a :class:`GoalMissed`, so a goal's ``xfail`` (which expects a miss) does not take it for one.
-    """
-
-
-class Broken(Exception):
-    """Raised by a contract property with what breaks the invariant; ``contract.trees.run_property`` adds the rest."""
-
-
-class ExitAtImport(BaseException):
-    """``os._exit`` called while a spec file (or a ``"module:Class"`` or ``"module:Id"`` string's module) was imported,
-    raised instead of ending the process.
-
-    A ``BaseException``, as ``SystemExit`` is: the spec file's own ``except Exception`` cannot swallow it.
-    :func:`specguard.spec.files.import_file` turns it into a :class:`SpecError` naming the file,
-    :func:`specguard.utils.imports.import_module` into one naming the string.
-    """
-
-    def __init__(self, status: object) -> None:
-        super().__init__(status)
-        self.status = status
-
-
-class ImportFailed(Exception):
-    """A module named by a user's string could not be imported; the message says why, in one bounded line.
-
-    Internal: :func:`specguard.utils.imports.import_module` raises it, and each caller turns it into the
-    :class:`SpecError` of its field (an algorithm's ``InvalidSpec``, an env's ``InitialEnvError``).
-    """
-
-
-class NoFrames(Exception):
-    """An env's ``render()`` gave no RGB frame, so a GIF cannot be written (the report notes it and goes on)."""
-
-
-class NoOffscreen(RuntimeError):
-    """A MuJoCo env cannot render here: no display, ``MUJOCO_GL`` unset, and no off-screen backend works.
-
-    Raised by :mod:`specguard.report.offscreen`; the GIF code turns it into the report's one-line note.
     """

@@ -15,12 +15,16 @@ design dependency). Parts, lowest first:
   gate);
 - ``report/`` (session reports, figures, GIFs, spec rendering);
 - the doors: ``pytest_plugin/`` and ``cli/``; and the facade ``specguard`` (``__init__``) and ``__main__``.
+
+Every exception and warning class a user may catch is defined in ``error``; the internal signals (raised and
+caught inside specguard) each beside the code that raises them (:data:`SIGNALS`); any other is a violation.
 """
 
 from __future__ import annotations
 
 import ast
 import builtins
+import importlib
 import re
 import subprocess
 import sys
@@ -377,38 +381,89 @@ def test_every_docstring_example_is_collected_by_the_readme_test_command():
     assert sorted(with_examples - collected_files(root, PACKAGE.name)) == []
 
 
-# -- one home for errors -----------------------------------------------------------------------
+# -- one home for errors, one for each internal signal ----------------------------------------------
+
+SIGNALS: Mapping[str, frozenset[str]] = {
+    "specguard.contract.trees": frozenset({"Broken"}),
+    "specguard.utils.imports": frozenset({"ExitAtImport", "ImportFailed"}),
+    "specguard.report.gifs": frozenset({"NoFrames"}),
+    "specguard.report.offscreen": frozenset({"NoOffscreen"}),
+}
+"""The internal signals (raised and caught inside specguard, never reaching a user), each beside the code that
+raises it. ``error`` holds only what users catch (as Gymnasium's ``error.py``)."""
 
 
-def exception_classes_outside_error(package: Path) -> list[str]:
-    """Classes deriving from an exception or warning (a builtin one or one of ``error.py``'s) defined elsewhere."""
+def misplaced_exception_classes(package: Path, signals: Mapping[str, frozenset[str]] = SIGNALS) -> list[str]:
+    """Exception and warning classes defined away from their home, as ``module.Class (why)``.
+
+    A class deriving from one of ``error.py``'s is public: its home is ``error``. An internal signal's home is
+    its module in ``signals``, never ``error``. Any other class deriving from a builtin exception or warning, or
+    from a signal, is misplaced wherever it is defined.
+    """
     error_module = package / "error.py"
-    known = {
+    builtin = {
         name for name, value in vars(builtins).items() if isinstance(value, type) and issubclass(value, BaseException)
     }
+    homes = {signal: module for module, names in signals.items() for signal in names}
+    public = set()
     if error_module.exists():
-        known |= {n.name for n in ast.walk(ast.parse(error_module.read_text())) if isinstance(n, ast.ClassDef)}
+        public = {n.name for n in ast.walk(ast.parse(error_module.read_text())) if isinstance(n, ast.ClassDef)}
+    public -= set(homes)
     found = []
     for name, path in modules_of(package).items():
-        if path == error_module:
-            continue
         for node in ast.walk(ast.parse(path.read_text(), str(path))):
-            if isinstance(node, ast.ClassDef) and any(ast.unparse(b).rpartition(".")[2] in known for b in node.bases):
-                found.append(f"{name}.{node.name}")
+            if not isinstance(node, ast.ClassDef):
+                continue
+            bases = {ast.unparse(b).rpartition(".")[2] for b in node.bases}
+            where = f"{name}.{node.name}"
+            if path == error_module:
+                if node.name in homes:
+                    found.append(f"{where} (an internal signal: its home is {homes[node.name]})")
+            elif bases & public:
+                found.append(f"{where} (a public exception: its home is {package.name}.error)")
+            elif bases & (builtin | set(homes)) and homes.get(node.name) != name:
+                found.append(f"{where} (neither public, in {package.name}.error, nor a signal listed at its home)")
     return sorted(found)
 
 
-def test_every_exception_class_is_defined_in_error():
-    assert exception_classes_outside_error(PACKAGE) == []
+def test_every_exception_class_is_in_error_or_a_signal_at_its_home():
+    assert misplaced_exception_classes(PACKAGE) == []
 
 
-def test_an_exception_class_outside_error_is_found(tmp_path):
+@pytest.mark.parametrize(("module", "signal"), [(m, s) for m, names in SIGNALS.items() for s in sorted(names)])
+def test_every_listed_signal_is_defined_at_its_home(module, signal):
+    cls = getattr(importlib.import_module(module), signal)
+    assert issubclass(cls, BaseException) and cls.__module__ == module
+    assert not hasattr(importlib.import_module("specguard.error"), signal)
+
+
+def test_a_misplaced_exception_class_is_found(tmp_path):
+    package = write_package(
+        tmp_path,
+        {
+            "error.py": "class SpecError(Exception):\n    pass\nclass Broken(Exception):\n    pass\n",
+            "engine/runs.py": "from specguard import error\nclass Late(error.SpecError):\n    pass\n",
+            "registry.py": "class Loud(UserWarning):\n    pass\nclass Plain:\n    pass\n",
+            "contract/trees.py": "class Broken(Exception):\n    pass\nclass Worse(Broken):\n    pass\n",
+            "report/gifs.py": "class Broken(Exception):\n    pass\nclass Stray(RuntimeError):\n    pass\n",
+        },
+    )
+    assert misplaced_exception_classes(package, {"specguard.contract.trees": frozenset({"Broken"})}) == [
+        "specguard.contract.trees.Worse (neither public, in specguard.error, nor a signal listed at its home)",
+        "specguard.engine.runs.Late (a public exception: its home is specguard.error)",
+        "specguard.error.Broken (an internal signal: its home is specguard.contract.trees)",
+        "specguard.registry.Loud (neither public, in specguard.error, nor a signal listed at its home)",
+        "specguard.report.gifs.Broken (neither public, in specguard.error, nor a signal listed at its home)",
+        "specguard.report.gifs.Stray (neither public, in specguard.error, nor a signal listed at its home)",
+    ]
+
+
+def test_a_signal_at_its_home_is_no_violation(tmp_path):
     package = write_package(
         tmp_path,
         {
             "error.py": "class SpecError(Exception):\n    pass\n",
-            "engine/runs.py": "from specguard import error\nclass Late(error.SpecError):\n    pass\n",
-            "registry.py": "class Loud(UserWarning):\n    pass\nclass Plain:\n    pass\n",
+            "contract/trees.py": "class Broken(Exception):\n    pass\n",
         },
     )
-    assert exception_classes_outside_error(package) == ["specguard.engine.runs.Late", "specguard.registry.Loud"]
+    assert misplaced_exception_classes(package, {"specguard.contract.trees": frozenset({"Broken"})}) == []

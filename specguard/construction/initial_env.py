@@ -29,8 +29,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.envs.registration import EnvSpec
 
-from specguard.error import ImportFailed, InitialEnvError, StateMappingError
-from specguard.utils.imports import import_module
+from specguard.error import InitialEnvError, StateMappingError
+from specguard.utils.imports import ImportFailed, import_module
 from specguard.utils.text import MAX_SHOWN, elide, shown
 
 __all__ = ["InitialEnv", "check_identity_observation", "read_env_features", "registered_spec", "state_type"]

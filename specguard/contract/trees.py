@@ -22,7 +22,6 @@ from specguard.construction.env import SpecEnv
 from specguard.construction.initial_env import state_type
 from specguard.construction.reference import ExtendedState, Requirements, process
 from specguard.contract.replay import ReplayEnv
-from specguard.error import Broken
 from specguard.extend import Annotation, Context, Node, until_end
 from specguard.tree._draw import values
 from specguard.tree.builtin_annotations import Constraint, Distance
@@ -30,6 +29,15 @@ from specguard.tree.nodes import All, Goal
 from specguard.validation import child_path
 
 __all__ = ["FEATURES", "Broken", "Example", "cases", "fail", "refinement_cases", "run_property", "trees_with"]
+
+
+class Broken(Exception):
+    """What breaks an invariant, raised by a contract property; :func:`run_property` adds the rest.
+
+    An internal signal: the kit's checks (:mod:`specguard.contract.checks`) raise it and
+    :func:`run_property` turns it into the check's readable :class:`AssertionError` (:func:`fail`).
+    """
+
 
 FEATURES = ("a", "b", "c")
 """The features of the random trees and trajectories."""

@@ -22,18 +22,25 @@ from pathlib import Path
 from typing import Any
 
 from specguard.cache.models import load_model
-from specguard.error import InitialEnvError, NoFrames, NoOffscreen
+from specguard.error import InitialEnvError
 from specguard.falsify.starts import START_OPTION, StartSpace
-from specguard.report.offscreen import HOW, is_mujoco, offscreen
+from specguard.report.offscreen import HOW, NoOffscreen, is_mujoco, offscreen
 from specguard.spec.spec import Spec
 from specguard.training.policy import policy
 from specguard.training.rollout import episode
 from specguard.training.train import EVAL_SEED_BASE
 
-__all__ = ["MAX_FRAMES", "Gif", "counterexample_gifs", "gif_stem", "report_gifs", "write_gif"]
+__all__ = ["MAX_FRAMES", "Gif", "NoFrames", "counterexample_gifs", "gif_stem", "report_gifs", "write_gif"]
 
 MAX_FRAMES = 100  # frames a GIF keeps at most (an episode's frames are subsampled evenly)
 LAST_FRAME_MS = 2000  # how long the captioned last frame stays
+
+
+class NoFrames(Exception):
+    """An env's ``render()`` gave no RGB frame, so a GIF cannot be written.
+
+    An internal signal, raised and caught here: the report notes it and goes on.
+    """
 
 
 @dataclass(frozen=True)

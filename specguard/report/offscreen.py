@@ -25,9 +25,15 @@ from contextlib import contextmanager
 
 import gymnasium as gym
 
-from specguard.error import NoOffscreen
+__all__ = ["BACKENDS", "ENABLE", "HOW", "NoOffscreen", "headless", "is_mujoco", "offscreen", "working_backend"]
 
-__all__ = ["BACKENDS", "ENABLE", "HOW", "headless", "is_mujoco", "offscreen", "working_backend"]
+
+class NoOffscreen(RuntimeError):
+    """A MuJoCo env cannot render here: no display, ``MUJOCO_GL`` unset, and no off-screen backend works.
+
+    An internal signal: :func:`offscreen` raises it; the GIF code turns it into the report's one-line note.
+    """
+
 
 BACKENDS = ("egl", "osmesa")
 """The off-screen backends tried, in order: EGL (Mesa's software renderer without a GPU), then OSMesa."""

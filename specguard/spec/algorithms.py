@@ -24,8 +24,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from specguard.error import ImportFailed, InvalidSpec
-from specguard.utils.imports import import_module
+from specguard.error import InvalidSpec
+from specguard.utils.imports import ImportFailed, import_module
 from specguard.utils.text import MAX_SHOWN, elide, shown, value_text
 from specguard.validation import is_count
 

@@ -15,9 +15,9 @@ from typing import Any
 
 import cloudpickle
 
-from specguard.error import ExitAtImport, SpecError
+from specguard.error import SpecError
 from specguard.spec.spec import Spec
-from specguard.utils.imports import no_exit
+from specguard.utils.imports import ExitAtImport, no_exit
 
 __all__ = ["import_file", "load_objects", "spec_path"]
 

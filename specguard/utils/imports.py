@@ -11,7 +11,7 @@ Example:
     >>> import_module(".rel")
     Traceback (most recent call last):
     ...
-    specguard.error.ImportFailed: its module '.rel' is relative; name it from its top package (package.rel)
+    specguard.utils.imports.ImportFailed: its module '.rel' is relative; name it from its top package (package.rel)
 """
 
 from __future__ import annotations
@@ -23,10 +23,31 @@ from collections.abc import Iterator
 from types import ModuleType
 from typing import NoReturn
 
-from specguard.error import ExitAtImport, ImportFailed
 from specguard.utils.text import MAX_SHOWN, elide, shown
 
-__all__ = ["import_module", "no_exit"]
+__all__ = ["ExitAtImport", "ImportFailed", "import_module", "no_exit"]
+
+
+class ExitAtImport(BaseException):
+    """``os._exit`` called while a spec file (or a ``"module:Class"`` or ``"module:Id"`` string's module) was imported,
+    raised instead of ending the process (an internal signal: :func:`no_exit` raises it).
+
+    A ``BaseException``, as ``SystemExit`` is: the spec file's own ``except Exception`` cannot swallow it.
+    :func:`specguard.spec.files.import_file` turns it into a :class:`~specguard.error.SpecError` naming the file,
+    :func:`import_module` into an :class:`ImportFailed` naming the string.
+    """
+
+    def __init__(self, status: object) -> None:
+        super().__init__(status)
+        self.status = status
+
+
+class ImportFailed(Exception):
+    """A module named by a user's string could not be imported; the message says why, in one bounded line.
+
+    An internal signal: :func:`import_module` raises it, and each caller turns it into the
+    :class:`~specguard.error.SpecError` of its field (an algorithm's ``InvalidSpec``, an env's ``InitialEnvError``).
+    """
 
 
 @contextlib.contextmanager
