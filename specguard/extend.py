@@ -57,7 +57,9 @@ from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 from specguard.error import InvalidSpec
-from specguard.validation import ANNOTATION_SEPARATOR, check_name, check_weight, child_path, number_text
+from specguard.utils.node_paths import ANNOTATION_SEPARATOR, child_path
+from specguard.utils.text import number_text
+from specguard.validation import check_name, check_weight
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterator

@@ -1,8 +1,15 @@
-"""The one place arguments of nodes and annotations are checked and numbers are written.
+"""The one place arguments of nodes, annotations and specs are checked.
 
 Built-in and third-party operators use the same checks, so every message has
 the same shape: *where* (the node or annotation at fault), *what was expected*,
 *what was given*, and a hint where one helps (see :class:`specguard.InvalidSpec`).
+Each rule is one ``is_*`` predicate; its ``check_*`` raises that message, and
+the doors read an option's text by the same predicate
+(:mod:`specguard.utils.options`).
+
+:func:`number_text` (from :mod:`specguard.utils.text`) is here too, the one way
+an operator's ``describe()`` writes a number; node paths are built by
+:mod:`specguard.utils.node_paths`.
 
 Example:
     >>> from specguard.validation import check_weight, number_text
@@ -15,7 +22,6 @@ Example:
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Callable, Iterable, Sequence
 from numbers import Integral, Real
 from typing import Any, TypeGuard
@@ -23,10 +29,10 @@ from typing import Any, TypeGuard
 import numpy as np
 
 from specguard.error import EvaluationError, InvalidSpec
+from specguard.utils.node_paths import ANNOTATION_SEPARATOR, PATH_SEPARATOR
+from specguard.utils.text import aside, number_text
 
 __all__ = [
-    "ANNOTATION_SEPARATOR",
-    "PATH_SEPARATOR",
     "check_budget",
     "check_callable",
     "check_choice",
@@ -41,8 +47,6 @@ __all__ = [
     "check_truth",
     "check_unique",
     "check_weight",
-    "child_path",
-    "function_text",
     "is_choice",
     "is_count",
     "is_finite",
@@ -50,28 +54,7 @@ __all__ = [
     "is_open_fraction",
     "is_positive",
     "number_text",
-    "parse_choice",
-    "parse_count",
-    "parse_natural",
-    "parse_positive",
 ]
-
-PATH_SEPARATOR = "/"
-ANNOTATION_SEPARATOR = ":"
-
-
-def child_path(parent: str, name: str) -> str:
-    """The path of the node ``name`` below the node whose path is ``parent``: ``parent/name``.
-
-    The one place a node path is built: tree walks, compiled envs, reference
-    rewards, contract checks, weights and reports all key their nodes by it. A
-    root has no parent: ``child_path("", name)`` is ``name``.
-
-    Example:
-        >>> child_path("pendulum", "position"), child_path("", "pendulum")
-        ('pendulum/position', 'pendulum')
-    """
-    return f"{parent}{PATH_SEPARATOR}{name}" if parent else name
 
 
 def check_name(kind: str, name: object) -> str:
@@ -108,10 +91,6 @@ def check_weight(where: str, weight: object) -> float | None:
     return value
 
 
-def _meaning(meaning: str) -> str:
-    return f" ({meaning})" if meaning else ""
-
-
 def is_count(value: object) -> TypeGuard[Integral]:
     """The one rule for a count: an integer ``>= 1``.
 
@@ -132,7 +111,7 @@ def check_count(where: str, argument: str, value: object, meaning: str = "") -> 
         InvalidSpec: naming ``where``, ``argument`` and the value given.
     """
     if not is_count(value):
-        raise InvalidSpec(where, f"expected {argument} to be an integer >= 1{_meaning(meaning)}, got {value!r}")
+        raise InvalidSpec(where, f"expected {argument} to be an integer >= 1{aside(meaning)}, got {value!r}")
     return int(value)
 
 
@@ -145,47 +124,9 @@ def check_positive(where: str, argument: str, value: object, meaning: str = "") 
     if not is_positive(value):
         raise InvalidSpec(
             where,
-            f"expected {argument} to be a finite number > 0{_meaning(meaning)}, got {value!r}",
+            f"expected {argument} to be a finite number > 0{aside(meaning)}, got {value!r}",
             hint=f"{argument} must be a positive finite number",
         )
-    return float(value)
-
-
-_COUNT_TEXT = re.compile(r"[1-9][0-9]*")
-"""How an option writes a count: ASCII digits without sign, separator or leading zero."""
-
-
-def parse_count(text: object, meaning: str = "") -> int:
-    """An integer ``>= 1`` (:func:`is_count`) from an option's text, or given as an integer.
-
-    The text is decimal digits without sign, ``_`` or leading zero (``"05"``
-    is refused, as a typo or an octal number would be); blanks around it are ignored.
-
-    Raises:
-        ValueError: anything else, saying what was expected; each door (an
-            option of the CLI or of the pytest plugin) makes it its own usage error.
-    """
-    value = int(text.strip()) if isinstance(text, str) and _COUNT_TEXT.fullmatch(text.strip()) else text
-    if not is_count(value):
-        raise ValueError(f"expected an integer >= 1{_meaning(meaning)}, got {text!r}")
-    return int(value)
-
-
-def parse_positive(text: object, meaning: str = "") -> float:
-    """A finite number ``> 0`` (:func:`is_positive`) from an option's text, or given as a number.
-
-    Raises:
-        ValueError: anything else (``inf`` and ``nan`` included), saying what
-            was expected; each door makes it its own usage error.
-    """
-    value: object = text
-    if isinstance(text, str):
-        try:
-            value = float(text)
-        except ValueError:
-            value = None
-    if not is_positive(value):
-        raise ValueError(f"expected a finite number > 0{_meaning(meaning)}, got {text!r}")
     return float(value)
 
 
@@ -209,21 +150,7 @@ def check_natural(where: str, argument: str, value: object, meaning: str = "") -
         specguard.error.InvalidSpec: Falsify: expected seed to be an integer >= 0, got -1...
     """
     if not is_natural(value):
-        raise InvalidSpec(where, f"expected {argument} to be an integer >= 0{_meaning(meaning)}, got {value!r}")
-    return int(value)
-
-
-def parse_natural(text: object, meaning: str = "") -> int:
-    """An integer ``>= 0`` (:func:`is_natural`) from an option's text: ``0``, or a count (see :func:`parse_count`).
-
-    Raises:
-        ValueError: anything else, saying what was expected; each door makes it its own usage error.
-    """
-    value = 0 if isinstance(text, str) and text.strip() == "0" else text
-    if isinstance(value, str) and _COUNT_TEXT.fullmatch(value.strip()):
-        value = int(value.strip())
-    if not is_natural(value):
-        raise ValueError(f"expected an integer >= 0{_meaning(meaning)}, got {text!r}")
+        raise InvalidSpec(where, f"expected {argument} to be an integer >= 0{aside(meaning)}, got {value!r}")
     return int(value)
 
 
@@ -247,7 +174,7 @@ def check_open_fraction(where: str, argument: str, value: object, meaning: str =
         specguard.error.InvalidSpec: Spec 'up': expected confidence to be a number in (0, 1), got 1.0...
     """
     if not is_open_fraction(value):
-        raise InvalidSpec(where, f"expected {argument} to be a number in (0, 1){_meaning(meaning)}, got {value!r}")
+        raise InvalidSpec(where, f"expected {argument} to be a number in (0, 1){aside(meaning)}, got {value!r}")
     return float(value)
 
 
@@ -311,18 +238,6 @@ def check_choice(where: str, argument: str, value: object, choices: Sequence[str
     return str(value)
 
 
-def parse_choice(text: object, choices: Sequence[str]) -> str:
-    """One of ``choices`` (:func:`is_choice`) from an option's text; blanks around it are ignored.
-
-    Raises:
-        ValueError: anything else, saying what was expected; each door makes it its own usage error.
-    """
-    value = text.strip() if isinstance(text, str) else text
-    if not is_choice(value, choices):
-        raise ValueError(f"expected one of {', '.join(choices)}, got {text!r}")
-    return str(value)
-
-
 def check_unique(where: str, pairs: Iterable[tuple[str, Any]]) -> dict[str, Any]:
     """``pairs`` as a dict, each name given once: a repeated name would let its last value win in silence.
 
@@ -353,27 +268,6 @@ def check_callable(where: str, fn: object, signature: str) -> Callable[..., Any]
     if not callable(fn):
         raise InvalidSpec(where, f"expected fn to be callable as {signature}, got {fn!r}")
     return fn
-
-
-def number_text(x: float) -> str:
-    """A number written exactly: the shortest text that reads back as the same float.
-
-    Whole numbers drop their ``.0``; infinities read ``inf``/``-inf``. Used by
-    every description, so printing, formulas and fingerprints never round.
-    """
-    text = float.__repr__(float(x))
-    return text[:-2] if text.endswith(".0") else text
-
-
-def function_text(fn: Callable[..., Any]) -> str:
-    """A user function's name as descriptions show it: its qualified name without ``<locals>.``.
-
-    Never ``repr(fn)``, which holds a memory address.
-    """
-    name = getattr(fn, "__qualname__", None) or getattr(fn, "__name__", None)
-    if not isinstance(name, str):
-        name = type(fn).__qualname__  # a callable object: its class
-    return name.rsplit("<locals>.", 1)[-1]
 
 
 def check_truth(where: str | None, value: object) -> bool:

@@ -125,7 +125,7 @@ def test_a_file_that_raises_on_import(tmp_path, capsys):
     [
         (["--workers", "0"], "argument --workers: expected an integer >= 1 (or 'auto': one per usable core), got '0'"),
         (["--budget-scale", "-1"], "argument --budget-scale: expected a finite number > 0, got '-1'"),
-        # each option reaches its shared rule (validation.parse_count, validation.parse_positive)
+        # each option reaches its shared rule (utils.options.parse_count, utils.options.parse_positive)
         (["--workers", "05"], "argument --workers: expected an integer >= 1 (or 'auto': one per usable core), got '05"),
         (["--checkpoints", "05"], "argument --checkpoints: expected an integer >= 1 (1: train every run's whole"),
         (["--budget-scale", "inf"], "argument --budget-scale: expected a finite number > 0, got 'inf'"),

@@ -4,7 +4,9 @@ Every import counts, wherever it is written: at module level, inside a
 function (a lazy import is still a dependency) or under ``TYPE_CHECKING`` (a
 design dependency). Parts, lowest first:
 
-- base: ``error``, ``validation``, ``version``, ``utils/``;
+- base: ``error``, ``validation``, ``version``, ``utils/`` (``validation`` reads the separators of
+  ``utils.node_paths`` and writes numbers by ``utils.text``; ``utils.options`` reads option text by
+  ``validation``'s rules: the two parts may import each other, module by module without a cycle);
 - ``extend`` (the operator API), then ``tree/`` (the built-in nodes), then ``construction/`` (the constructed env);
 - ``stats/`` (intervals, anytime looks, comparisons: numbers only);
 - ``falsify/`` (start spaces, robustness margins, the guided search for failing starts: over any policy callable);
@@ -46,7 +48,7 @@ RUNNING = TOOLS | {"stats", "parallel", "falsify", "spec", "training", "cache"}
 ALLOWED: Mapping[str, frozenset[str]] = {
     "error": frozenset({"error"}),
     "version": frozenset({"version"}),
-    "validation": frozenset({"validation", "error"}),
+    "validation": frozenset({"validation", "error", "utils"}),
     "utils": BASE,
     "extend": BASE | {"extend"},
     "tree": BASE | {"extend", "tree"},

@@ -441,7 +441,7 @@ def test_checkpoints_make_the_budget_a_ceiling(pytester):
             "--goal-specs-undecided: expected one of fail, xfail, pass, got 'maybe'",
         ),
         ("--goal-specs-budget-scale=0", "--goal-specs-budget-scale: expected a finite number > 0, got '0'"),
-        # inf passed the option check and then failed every item (validation.parse_positive now)
+        # inf passed the option check and then failed every item (utils.options.parse_positive now)
         ("--goal-specs-budget-scale=inf", "--goal-specs-budget-scale: expected a finite number > 0, got 'inf'"),
         (
             "--goal-specs-checkpoints=0",

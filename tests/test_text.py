@@ -1,8 +1,13 @@
-"""The one table renderer."""
+"""Text every door writes the same way: tables, numbers written exactly, user functions by name."""
 
 from __future__ import annotations
 
-from specguard.utils.text import MAX_CELL, elide, render_table
+import math
+
+from hypothesis import given
+from hypothesis import strategies as st
+
+from specguard.utils.text import MAX_CELL, elide, function_text, number_text, render_table
 
 
 def test_columns_align_and_lines_have_no_trailing_spaces():
@@ -26,3 +31,25 @@ def test_a_long_cell_is_elided_in_the_middle_and_the_columns_stay_narrow():
 def test_elide_keeps_short_text_and_both_ends_of_long_text():
     assert elide("abc", 5) == "abc"
     assert elide("abcdefghij", 5) == "ab…ij" and len(elide("abcdefghij", 6)) == 6
+
+
+@given(st.floats(allow_nan=False))
+def test_numbers_are_written_exactly(x):
+    assert float(number_text(x)) == x
+
+
+def test_whole_numbers_drop_their_point():
+    assert (number_text(1.0), number_text(-0.0), number_text(2.5), number_text(math.inf)) == ("1", "-0", "2.5", "inf")
+
+
+def test_function_text_never_holds_an_address():
+    def inner(s):  # type: ignore[no-untyped-def]
+        return s
+
+    class Callable_:
+        def __call__(self, s):  # type: ignore[no-untyped-def]
+            return s
+
+    assert function_text(inner) == "inner"
+    assert function_text(abs) == "abs"
+    assert function_text(Callable_()) == "Callable_"

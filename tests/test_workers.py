@@ -425,7 +425,7 @@ def test_parse_workers(value, parsed):
 
 @pytest.mark.parametrize("value", [0, -1, "0", "two", 1.5, True, None, "", "05"])
 def test_parse_workers_refuses(value):
-    # "05" went through str.isdigit here while checkpoint counts refused it: one rule now (validation.parse_count)
+    # "05" went through str.isdigit here while checkpoint counts refused it: one rule now (utils.options.parse_count)
     message = r"^workers: expected an integer >= 1 \(or 'auto': one per usable core\), got "
     with pytest.raises(InvalidSpec, match=message):
         parse_workers(value)

@@ -160,6 +160,28 @@ def test_the_checker_passes_public_uses(source):
     assert private_uses(source) == []
 
 
+def imported_names(source: str) -> list[tuple[str, str]]:
+    """``(module, name)`` for each ``from specguard... import name`` in ``source`` (module level or not)."""
+    return [
+        (node.module, alias.name)
+        for node in ast.walk(ast.parse(source))
+        if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module and _is_specguard(node.module)
+        for alias in node.names
+    ]
+
+
+def test_every_name_the_plugin_imports_is_listed_in_its_module_all():
+    """What a plugin imports is the API specguard keeps: a name in the public module's ``__all__`` (or a submodule)."""
+    used = sorted({pair for path in plugin_sources() for pair in imported_names(path.read_text(encoding="utf-8"))})
+    assert ("specguard.validation", "number_text") in used  # the reader reads them
+    unlisted = [
+        f"{module}.{name}"
+        for module, name in used
+        if f"{module}.{name}" not in SUBMODULES and name not in importlib.import_module(module).__all__
+    ]
+    assert unlisted == []
+
+
 # -- names --------------------------------------------------------------------
 
 

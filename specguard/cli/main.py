@@ -51,7 +51,8 @@ from specguard.stats.intervals import UNDECIDED_OUTCOMES
 from specguard.tree.keys import require_thresholds
 from specguard.tree.nodes import Node
 from specguard.utils.files import DEFAULT_CACHE_DIR, write_atomic
-from specguard.validation import check_unique, parse_choice, parse_count, parse_natural, parse_positive
+from specguard.utils.options import parse_choice, parse_count, parse_natural, parse_positive
+from specguard.validation import check_unique
 from specguard.version import __version__
 
 __all__ = ["main"]
@@ -173,7 +174,7 @@ _T = TypeVar("_T")
 
 
 def _option(parse: Callable[[str], _T]) -> Callable[[str], _T]:
-    """An option's argparse type from its shared check (:mod:`specguard.validation` and the rules built on it).
+    """An option's argparse type from its shared check (:mod:`specguard.utils.options` and the rules built on it).
 
     The check's message (a ``ValueError``'s, or a ``SpecError``'s without where
     and hint) becomes argparse's usage error: ``argument --NAME: <message>``, exit status 2.
@@ -223,7 +224,7 @@ _case_scale = _option(_parse_case_scale)
 
 
 def _natural(meaning: str) -> Callable[[str], int]:
-    """An option's type: an integer >= 0 (:func:`specguard.validation.parse_natural`); ``meaning`` names it."""
+    """An option's type: an integer >= 0 (:func:`specguard.utils.options.parse_natural`); ``meaning`` names it."""
 
     def natural(text: str) -> int:
         return parse_natural(text, meaning)

@@ -54,7 +54,8 @@ from specguard.extend import (
     component_weights,
     until_end,
 )
-from specguard.validation import check_truth, child_path
+from specguard.utils.node_paths import child_path
+from specguard.validation import check_truth
 
 __all__ = ["CompiledTree", "FlatEvaluator", "compile_tree"]
 

@@ -23,7 +23,7 @@ from specguard.construction.evaluator import StepResult
 from specguard.construction.initial_env import state_type
 from specguard.error import EvaluationError
 from specguard.extend import Annotation, Context, Node, Slot, annotation_key, component_weights, until_end
-from specguard.validation import child_path
+from specguard.utils.node_paths import child_path
 
 __all__ = [
     "ExtendedState",

@@ -56,7 +56,7 @@ from specguard.contract.trees import (
 )
 from specguard.extend import Annotation, Context, Node, annotation_key
 from specguard.tree.nodes import Goal
-from specguard.validation import child_path
+from specguard.utils.node_paths import child_path
 
 __all__ = [
     "CHECKS",

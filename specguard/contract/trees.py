@@ -26,7 +26,7 @@ from specguard.extend import Annotation, Context, Node, until_end
 from specguard.tree._draw import values
 from specguard.tree.builtin_annotations import Constraint, Distance
 from specguard.tree.nodes import All, Goal
-from specguard.validation import child_path
+from specguard.utils.node_paths import child_path
 
 __all__ = ["FEATURES", "Broken", "Example", "cases", "fail", "refinement_cases", "run_property", "trees_with"]
 

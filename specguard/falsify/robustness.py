@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from specguard.extend import SAFETY, Box, Context, Node, annotation_key
-from specguard.validation import child_path
+from specguard.utils.node_paths import child_path
 
 __all__ = ["Judgement", "box_margin", "feature_scales", "judge_end", "margins", "own_states", "reached_early"]
 

@@ -17,8 +17,8 @@ from specguard.spec.spec import Spec
 from specguard.stats.intervals import GoalOutcome, RunVerdict, run_verdict, success_interval
 from specguard.tree.keys import GOAL, SAFETY, kind, require_thresholds, resolve_goal
 from specguard.tree.nodes import keeps_to_horizon
+from specguard.utils.node_paths import child_path
 from specguard.utils.text import interval_text
-from specguard.validation import child_path
 
 if TYPE_CHECKING:
     from specguard.gate.baseline import Baseline

@@ -79,7 +79,7 @@ def parse_checkpoints(text: str | int) -> int:
     Raises:
         ValueError: anything else, saying what was expected.
     """
-    from specguard.validation import parse_count
+    from specguard.utils.options import parse_count
 
     return parse_count(text, "1: train every run's whole budget")
 

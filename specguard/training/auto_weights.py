@@ -58,7 +58,7 @@ from collections import deque
 from collections.abc import Mapping, Sequence
 
 from specguard.extend import Node, adapted_annotations, annotation_key, component_weights
-from specguard.validation import child_path
+from specguard.utils.node_paths import child_path
 
 __all__ = [
     "FLOOR",

@@ -17,16 +17,8 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from specguard.error import EvaluationError
 from specguard.extend import SAFETY, SHAPING, Annotation, CounterForm, ShapingForm, Slot
-from specguard.validation import (
-    check_budget,
-    check_callable,
-    check_name,
-    check_positive,
-    check_truth,
-    check_weight,
-    function_text,
-    number_text,
-)
+from specguard.utils.text import function_text, number_text
+from specguard.validation import check_budget, check_callable, check_name, check_positive, check_truth, check_weight
 
 if TYPE_CHECKING:
     from hypothesis.strategies import SearchStrategy

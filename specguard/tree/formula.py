@@ -21,7 +21,8 @@ from __future__ import annotations
 from collections import Counter
 
 from specguard.extend import SAFETY, SHAPING, Annotation, ChildWeights, Node, adapted_annotations, component_weights
-from specguard.validation import PATH_SEPARATOR, child_path, number_text
+from specguard.utils.node_paths import PATH_SEPARATOR, child_path
+from specguard.utils.text import number_text
 
 __all__ = ["formula"]
 

@@ -44,7 +44,7 @@ from typing import TYPE_CHECKING, Any
 
 from specguard.error import InvalidSpec
 from specguard.extend import SAFETY, annotation_key
-from specguard.validation import ANNOTATION_SEPARATOR, PATH_SEPARATOR
+from specguard.utils.node_paths import ANNOTATION_SEPARATOR, PATH_SEPARATOR
 
 if TYPE_CHECKING:
     from specguard.extend import Node

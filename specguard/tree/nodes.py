@@ -38,7 +38,9 @@ from specguard.extend import (
     set_fields,
 )
 from specguard.tree.builtin_annotations import Constraint, Distance
-from specguard.validation import ANNOTATION_SEPARATOR, PATH_SEPARATOR, check_choice, check_name, number_text
+from specguard.utils.node_paths import ANNOTATION_SEPARATOR, PATH_SEPARATOR
+from specguard.utils.text import number_text
+from specguard.validation import check_choice, check_name
 
 if TYPE_CHECKING:
     from hypothesis.strategies import SearchStrategy

@@ -1,19 +1,29 @@
-"""Text every door writes the same way: plain and Markdown tables, intervals, bounds, adapted weights."""
+"""Text every door writes the same way: numbers written exactly, user functions by name, plain and Markdown
+tables, intervals, bounds, adapted weights.
+
+Example:
+    >>> number_text(0.1 + 0.2), number_text(1.0), number_text(float("-inf"))
+    ('0.30000000000000004', '1', '-inf')
+"""
 
 from __future__ import annotations
 
 import reprlib
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import Any
 
 __all__ = [
     "MAX_CELL",
     "MAX_SHOWN",
     "MAX_VALUE",
+    "aside",
     "bounds_text",
     "elide",
+    "function_text",
     "interval_text",
     "markdown_cell",
     "markdown_table",
+    "number_text",
     "per_seed_text",
     "render_table",
     "shown",
@@ -24,6 +34,37 @@ __all__ = [
 
 MAX_CELL = 60  # the widest a table cell is drawn, but in the last column (never padded)
 MAX_VALUE = 200  # the most characters of a value read from a file that an error or warning quotes
+
+
+def number_text(x: float) -> str:
+    """A number written exactly: the shortest text that reads back as the same float.
+
+    Whole numbers drop their ``.0``; infinities read ``inf``/``-inf``. Used by
+    every description, so printing, formulas and fingerprints never round.
+    """
+    text = float.__repr__(float(x))
+    return text[:-2] if text.endswith(".0") else text
+
+
+def function_text(fn: Callable[..., Any]) -> str:
+    """A user function's name as descriptions show it: its qualified name without ``<locals>.``.
+
+    Never ``repr(fn)``, which holds a memory address.
+    """
+    name = getattr(fn, "__qualname__", None) or getattr(fn, "__name__", None)
+    if not isinstance(name, str):
+        name = type(fn).__qualname__  # a callable object: its class
+    return name.rsplit("<locals>.", 1)[-1]
+
+
+def aside(text: str) -> str:
+    """``text`` as an aside to a message, `` (text)``; nothing for no text.
+
+    Example:
+        >>> f"expected an integer >= 1{aside('runs')}", f"expected an integer >= 1{aside('')}"
+        ('expected an integer >= 1 (runs)', 'expected an integer >= 1')
+    """
+    return f" ({text})" if text else ""
 
 
 def elide(text: str, width: int) -> str:
