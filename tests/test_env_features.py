@@ -10,8 +10,8 @@ import pytest
 
 import specguard as sg
 from specguard.cache.fingerprint import fingerprint_spec
-from specguard.falsify.starts import START_OPTION, StartSpace
 from specguard.report.show import render_spec
+from specguard.starts.space import START_OPTION, StartSpace
 
 
 class LineEnv(gym.Env[np.ndarray, int]):

@@ -12,7 +12,7 @@ from specguard.cli.main import main
 from specguard.construction.initial_env import state_type
 from specguard.falsify.robustness import box_margin, feature_scales, margins
 from specguard.falsify.search import EpisodeRunner, falsify
-from specguard.falsify.starts import StartSpace
+from specguard.starts.space import StartSpace
 
 
 class Line(gym.Env):

@@ -23,9 +23,9 @@ from typing import Any
 
 from specguard.cache.models import load_model
 from specguard.error import InitialEnvError, NoFrames, NoOffscreen
-from specguard.falsify.starts import START_OPTION, StartSpace
 from specguard.report.offscreen import HOW, is_mujoco, offscreen
 from specguard.spec.spec import Spec
+from specguard.starts.space import START_OPTION, StartSpace
 from specguard.training.policy import policy
 from specguard.training.rollout import episode
 from specguard.training.train import EVAL_SEED_BASE

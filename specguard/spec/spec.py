@@ -24,10 +24,10 @@ from typing import Any, cast
 from specguard.construction.env import OBSERVATIONS, BaselineEnv, EnvFactory, SpecEnv
 from specguard.construction.initial_env import InitialEnv
 from specguard.error import InvalidSpec
-from specguard.falsify.starts import StartSpace, as_start_space
 from specguard.spec.algorithms import check_hyperparameters, check_policy, default_policy, resolve_algorithm
 from specguard.spec.budget import Budget
 from specguard.spec.zoo import SCHEDULED, LinearSchedule
+from specguard.starts.space import StartSpace, as_start_space
 from specguard.stats.intervals import UNDECIDED_OUTCOMES
 from specguard.tree.keys import check_expect, check_xfail, check_xfail_thresholded, resolve_goal
 from specguard.tree.nodes import Node
@@ -77,7 +77,7 @@ class Spec:
             their miss as a failure. Under anytime verdicts their runs are
             never cut short: a goal not met keeps its run training.
         starts: the start space the falsifier searches by default
-            (:class:`~specguard.falsify.starts.StartSpace` or its ranges
+            (:class:`~specguard.starts.space.StartSpace` or its ranges
             ``{variable: (lo, hi)}``; ``None``: the env's own reset ranges):
             ``specguard falsify``, :meth:`SpecResult.falsify` and
             ``falsify=True`` read it. Not part of the spec's identity: it

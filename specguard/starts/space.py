@@ -14,7 +14,7 @@ starts. A :class:`StartSpace` names other starts: per state variable a range
   link_mass_2``; MountainCar ``force, gravity``; MountainCarContinuous
   ``power``); one left out keeps the env's own value;
 * Gymnasium's MuJoCo envs (any ``MujocoEnv``) are set by their model's joints
-  (:mod:`specguard.falsify.joints`): a hinge or slide joint ``J`` gives ``J``
+  (:mod:`specguard.starts.joints`): a hinge or slide joint ``J`` gives ``J``
   and ``J_vel`` (InvertedPendulum: ``slider, hinge, slider_vel, hinge_vel``),
   set through ``set_state``. They have no default range: a variable left out
   keeps what the env's reset gave, and a space naming none searches the
@@ -51,8 +51,8 @@ import gymnasium as gym
 import numpy as np
 
 from specguard.error import InvalidSpec, UnknownFeature
-from specguard.falsify.joints import joint_setter
-from specguard.falsify.setter import Range, Setter, env_label
+from specguard.starts.joints import joint_setter
+from specguard.starts.setter import Range, Setter, env_label
 from specguard.validation import check_finite, check_flag, check_text
 
 __all__ = [
