@@ -53,7 +53,7 @@ from specguard.construction.policy import EpisodePolicy
 from specguard.extend import until_end
 from specguard.falsify.portfolio import Portfolio
 from specguard.falsify.robustness import Judgement, feature_scales, judge_end, own_states, reached_early
-from specguard.starts.space import START_OPTION, Starts, StartSpace
+from specguard.starts.space import START_OPTION, Starts, StartSpace, starts_of
 from specguard.stats.intervals import success_interval
 from specguard.validation import check_count, check_flag, check_natural, check_open_fraction
 
@@ -108,7 +108,9 @@ class EpisodeRunner:
     """Runs a policy from chosen starts on fresh copies of one env, several starts in lockstep.
 
     Args:
-        make_env: builds the spec's env (a ``SpecEnv``: it reports goals, safety and its evaluator).
+        make_env: ``make_env(starts=space)`` builds the spec's env in the start space's wrapper (a ``SpecEnv``:
+            it reports goals, safety and its evaluator), as :meth:`Spec.make_env
+            <specguard.spec.spec.Spec.make_env>` and :func:`~specguard.construction.env.make_env` do.
         act: ``act(observations) -> actions``, a batch (rows) to a batch; an
             :class:`~specguard.construction.policy.EpisodePolicy` is told when the batch's episodes start and
             which rows still run.
@@ -119,7 +121,7 @@ class EpisodeRunner:
 
     def __init__(
         self,
-        make_env: Callable[[], Any],
+        make_env: Callable[..., Any],
         act: Callable[[np.ndarray], Any],
         space: StartSpace,
         keys: Sequence[str],
@@ -127,12 +129,12 @@ class EpisodeRunner:
         batch: int = 8,
     ) -> None:
         self._make_env = make_env
+        self.space = space
         self.act = act
         self.keys = tuple(keys)
         self.batch = max(1, int(batch))
-        first = make_env()
-        self.starts: Starts = space.resolve(first.env)
-        first.env = self.starts.wrap(first.env)
+        first = make_env(starts=space)
+        self.starts: Starts = starts_of(first)
         self._envs: list[Any] = [first]
         self.tree = first.tree
         n = len(first.features)
@@ -147,9 +149,7 @@ class EpisodeRunner:
 
     def _ready(self, k: int) -> list[Any]:
         while len(self._envs) < k:
-            env = self._make_env()
-            env.env = self.starts.wrap(env.env)
-            self._envs.append(env)
+            self._envs.append(self._make_env(starts=self.space))
         return self._envs[:k]
 
     def run(self, points: np.ndarray) -> list[Outcome]:
