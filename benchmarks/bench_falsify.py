@@ -57,7 +57,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the case stud
 import specguard as sg
 from specguard.engine.falsification import batch_policy, property_keys
 from specguard.falsify.search import EpisodeRunner, falsify
-from specguard.falsify.starts import StartSpace
+from specguard.starts.space import StartSpace
 from specguard.training.policy import one_torch_thread, policy
 from specguard.training.rollout import episode
 

@@ -57,7 +57,7 @@ _EXPORTS = {
     "SpecError": "specguard.error",
     "SpecResult": "specguard.engine.spec_result",
     "SpecWarning": "specguard.error",
-    "StartSpace": "specguard.falsify.starts",
+    "StartSpace": "specguard.starts.space",
     "StateMappingError": "specguard.error",
     "UnknownFeature": "specguard.error",
     "UnreachableGoal": "specguard.error",
@@ -124,13 +124,13 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.extend import Annotation as Annotation
     from specguard.extend import Node as Node
     from specguard.falsify.check import Falsify as Falsify
-    from specguard.falsify.starts import StartSpace as StartSpace
     from specguard.pytest_plugin.declare import goal_spec as goal_spec
     from specguard.pytest_plugin.declare import goal_specs as goal_specs
     from specguard.spec.budget import Budget as Budget
     from specguard.spec.spec import Spec as Spec
     from specguard.spec.spec import check_spec as check_spec
     from specguard.spec.zoo import zoo_settings as zoo_settings
+    from specguard.starts.space import StartSpace as StartSpace
     from specguard.tree.builtin_annotations import Constraint as Constraint
     from specguard.tree.builtin_annotations import Distance as Distance
     from specguard.tree.formula import formula as formula

@@ -16,6 +16,7 @@ import specguard as sg
 from example_specs import acrobot, lunar_lander, mountain_car, pendulum
 from specguard import strategies as sgst
 from specguard.error import GoalMetAtStart, UnreachableGoal
+from specguard.starts.space import START_OPTION, starts_of
 from specguard.testing import ReplayEnv
 
 CASES = [(m, key) for m in (acrobot, pendulum, mountain_car, lunar_lander) for key in m.trees]
@@ -519,3 +520,40 @@ def test_an_env_without_masks_for_the_agents_actions_says_why(kwargs, problem):
     assert re.match(problem, action_masks_problem(env))
     with pytest.raises(sg.InitialEnvError, match=rf"far: no action masks: {problem}"):
         env.action_masks()
+
+
+# -- a start space given to the factory ---------------------------------------------------------
+
+CARTPOLE = sg.InitialEnv("CartPole-v1", features=CARTPOLE_FEATURES)
+WIDE = sg.StartSpace({"x": (-1.0, 1.0), "theta": (-0.2, 0.2)})
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda **kw: sg.make_env(CARTPOLE, FAR, **kw),
+        lambda **kw: sg.make_baseline_env(CARTPOLE, FAR, **kw),
+        lambda **kw: sg.Spec(CARTPOLE, FAR, budget=sg.Budget(timesteps=64), expect=0.5).make_env(**kw),
+    ],
+    ids=["make_env", "make_baseline_env", "Spec.make_env"],
+)
+def test_an_env_made_with_a_start_space_starts_where_it_is_told_in_that_space(make):
+    env = make(starts=WIDE)
+    starts = starts_of(env)  # resolved over the base env as it was made
+    assert starts.names == CARTPOLE_FEATURES and starts.low.tolist() == [-1.0, -0.05, -0.2, -0.05]
+    for point in starts.uniform(np.random.default_rng(0), 5):
+        obs, info = env.reset(seed=0, options={START_OPTION: starts.values(point)})
+        np.testing.assert_allclose(obs[:4], point, atol=1e-6)  # the first state is the start asked for
+        assert info["goals"] == {"far": False}  # judged there, as the spec's env judges any reset
+    obs, _ = env.reset(seed=3)  # no start asked for: the env's own reset
+    np.testing.assert_array_equal(obs[:4], gym.make("CartPole-v1").reset(seed=3)[0])
+
+
+def test_an_env_made_without_a_start_space_has_none_and_a_wrong_one_is_refused_naming_it():
+    with pytest.raises(sg.InvalidSpec, match=r"CartPole-v1: the env has no StartWrapper .* without a start space"):
+        starts_of(sg.make_env(CARTPOLE, FAR))
+    assert starts_of(sg.make_env(CARTPOLE, FAR, starts={"x": (-1.0, 1.0)})).high.tolist() == [1.0, 0.05, 0.05, 0.05]
+    with pytest.raises(sg.InvalidSpec, match=r"^make_env: expected starts to be a StartSpace or \{name: \(lo, hi\)\}"):
+        sg.make_env(CARTPOLE, FAR, starts=5)
+    with pytest.raises(sg.UnknownFeature, match=r"the start space names 'height'"):
+        sg.make_baseline_env(CARTPOLE, FAR, starts={"height": (0.0, 1.0)})

@@ -10,8 +10,8 @@ import pytest
 
 import specguard as sg
 from specguard.cache.fingerprint import fingerprint_spec
-from specguard.falsify.starts import START_OPTION, StartSpace
 from specguard.report.show import render_spec
+from specguard.starts.space import START_OPTION, StartSpace
 
 
 class LineEnv(gym.Env[np.ndarray, int]):
@@ -258,8 +258,7 @@ def test_a_falsifier_start_set_on_the_env_is_read_by_the_env_features():
         env.unwrapped.pos = int(values["pos"])
         return np.zeros(1, np.float32)
 
-    env = sg.make_env(line(), RIGHT)
-    env.env = StartSpace({"pos": (-3, 3)}, set_state=set_pos).resolve(env.env).wrap(env.env)
+    env = sg.make_env(line(), RIGHT, starts=StartSpace({"pos": (-3, 3)}, set_state=set_pos))
     obs, _ = env.reset(seed=0, options={START_OPTION: {"pos": 2.0}})
     assert obs.tolist() == [0.0, 0.0, 2.0]
     obs, _, terminated, _, _ = env.step(1)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -12,7 +14,7 @@ from specguard.cli.main import main
 from specguard.construction.initial_env import state_type
 from specguard.falsify.robustness import box_margin, feature_scales, margins
 from specguard.falsify.search import EpisodeRunner, falsify
-from specguard.falsify.starts import StartSpace
+from specguard.starts.space import StartSpace, starts_of
 
 
 class Line(gym.Env):
@@ -80,12 +82,25 @@ DRIFT_SPACE = StartSpace({"x": (-1.0, 1.0), "y": (-1.0, 1.0)}, set_state=set_lin
 
 
 def runner(policy, **kwargs):
-    return EpisodeRunner(lambda: sg.make_env(LINE, TREE), policy, SPACE, ["home"], **kwargs)
+    return EpisodeRunner(functools.partial(sg.make_env, LINE, TREE), policy, SPACE, ["home"], **kwargs)
 
 
 def still_at_rest(obs):
     """Keeps still, so never gets home, exactly from starts within 0.01 of the middle (1 start in 10,000)."""
     return (np.abs(obs).max(axis=1) < 0.01).astype(int)
+
+
+def test_the_runners_envs_are_made_in_its_start_space_and_one_made_without_it_is_refused():
+    run = runner(still_at_rest, batch=3)
+    outcomes = run.run(np.array([[0.5, -0.25], [0.25, 0.5], [-1.0, 1.0]]))
+    assert [(o.steps, o.last) for o in outcomes] == [  # one step right (2) from each start: home from the first two
+        (1, {"x": 2.5, "y": -0.25}),
+        (1, {"x": 2.25, "y": 0.5}),
+        (2, {"x": 3.0, "y": 1.0}),
+    ]
+    assert [starts_of(env).names for env in run._ready(3)] == [("x", "y")] * 3  # each env made in the space
+    with pytest.raises(sg.InvalidSpec, match="made without a start space"):
+        EpisodeRunner(lambda **kwargs: sg.make_env(LINE, TREE), still_at_rest, SPACE, ["home"])
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -114,7 +129,7 @@ def test_the_guided_search_follows_slower_episodes_to_a_failure_uniform_draws_wo
     # crawls, and it times out within 0.01 of the corner: 1 start in 20,000, where 100 uniform draws find it 0.5% of
     # the time. With uniform draws instead of steps from the lowest scores, this fails.
     env = sg.InitialEnv(drift, features=("x", "y"))
-    slow = EpisodeRunner(lambda: sg.make_env(env, TREE), slower_near_the_corner, DRIFT_SPACE, ["home"])
+    slow = EpisodeRunner(functools.partial(sg.make_env, env, TREE), slower_near_the_corner, DRIFT_SPACE, ["home"])
     assert slow.max_steps == 40
     found = falsify(slow, examples=100, uniform=0, seed=seed)
     assert found.found and found.episodes_to_first <= 100

@@ -11,7 +11,7 @@ import pytest
 import specguard as sg
 from specguard.falsify.check import Falsify, as_falsify, falsify_verdict
 from specguard.falsify.search import Falsification
-from specguard.falsify.starts import StartSpace
+from specguard.starts.space import StartSpace
 from specguard.stats.intervals import RunVerdict
 
 HEADER = """

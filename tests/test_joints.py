@@ -11,7 +11,7 @@ import pytest
 from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
 
 from specguard.error import InvalidSpec, UnknownFeature
-from specguard.falsify.starts import START_OPTION, StartSpace, start_variables
+from specguard.starts.space import START_OPTION, StartSpace, start_variables
 
 
 def start(env, values):

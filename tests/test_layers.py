@@ -7,9 +7,12 @@ design dependency). Parts, lowest first:
 - base: ``error``, ``validation``, ``version``, ``utils/`` (``validation`` reads the separators of
   ``utils.node_paths`` and writes numbers by ``utils.text``; ``utils.options`` reads option text by
   ``validation``'s rules: the two parts may import each other, module by module without a cycle);
-- ``extend`` (the operator API), then ``tree/`` (the built-in nodes), then ``construction/`` (the constructed env);
+- ``extend`` (the operator API), then ``tree/`` (the built-in nodes); ``starts/`` (start spaces and how an env is
+  put in one: it knows nothing of trees); then ``construction/`` (the constructed env, made in a start space's
+  wrapper when given one, and the ``EpisodePolicy`` protocol that training and the falsifier share);
 - ``stats/`` (intervals, anytime looks, comparisons: numbers only);
-- ``falsify/`` (start spaces, robustness margins, the guided search for failing starts: over any policy callable);
+- ``falsify/`` (robustness margins, the guided search for failing starts: over any policy callable); nothing
+  below the engine imports it: the spec and training need only what ``starts/`` and ``construction/`` hold;
 - ``parallel/`` (tasks in processes or on a cluster: generic, it knows nothing of specs);
 - the public tools over the core: ``strategies``, ``registry``, ``contract/``, ``testing``;
 - ``spec/`` (the spec, its budget, the algorithms, spec files), then ``training/`` (one seed), then ``cache/``
@@ -41,7 +44,7 @@ import specguard
 PACKAGE = Path(specguard.__file__).parent
 
 BASE = frozenset({"error", "validation", "version", "utils"})
-CORE = BASE | {"extend", "tree", "construction"}
+CORE = BASE | {"extend", "tree", "starts", "construction"}
 TOOLS = CORE | {"strategies", "registry", "contract", "testing"}
 RUNNING = TOOLS | {"stats", "parallel", "falsify", "spec", "training", "cache"}
 # Per part, the parts its modules may import (its own included).
@@ -52,6 +55,7 @@ ALLOWED: Mapping[str, frozenset[str]] = {
     "utils": BASE,
     "extend": BASE | {"extend"},
     "tree": BASE | {"extend", "tree"},
+    "starts": BASE | {"starts"},
     "construction": CORE,
     "stats": BASE | {"stats"},
     "strategies": BASE | {"extend", "tree", "strategies"},
@@ -60,9 +64,9 @@ ALLOWED: Mapping[str, frozenset[str]] = {
     "testing": CORE | {"contract", "testing"},
     "falsify": CORE | {"stats", "falsify"},
     "parallel": BASE | {"parallel"},
-    "spec": CORE | {"stats", "falsify", "spec"},
-    "training": CORE | {"stats", "falsify", "parallel", "spec", "training"},
-    "cache": CORE | {"stats", "falsify", "parallel", "spec", "training", "cache"},
+    "spec": CORE | {"stats", "spec"},
+    "training": CORE | {"stats", "parallel", "spec", "training"},
+    "cache": CORE | {"stats", "parallel", "spec", "training", "cache"},
     "engine": RUNNING | {"engine"},
     "gate": RUNNING | {"engine", "gate"},
     "report": RUNNING | {"engine", "gate", "report"},
@@ -73,6 +77,7 @@ ALLOWED: Mapping[str, frozenset[str]] = {
 NO_DEEP_LEARNING = (
     "extend",
     "tree",
+    "starts",
     "construction",
     "stats",
     "falsify",
@@ -282,6 +287,39 @@ def test_an_upward_import_between_the_running_parts_is_a_violation(tmp_path, imp
     ]
     downward = write_package(tmp_path / "down", {imported: f"from specguard.{low} import x\n", importer: ""})
     assert layer_violations(import_graph(downward)) == []
+
+
+@pytest.mark.parametrize(
+    ("importer", "imported"),
+    [
+        ("spec/spec.py", "falsify/search.py"),
+        ("training/train.py", "falsify/search.py"),
+        ("cache/fingerprint.py", "falsify/check.py"),
+        ("starts/space.py", "construction/env.py"),
+        ("starts/space.py", "tree/nodes.py"),
+    ],
+)
+def test_the_spec_training_and_cache_importing_the_falsifier_are_violations(tmp_path, importer, imported):
+    """What they share with it (start spaces, the episode policy) lies lower: ``starts/`` below ``construction/``."""
+    low, high = (m.removesuffix(".py").replace("/", ".") for m in (importer, imported))
+    package = write_package(tmp_path, {importer: f"from specguard.{high} import x\n", imported: ""})
+    assert layer_violations(import_graph(package)) == [
+        f"specguard.{low} -> specguard.{high} ({low.split('.')[0]} may not import {high.split('.')[0]})"
+    ]
+
+
+def test_the_construction_and_the_falsifier_importing_start_spaces_are_allowed(tmp_path):
+    package = write_package(
+        tmp_path,
+        {
+            "construction/env.py": "from specguard.starts.space import StartSpace\n",
+            "falsify/search.py": "from specguard.starts.space import starts_of\n",
+            "training/train.py": "from specguard.construction.policy import EpisodePolicy\n",
+            "starts/space.py": "",
+            "construction/policy.py": "",
+        },
+    )
+    assert layer_violations(import_graph(package)) == []
 
 
 def test_the_cli_importing_the_pytest_plugin_is_a_violation(tmp_path):

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from specguard.error import InvalidSpec, UnknownFeature
-from specguard.falsify.starts import BUILTIN_SETTERS, START_OPTION, StartSpace
+from specguard.starts.space import BUILTIN_SETTERS, START_OPTION, StartSpace
 
 
 def start(env_id, values, **space):

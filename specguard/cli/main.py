@@ -385,7 +385,7 @@ def _falsify(args: argparse.Namespace) -> int:
     """Train (or find in the cache) each spec, then search its start space for counterexamples, per run."""
     from specguard.engine.falsification import start_space
     from specguard.engine.run_spec import run_spec
-    from specguard.falsify.starts import StartSpace
+    from specguard.starts.space import StartSpace
     from specguard.training.progress import print_event
 
     starts = StartSpace(check_unique("--starts", args.starts)) if args.starts else None  # None: the spec's own

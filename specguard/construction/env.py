@@ -37,6 +37,8 @@ from specguard.construction.evaluator import Evaluator
 from specguard.construction.initial_env import InitialEnv, check_identity_observation, read_env_features
 from specguard.construction.reference import ReferenceEvaluator
 from specguard.error import EvaluationError, InitialEnvError, InvalidSpec, SpecError, StateMappingError
+from specguard.starts.setter import Range
+from specguard.starts.space import StartSpace, as_start_space
 from specguard.tree.nodes import Node
 from specguard.utils.text import shown
 from specguard.validation import check_choice
@@ -643,21 +645,33 @@ class EnvFactory:
             self._bounds = self.initial_env.feature_bounds(base.observation_space)  # the features fit the observation
         return self._bounds
 
-    def __call__(self, *, check: bool = True, **make_kwargs: Any) -> SpecEnv | BaselineEnv:
+    def __call__(
+        self, *, check: bool = True, starts: StartSpace | Mapping[str, Range] | None = None, **make_kwargs: Any
+    ) -> SpecEnv | BaselineEnv:
         """A new env; ``make_kwargs`` override the base env's ``gymnasium.make`` kwargs.
 
         ``check=False`` builds it without the checks (:meth:`check`), as ``gymnasium.make(...,
         disable_env_checker=True)`` does; they run at most once per factory anyway.
 
+        ``starts``: a start space (a :class:`~specguard.starts.space.StartSpace` or its ranges ``{name: (lo, hi)}``)
+        the env's episodes may begin in. It is resolved over the base env and the base
+        env wrapped in its :class:`~specguard.starts.space.StartWrapper` before the constructed env is put
+        around it, so ``reset(options={START_OPTION: values})`` starts the episode from ``values``
+        (:func:`~specguard.starts.space.starts_of` gives the resolved space); other resets are the env's own.
+
         Raises:
-            SpecError: the tree or the initial env is invalid; the message names the node path.
+            SpecError: the tree or the initial env is invalid, or ``starts`` does not fit the env; the message
+                names the node path or the env.
         """
         compiled, initial_env = self._compiled(), self.initial_env
+        space = as_start_space("make_baseline_env" if self.baseline else "make_env", starts)
         base = capped(initial_env.make(**make_kwargs))  # every episode ends (specguard.construction.cap)
         try:
             low, high = self._bounds_of(base)
             if check:
                 self.check(base, **make_kwargs)
+            if space is not None:  # under the constructed env, as the falsifier's episodes begin
+                base = space.resolve(base).wrap(base)
             if self.baseline:
                 return BaselineEnv(
                     base,
@@ -688,12 +702,21 @@ class EnvFactory:
             raise
 
 
-def make_baseline_env(initial_env: InitialEnv, tree: Node, *, check: bool = True, **make_kwargs: Any) -> BaselineEnv:
+def make_baseline_env(
+    initial_env: InitialEnv,
+    tree: Node,
+    *,
+    check: bool = True,
+    starts: StartSpace | Mapping[str, Range] | None = None,
+    **make_kwargs: Any,
+) -> BaselineEnv:
     """The initial env with its own reward, reporting the goals of ``tree`` (the paper's baseline).
 
-    It runs the preflight and the checks of :func:`make_env` (``check=False``: the preflight alone).
+    It runs the preflight and the checks of :func:`make_env` (``check=False``: the preflight alone), and takes
+    its start space (``starts``).
     """
-    return cast(BaselineEnv, EnvFactory(initial_env, tree, baseline=True)(check=check, **make_kwargs))
+    factory = EnvFactory(initial_env, tree, baseline=True)
+    return cast(BaselineEnv, factory(check=check, starts=starts, **make_kwargs))
 
 
 def make_env(
@@ -703,6 +726,7 @@ def make_env(
     evaluator: EvaluatorName = "flat",
     observation: str = "features",
     check: bool = True,
+    starts: StartSpace | Mapping[str, Range] | None = None,
     **make_kwargs: Any,
 ) -> SpecEnv:
     """Construct the trainable env of ``tree`` over ``initial_env`` (Algorithm 1).
@@ -715,6 +739,9 @@ def make_env(
             (a ``Dict`` of those and the initial env's own observation, :class:`SpecEnv`).
         check: run the checks of the construction (:meth:`EnvFactory.check`: a goal no state can be in, a
             root goal met before the agent acts); ``False`` skips them, as ``disable_env_checker`` does.
+        starts: a start space the episodes may begin in (:class:`~specguard.starts.space.StartSpace`, or its
+            ranges): the base env is put in its wrapper, and ``reset(options={START_OPTION: values})`` starts
+            from ``values`` (:meth:`EnvFactory.__call__`); ``None`` (default): the env's own starts only.
         **make_kwargs: overrides for the base env's ``gymnasium.make`` kwargs
             (e.g. ``render_mode="human"``).
 
@@ -723,7 +750,8 @@ def make_env(
         (:class:`EnvFactory` builds several envs of one tree on one compilation).
 
     Raises:
-        SpecError: the tree or the initial env is invalid; the message names the node path.
+        SpecError: the tree or the initial env is invalid, or ``starts`` does not fit the env; the message
+            names the node path or the env.
     """
     factory = EnvFactory(initial_env, tree, evaluator=evaluator, observation=observation)
-    return cast(SpecEnv, factory(check=check, **make_kwargs))
+    return cast(SpecEnv, factory(check=check, starts=starts, **make_kwargs))

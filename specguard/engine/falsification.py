@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 
 from specguard.falsify.search import EpisodeRunner, Falsification, falsify
-from specguard.falsify.starts import StartSpace
 from specguard.spec.spec import Spec
+from specguard.starts.space import StartSpace
 from specguard.training.policy import one_torch_thread
 
 __all__ = ["batch_policy", "database_key", "falsify_run", "property_keys", "start_space"]

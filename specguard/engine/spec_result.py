@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from collections.abc import Callable
 
     from specguard.falsify.search import Falsification
-    from specguard.falsify.starts import StartSpace
+    from specguard.starts.space import StartSpace
 
 __all__ = ["VERDICT_WORDS", "GoalVerdict", "SpecResult", "verdict_word"]
 
@@ -214,7 +214,7 @@ class SpecResult:
         """Search ``starts`` for starts from which each run's cached policy misses the spec (no retraining).
 
         Args:
-            starts: the start space (:class:`~specguard.falsify.starts.StartSpace`); ``None``: the spec's own
+            starts: the start space (:class:`~specguard.starts.space.StartSpace`); ``None``: the spec's own
                 (``Spec.starts``), else the env's.
             seeds: the runs to falsify; ``None``: every run.
             examples: guided episodes per run at most; ``uniform``: uniform draws for the failure rate.

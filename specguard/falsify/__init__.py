@@ -1,1 +1,1 @@
-"""Falsifying trained agents: start spaces, the guided search for failing starts, and its reports."""
+"""Falsifying trained agents: the guided search for failing starts over a start space, and its reports."""

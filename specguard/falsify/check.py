@@ -35,7 +35,7 @@ from typing import Any
 
 from specguard.error import InvalidSpec
 from specguard.falsify.search import Falsification
-from specguard.falsify.starts import StartSpace, as_start_space
+from specguard.starts.space import StartSpace, as_start_space
 from specguard.stats.intervals import RunVerdict, run_verdict
 from specguard.validation import check_count, check_natural, check_open_fraction
 
@@ -47,7 +47,7 @@ class Falsify:
     """What a spec's ``[falsify]`` item searches, and the failure rate it tolerates.
 
     Args:
-        starts: the start space: a :class:`~specguard.falsify.starts.StartSpace`, or its ranges
+        starts: the start space: a :class:`~specguard.starts.space.StartSpace`, or its ranges
             ``{variable: (lo, hi)}``; ``None``: the spec's own (``Spec.starts``), else the env's reset ranges.
         examples: guided episodes per run at most.
         uniform: uniform draws per run for the failure rate (at least 1 with ``max_rate``).
@@ -102,7 +102,7 @@ def falsify_verdict(found: Falsification, max_rate: float | None, confidence: fl
     failures and so overcount them).
 
     Example:
-        >>> from specguard.falsify.starts import StartSpace
+        >>> from specguard.starts.space import StartSpace
         >>> from specguard.falsify.search import Falsification
         >>> found = Falsification(StartSpace(), uniform_failures=0, uniform_episodes=100)
         >>> falsify_verdict(found, None).value, falsify_verdict(found, 0.05).value

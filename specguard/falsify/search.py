@@ -2,7 +2,7 @@
 
 :class:`EpisodeRunner` runs a policy (any callable from a batch of
 observations to a batch of actions: a trained model, or a planted policy in a
-test; one that carries something per env, an :class:`EpisodePolicy`, is told
+test; one that carries something per env, an :class:`~specguard.construction.policy.EpisodePolicy`, is told
 when episodes start and which rows still run) on the spec's env from chosen starts, several starts in lockstep so
 the policy is asked once per step for all of them, and judges each
 episode's end by the spec's property (:mod:`specguard.falsify.robustness`).
@@ -43,20 +43,21 @@ from __future__ import annotations
 import json
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol, runtime_checkable
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
 from specguard.construction.env import features_space, stack_observations
+from specguard.construction.policy import EpisodePolicy
 from specguard.extend import until_end
 from specguard.falsify.portfolio import Portfolio
 from specguard.falsify.robustness import Judgement, feature_scales, judge_end, own_states, reached_early
-from specguard.falsify.starts import START_OPTION, Starts, StartSpace
+from specguard.starts.space import START_OPTION, Starts, StartSpace, starts_of
 from specguard.stats.intervals import success_interval
 from specguard.validation import check_count, check_flag, check_natural, check_open_fraction
 
-__all__ = ["EpisodePolicy", "EpisodeRunner", "Falsification", "Outcome", "falsify", "start_text"]
+__all__ = ["EpisodeRunner", "Falsification", "Outcome", "falsify", "start_text"]
 
 BISECTIONS = 16
 """Bisection steps per variable when a counterexample is moved to the failure region's boundary."""
@@ -103,27 +104,16 @@ class Outcome:
         return f"{self.steps} steps, {self.ended} at ({last}); missed {missed}; score {self.judgement.score:.3g}"
 
 
-@runtime_checkable
-class EpisodePolicy(Protocol):
-    """A policy that carries something per env from step to step (a recurrent policy's state, the env's action masks).
-
-    :meth:`start` is called as the episodes of ``envs`` start (after their ``reset``; one env per row), then the
-    policy once per step, with the rows still running (``None``: every env started).
-    :class:`specguard.training.policy.Policy` is one.
-    """
-
-    def start(self, envs: Sequence[Any]) -> None: ...
-
-    def __call__(self, observations: Any, rows: Sequence[int] | None = None) -> Any: ...
-
-
 class EpisodeRunner:
     """Runs a policy from chosen starts on fresh copies of one env, several starts in lockstep.
 
     Args:
-        make_env: builds the spec's env (a ``SpecEnv``: it reports goals, safety and its evaluator).
-        act: ``act(observations) -> actions``, a batch (rows) to a batch; an :class:`EpisodePolicy` is told
-            when the batch's episodes start and which rows still run.
+        make_env: ``make_env(starts=space)`` builds the spec's env in the start space's wrapper (a ``SpecEnv``:
+            it reports goals, safety and its evaluator), as :meth:`Spec.make_env
+            <specguard.spec.spec.Spec.make_env>` and :func:`~specguard.construction.env.make_env` do.
+        act: ``act(observations) -> actions``, a batch (rows) to a batch; an
+            :class:`~specguard.construction.policy.EpisodePolicy` is told when the batch's episodes start and
+            which rows still run.
         space: the start space.
         keys: the asserted goal paths and safety keys (the property).
         batch: starts run in lockstep.
@@ -131,7 +121,7 @@ class EpisodeRunner:
 
     def __init__(
         self,
-        make_env: Callable[[], Any],
+        make_env: Callable[..., Any],
         act: Callable[[np.ndarray], Any],
         space: StartSpace,
         keys: Sequence[str],
@@ -139,12 +129,12 @@ class EpisodeRunner:
         batch: int = 8,
     ) -> None:
         self._make_env = make_env
+        self.space = space
         self.act = act
         self.keys = tuple(keys)
         self.batch = max(1, int(batch))
-        first = make_env()
-        self.starts: Starts = space.resolve(first.env)
-        first.env = self.starts.wrap(first.env)
+        first = make_env(starts=space)
+        self.starts: Starts = starts_of(first)
         self._envs: list[Any] = [first]
         self.tree = first.tree
         n = len(first.features)
@@ -159,9 +149,7 @@ class EpisodeRunner:
 
     def _ready(self, k: int) -> list[Any]:
         while len(self._envs) < k:
-            env = self._make_env()
-            env.env = self.starts.wrap(env.env)
-            self._envs.append(env)
+            self._envs.append(self._make_env(starts=self.space))
         return self._envs[:k]
 
     def run(self, points: np.ndarray) -> list[Outcome]:

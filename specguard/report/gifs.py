@@ -23,9 +23,9 @@ from typing import Any
 
 from specguard.cache.models import load_model
 from specguard.error import InitialEnvError
-from specguard.falsify.starts import START_OPTION, StartSpace
 from specguard.report.offscreen import HOW, NoOffscreen, is_mujoco, offscreen
 from specguard.spec.spec import Spec
+from specguard.starts.space import START_OPTION, StartSpace
 from specguard.training.policy import policy
 from specguard.training.rollout import episode
 from specguard.training.train import EVAL_SEED_BASE
@@ -107,20 +107,22 @@ def _refuses_render_mode(error: InitialEnvError) -> bool:
     return isinstance(cause, TypeError) and "render_mode" in str(cause)
 
 
-def rendering_env(spec: Spec) -> Any:
+def rendering_env(spec: Spec, *, starts: StartSpace | None = None) -> Any:
     """``spec``'s env, rendering ``rgb_array`` frames: made with ``render_mode="rgb_array"``, or, where its
     factory takes no ``render_mode``, made without and its ``unwrapped.render_mode`` set.
+
+    ``starts``: the start space it is made with (as ``spec.make_env(starts=...)``); ``None``: none.
 
     Raises:
         NoFrames: the env lists its render modes and ``rgb_array`` is not among them.
         SpecError: the env cannot be made (as ``spec.make_env``).
     """
     try:
-        return spec.make_env(render_mode="rgb_array")
+        return spec.make_env(render_mode="rgb_array", starts=starts)
     except InitialEnvError as e:
         if not _refuses_render_mode(e):
             raise
-    env = spec.make_env()
+    env = spec.make_env(starts=starts)
     base = env.unwrapped
     modes = (getattr(base, "metadata", None) or {}).get("render_modes")
     if modes is not None and "rgb_array" not in modes:
@@ -168,11 +170,10 @@ def write_gif(
     try:
         # Frames are drawn off-screen: SDL needs no display (and prints no complaint about a missing one).
         os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
-        env = rendering_env(spec)
         options = None
-        if start is not None:  # as the falsifier's runner: the start wrapper under the spec's env, reset seed 0
-            env.env = (starts or StartSpace()).resolve(env.env).wrap(env.env)
+        if start is not None:  # as the falsifier's runner: made with the start space, reset seed 0
             options, seed = {START_OPTION: dict(start)}, 0
+        env = rendering_env(spec, starts=(starts or StartSpace()) if start is not None else None)
     except NoFrames as e:
         return Gif(None, f"no GIF of spec {spec.label!r}: its env does not render rgb_array frames ({e})")
     except Exception as e:

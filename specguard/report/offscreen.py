@@ -58,7 +58,7 @@ with mujoco.Renderer(model, 16, 16) as renderer:
 
 def is_mujoco(env: gym.Env) -> bool:
     """Whether ``env.unwrapped`` is a Gymnasium ``MujocoEnv`` (never imports MuJoCo)."""
-    from specguard.falsify.joints import mujoco_env
+    from specguard.starts.joints import mujoco_env
 
     return mujoco_env(env) is not None
 

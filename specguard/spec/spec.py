@@ -24,10 +24,11 @@ from typing import Any, cast
 from specguard.construction.env import OBSERVATIONS, BaselineEnv, EnvFactory, SpecEnv
 from specguard.construction.initial_env import InitialEnv
 from specguard.error import InvalidSpec
-from specguard.falsify.starts import StartSpace, as_start_space
 from specguard.spec.algorithms import check_hyperparameters, check_policy, default_policy, resolve_algorithm
 from specguard.spec.budget import Budget
 from specguard.spec.zoo import SCHEDULED, LinearSchedule
+from specguard.starts.setter import Range
+from specguard.starts.space import StartSpace, as_start_space
 from specguard.stats.intervals import UNDECIDED_OUTCOMES
 from specguard.tree.keys import check_expect, check_xfail, check_xfail_thresholded, resolve_goal
 from specguard.tree.nodes import Node
@@ -77,7 +78,7 @@ class Spec:
             their miss as a failure. Under anytime verdicts their runs are
             never cut short: a goal not met keeps its run training.
         starts: the start space the falsifier searches by default
-            (:class:`~specguard.falsify.starts.StartSpace` or its ranges
+            (:class:`~specguard.starts.space.StartSpace` or its ranges
             ``{variable: (lo, hi)}``; ``None``: the env's own reset ranges):
             ``specguard falsify``, :meth:`SpecResult.falsify` and
             ``falsify=True`` read it. Not part of the spec's identity: it
@@ -168,15 +169,20 @@ class Spec:
             object.__setattr__(self, "_factory", factory)
         return cast(EnvFactory, factory)
 
-    def make_env(self, *, check: bool = True, **make_kwargs: Any) -> SpecEnv | BaselineEnv:
+    def make_env(
+        self, *, check: bool = True, starts: StartSpace | Mapping[str, Range] | None = None, **make_kwargs: Any
+    ) -> SpecEnv | BaselineEnv:
         """The env this spec trains on, built afresh, as Gymnasium's ``EnvSpec.make`` builds a registered env.
 
         The constructed env (:class:`~specguard.construction.env.SpecEnv`), or for a
         baseline spec the initial env with goal info (:class:`~specguard.construction.env.BaselineEnv`);
         ``make_kwargs`` override the base env's ``gymnasium.make`` kwargs (e.g. ``render_mode="rgb_array"``).
         The spec's checks (:func:`check_spec`) run on the first call unless ``check=False``, and never again.
+        ``starts``: a start space its episodes may begin in, given to the factory
+        (:meth:`EnvFactory.__call__ <specguard.construction.env.EnvFactory.__call__>`); not the spec's own
+        :attr:`starts`, which the falsifier passes when it searches them.
         """
-        return self.env_factory()(check=check, **make_kwargs)
+        return self.env_factory()(check=check, starts=starts, **make_kwargs)
 
     def scaled(self, factor: float, *, checkpoints: int | None = None) -> Spec:
         """This spec with its training budget multiplied by ``factor`` (the one place budgets are scaled).

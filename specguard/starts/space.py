@@ -14,7 +14,7 @@ starts. A :class:`StartSpace` names other starts: per state variable a range
   link_mass_2``; MountainCar ``force, gravity``; MountainCarContinuous
   ``power``); one left out keeps the env's own value;
 * Gymnasium's MuJoCo envs (any ``MujocoEnv``) are set by their model's joints
-  (:mod:`specguard.falsify.joints`): a hinge or slide joint ``J`` gives ``J``
+  (:mod:`specguard.starts.joints`): a hinge or slide joint ``J`` gives ``J``
   and ``J_vel`` (InvertedPendulum: ``slider, hinge, slider_vel, hinge_vel``),
   set through ``set_state``. They have no default range: a variable left out
   keeps what the env's reset gave, and a space naming none searches the
@@ -51,8 +51,8 @@ import gymnasium as gym
 import numpy as np
 
 from specguard.error import InvalidSpec, UnknownFeature
-from specguard.falsify.joints import joint_setter
-from specguard.falsify.setter import Range, Setter, env_label
+from specguard.starts.joints import joint_setter
+from specguard.starts.setter import Range, Setter, env_label
 from specguard.validation import check_finite, check_flag, check_text
 
 __all__ = [
@@ -65,6 +65,7 @@ __all__ = [
     "as_start_space",
     "setter_for",
     "start_variables",
+    "starts_of",
 ]
 
 SEED_RANGE: Range = (0.0, float(2**31 - 1))
@@ -370,7 +371,11 @@ class Starts:
 
 
 class StartWrapper(gym.Wrapper[Any, Any, Any, Any]):
-    """Resets its env, then puts it in the start passed as ``options[START_OPTION]`` (if any)."""
+    """Resets its env, then puts it in the start passed as ``options[START_OPTION]`` (if any).
+
+    The env factory puts it around the base env when an env is made with a start space
+    (``make_env(..., starts=space)``), under the constructed env: :func:`starts_of` finds it.
+    """
 
     def __init__(self, env: gym.Env, starts: Starts) -> None:
         super().__init__(env)
@@ -389,6 +394,32 @@ class StartWrapper(gym.Wrapper[Any, Any, Any, Any]):
         _, info = self.env.reset(seed=seed, options=options or None)
         assert self.starts.apply is not None
         return self.starts.apply(self.env, values), info
+
+
+def starts_of(env: gym.Env) -> Starts:
+    """The start space ``env`` was made with (``make_env(..., starts=space)``), resolved: its :class:`StartWrapper`'s.
+
+    Raises:
+        InvalidSpec: no wrapper of ``env`` is a :class:`StartWrapper`: it was made without a start space.
+
+    Example:
+        >>> import specguard as sg
+        >>> line = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+        >>> env = sg.make_env(line, sg.Goal("right", x=(1.0, None)), starts=StartSpace({"x": (-1.0, 1.0)}))
+        >>> starts_of(env).names
+        ('x', 'v', 'theta', 'omega')
+    """
+    inner: Any = env
+    while isinstance(inner, gym.Wrapper):
+        if isinstance(inner, StartWrapper):
+            return inner.starts
+        inner = inner.env
+    raise InvalidSpec(
+        env_label(env),
+        f"the env has no StartWrapper among its wrappers ({type(env).__name__} over {type(env.unwrapped).__name__}): "
+        "it was made without a start space",
+        hint="make it with make_env(..., starts=space)",
+    )
 
 
 def as_start_space(where: str, value: object) -> StartSpace | None:

@@ -43,7 +43,7 @@ import gymnasium as gym
 import numpy as np
 
 from specguard.error import InvalidSpec
-from specguard.falsify.setter import Range, Setter, env_label
+from specguard.starts.setter import Range, Setter, env_label
 
 __all__ = ["joint_setter", "mujoco_env"]
 
