@@ -286,17 +286,3 @@ def test_in_a_log_training_progress_shows_once_every_interval_and_each_seeds_las
     clock[0] = 1000.0
     write(update), write(done)
     assert len(silent.reporter.lines) == 1
-
-
-def test_a_training_worker_sends_a_line_at_least_every_heartbeat(monkeypatch):
-    from specguard.training import curve as curves
-
-    clock = [0.0]
-    monkeypatch.setattr(curves.time, "perf_counter", lambda: clock[0])
-    sent: list[tuple] = []
-    goal_curve = curves.GoalCurve(1000, None, 10_000, lambda *a: sent.append(a))
-    for step in range(100, 1000, 100):  # ticks every 1% of the budget, inside the first tenth
-        clock[0] = step / 10  # 10 s a tick
-        goal_curve.on_step(step, [False], [{}])
-    steps = [step for _, step, line in sent if line is not None]
-    assert steps == [300, 600, 900]  # every 30 s: a tenth of the budget that takes 90 s is not silent

@@ -182,17 +182,6 @@ def test_evaluate_counts_an_episode_ended_by_its_constraint_as_unsafe():
     assert counts == {"far": 0, "far:two": 2, "far:hot": 0}
 
 
-def test_training_curve_records_safety_rates():
-    from specguard.training.curve import GoalCurve
-
-    curve = GoalCurve(every=2, wall_clock_s=None, total=4, report=None)
-    unsafe = {"goals": {"root": True}, "safe": {"root:c": False}}
-    safe = {"goals": {"root": False}, "safe": {"root:c": True}}
-    curve.on_step(1, [True, False], [unsafe, {}])
-    curve.on_step(2, [True, True], [safe, safe])
-    assert curve.points == [{"timesteps": 2, "episodes": 3, "success": {"root": 1 / 3, "root:c": 2 / 3}}]
-
-
 @pytest.mark.parametrize("baseline", [False, True])
 def test_runs_measure_the_safety_rate_of_every_constraint(baseline):
     fast = sg.Constraint(lambda s, a: abs(s.omega) > 7.5, budget=2, name="fast")
@@ -222,6 +211,25 @@ def test_a_run_whose_thresholds_are_met_stops_at_the_first_checkpoint():
     assert (result.successes, result.episodes) == ({"up": 30}, 30)
     assert result.curve[-1]["timesteps"] == 1024 and result.curve[-1]["evaluation"] == {"up": 1.0}
     assert model.num_timesteps == 1024  # the model kept is the one judged: training stopped at the checkpoint
+
+
+def test_a_run_stopped_by_a_met_checkpoint_did_not_hit_the_wall_clock(monkeypatch):
+    import time
+
+    from specguard.training import train
+
+    budget = sg.Budget(timesteps=4096, eval_episodes=30, checkpoints=4, wall_clock_s=60)
+    spec = sg.Spec(reached_initial(), sg.Goal("up", x=(0.5, None)), budget=budget, hyperparameters=TINY, expect=0.8)
+    late, perf_counter, interim_look = [0.0], time.perf_counter, train.interim_look
+    monkeypatch.setattr(time, "perf_counter", lambda: perf_counter() + late[0])
+
+    def slow_look(*args):
+        late[0] = 3600.0  # the look's evaluation runs past the cap
+        return interim_look(*args)
+
+    monkeypatch.setattr(train, "interim_look", slow_look)
+    result, _ = train_run(spec, seed=0)
+    assert result.met_early and result.timesteps == 1024 and not result.hit_wall_clock
 
 
 def test_the_cached_model_of_a_run_stopped_at_a_checkpoint_is_the_one_judged(tmp_path):

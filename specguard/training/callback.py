@@ -1,39 +1,249 @@
-"""The SB3 callback of a training run: the learning curve's body stepped, auto weights switched between rollouts.
+"""The SB3 callbacks of a training run, one job each, and their composition (:func:`training_callbacks`).
 
+At every step, in this order:
+
+* :class:`RecordGoalCurve` counts each finished episode's goals into the
+  learning curve (:mod:`specguard.training.curve`) and makes a point at every
+  tenth of the budget and at every interim checkpoint;
+* :class:`AdaptWeights` feeds each finished episode to the weight adapter
+  (``weights="auto"``) and switches the envs' weights after each rollout;
+* :class:`ReportProgress` reports the step at every hundredth of the budget,
+  and a progress line at each point and at a hundredth when none was sent
+  for :data:`HEARTBEAT_S`;
+* :class:`StopTrainingOnMetCheckpoint` evaluates the policy at each interim
+  checkpoint, after that step's point, and stops training once every
+  threshold is met;
+* :class:`StopTrainingOnWallClock` stops training at the budget's wall-clock cap.
+
+They are composed as SB3 composes its own (``CallbackList``,
+``StopTrainingOnMaxEpisodes``), and each may be tested alone with a model that
+has ``num_timesteps`` and a ``locals`` with ``dones`` and ``infos``.
 Stable-baselines3 is imported with this module; :mod:`specguard.training.train`
 imports it only when a run trains.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+import time
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
-from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+
+from specguard.training.curve import root_success
+from specguard.training.progress import encode_update
 
 if TYPE_CHECKING:
+    from specguard.parallel.protocol import Report
     from specguard.training.auto_weights import WeightAdapter
     from specguard.training.curve import GoalCurve
 
-__all__ = ["GoalCurveCallback"]
+__all__ = [
+    "HEARTBEAT_S",
+    "TICKS",
+    "AdaptWeights",
+    "Look",
+    "RecordGoalCurve",
+    "ReportProgress",
+    "StopTrainingOnMetCheckpoint",
+    "StopTrainingOnWallClock",
+    "training_callbacks",
+]
+
+TICKS = 100  # step reports per run (cheap; they tell where a run was when it died)
+HEARTBEAT_S = 30.0  # at a tick, a progress line once this long passed since the last (a long tenth is not silent)
+
+Look = Callable[[int], bool]
+"""An interim checkpoint: evaluates the policy at a training step; True when every threshold is met."""
 
 
-class GoalCurveCallback(BaseCallback):  # type: ignore[misc]
-    """Feeds every step to ``curve`` (which may stop training), and switches auto weights after each rollout.
+def _finished(locals_: Mapping[str, Any]) -> Iterator[Mapping[str, Any]]:
+    """The last ``info`` of each episode that ended at this step (a spec's env reports its ``"goals"`` there)."""
+    for done, info in zip(locals_["dones"], locals_["infos"]):
+        if done and "goals" in info:
+            yield info
+
+
+class RecordGoalCurve(BaseCallback):  # type: ignore[misc]
+    """Counts every finished training episode into ``curve``; a point every ``every`` steps and at each checkpoint.
 
     Args:
-        curve: the run's learning curve, checkpoints and caps.
-        adapter: the run's weight adapter (``weights="auto"``), or ``None``.
+        curve: the run's learning curve.
+        every: steps between points (a tenth of the budget).
+        checkpoints: the interim checkpoints' steps: a point at each, for its evaluation to be stored in.
     """
 
-    def __init__(self, curve: GoalCurve, adapter: WeightAdapter | None = None) -> None:
+    def __init__(self, curve: GoalCurve, every: int, checkpoints: Sequence[int] = ()) -> None:
         super().__init__()
         self.curve = curve
+        self.every = max(1, every)
+        self._next = self.every
+        self._checkpoints = list(checkpoints)
+
+    def _on_step(self) -> bool:
+        for info in _finished(self.locals):
+            self.curve.count(info)
+        step = self.num_timesteps
+        at_checkpoint = bool(self._checkpoints) and step >= self._checkpoints[0]
+        if step >= self._next or at_checkpoint:
+            while self._next <= step:
+                self._next += self.every
+            while self._checkpoints and self._checkpoints[0] <= step:
+                self._checkpoints.pop(0)
+            self.curve.point(step)
+        return True
+
+
+class AdaptWeights(BaseCallback):  # type: ignore[misc]
+    """Feeds every finished training episode to ``adapter``, and switches the envs' weights after each rollout.
+
+    Between rollouts, so every env switches at its next reset (:mod:`specguard.training.auto_weights`).
+
+    Args:
+        adapter: the run's weight adapter (``weights="auto"``).
+    """
+
+    def __init__(self, adapter: WeightAdapter) -> None:
+        super().__init__()
         self.adapter = adapter
 
     def _on_step(self) -> bool:
-        return self.curve.on_step(self.num_timesteps, self.locals["dones"], self.locals["infos"])
+        for info in _finished(self.locals):
+            self.adapter.observe(info["goals"], info.get("safe"))
+        return True
 
     def _on_rollout_end(self) -> None:
-        # Between rollouts, so every env switches at its next reset (specguard.training.auto_weights).
-        if self.adapter is not None and self.adapter.update() is not None:
+        if self.adapter.update() is not None:
             self.training_env.env_method("set_weights", self.adapter.in_force)
+
+
+class ReportProgress(BaseCallback):  # type: ignore[misc]
+    """Reports a run's progress to ``report``: its step :data:`TICKS` times a run, and a progress line at each point.
+
+    A line (``report("train", step, line)``, :func:`~specguard.training.progress.encode_update`) gives the root
+    goal's success over the episodes since the last point; at a tick, a line is sent instead of the bare step
+    (``report("train", step, None)``) once :data:`HEARTBEAT_S` passed since the last one. Its clock starts when
+    the callback is made. Place it after :class:`RecordGoalCurve`, which makes the points it reports.
+
+    Args:
+        curve: the run's learning curve.
+        report: receives ``(phase, step, line)``.
+        total: the run's budget of steps.
+    """
+
+    def __init__(self, curve: GoalCurve, report: Report, total: int) -> None:
+        super().__init__()
+        self.curve = curve
+        self.report = report
+        self.total = total
+        self.tick = max(1, total // TICKS)
+        self._next_tick = self.tick
+        self._points = len(curve.points)
+        self.start = self._said = time.perf_counter()  # when training began, when the last line was sent
+
+    def _on_step(self) -> bool:
+        step = self.num_timesteps
+        made = len(self.curve.points) > self._points  # a point made at this step closed the period up to it
+        self._points = len(self.curve.points)
+        point = self.curve.points[-1] if made else None
+        if step >= self._next_tick:
+            self._next_tick = step + self.tick
+            if time.perf_counter() - self._said >= HEARTBEAT_S:
+                self._say(step, point)
+            else:
+                self.report("train", step, None)
+        if point is not None:
+            self._say(step, point)
+        return True
+
+    def _say(self, step: int, point: Mapping[str, Any] | None) -> None:
+        """A progress line of the episodes up to ``step``: ``point``'s, else the open period's so far."""
+        if point is None:
+            episodes, success = self.curve.episodes, self.curve.success()
+        else:
+            episodes, success = point["episodes"], point["success"]
+        self._said = now = time.perf_counter()
+        line = encode_update(step, self.total, now - self.start, root_success(success), episodes)
+        self.report("train", step, line)
+
+
+class StopTrainingOnMetCheckpoint(BaseCallback):  # type: ignore[misc]
+    """Looks at each interim checkpoint (``look``) and stops training once a look says every threshold is met.
+
+    Place it after :class:`RecordGoalCurve`, so that the look's evaluation is stored in its checkpoint's point.
+
+    Args:
+        checkpoints: the interim checkpoints' steps (:func:`specguard.stats.anytime.checkpoint_steps`).
+        look: evaluates the policy at a step; True when every threshold is met.
+    """
+
+    def __init__(self, checkpoints: Sequence[int], look: Look) -> None:
+        super().__init__()
+        self.checkpoints = tuple(checkpoints)
+        self.look = look
+        self._pending = list(self.checkpoints)
+        self.met_early = False
+
+    def _on_step(self) -> bool:
+        step = self.num_timesteps
+        if not self._pending or step < self._pending[0]:
+            return True
+        while self._pending and self._pending[0] <= step:
+            self._pending.pop(0)
+        self.met_early = self.look(step)
+        return not self.met_early
+
+
+class StopTrainingOnWallClock(BaseCallback):  # type: ignore[misc]
+    """Stops training once ``max_seconds`` passed since the callback was made (``None``: never).
+
+    Args:
+        max_seconds: the budget's wall-clock cap, or ``None``.
+    """
+
+    def __init__(self, max_seconds: float | None) -> None:
+        super().__init__()
+        self.max_seconds = max_seconds
+        self.deadline = None if max_seconds is None else time.perf_counter() + max_seconds
+        self.hit_wall_clock = False
+
+    def _on_step(self) -> bool:
+        if self.deadline is not None and time.perf_counter() > self.deadline:
+            self.hit_wall_clock = True
+        return not self.hit_wall_clock
+
+
+def training_callbacks(
+    curve: GoalCurve,
+    *,
+    every: int,
+    total: int,
+    report: Report | None = None,
+    adapter: WeightAdapter | None = None,
+    stop_on_checkpoint: StopTrainingOnMetCheckpoint | None = None,
+    stop_on_wall_clock: StopTrainingOnWallClock | None = None,
+) -> CallbackList:
+    """The callbacks of a training run, in the order they act at each step (the module's list).
+
+    The caller makes the stopping callbacks and reads their flags after training
+    (``stop_on_checkpoint.met_early``, ``stop_on_wall_clock.hit_wall_clock``); the curve has a point at each
+    of ``stop_on_checkpoint``'s steps. SB3 calls every callback of the list at each step, and stops training
+    when any of them returns False.
+
+    Args:
+        curve: the run's learning curve (:class:`RecordGoalCurve`).
+        every: steps between curve points.
+        total: the run's budget of steps (:class:`ReportProgress`).
+        report: receives the run's progress, or ``None`` (no :class:`ReportProgress`).
+        adapter: the run's weight adapter (``weights="auto"``), or ``None`` (no :class:`AdaptWeights`).
+        stop_on_checkpoint: the interim checkpoints' looks, or ``None``.
+        stop_on_wall_clock: the wall-clock cap, or ``None``.
+    """
+    checkpoints = () if stop_on_checkpoint is None else stop_on_checkpoint.checkpoints
+    callbacks: list[BaseCallback] = [RecordGoalCurve(curve, every, checkpoints)]
+    if adapter is not None:
+        callbacks.append(AdaptWeights(adapter))
+    if report is not None:
+        callbacks.append(ReportProgress(curve, report, total))
+    callbacks.extend(stop for stop in (stop_on_checkpoint, stop_on_wall_clock) if stop is not None)
+    return CallbackList(callbacks)

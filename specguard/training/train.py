@@ -107,6 +107,8 @@ class _Run:
     started: dict[int, bool] = field(default_factory=dict)  # evaluation episode -> it started in the root goal
     terminated: dict[int, bool] = field(default_factory=dict)  # evaluation episode -> it ended by termination
     capped: dict[int, bool] = field(default_factory=dict)  # evaluation episode -> specguard's step cap cut it
+    met_early: bool = False  # a checkpoint's look met every threshold and stopped training
+    hit_wall_clock: bool = False  # the wall-clock cap stopped training
 
     @property
     def label(self) -> str:
@@ -205,11 +207,13 @@ def _build(spec: Spec, seed: int) -> _Run:
 def _learn(run: _Run, emit: Emit) -> tuple[GoalCurve, WeightAdapter | None, dict[str, Any], float]:
     """Train the run's budget, looking at its checkpoints; the curve, the adapter, a met look's counts, the seconds.
 
+    What stopped training early is recorded on ``run`` (``met_early``, ``hit_wall_clock``).
+
     Raises:
         TrainingError: the env or a user function failed while training (the training step named) or in a
             checkpoint's evaluation (the checkpoint and evaluation episode named).
     """
-    from specguard.training.callback import GoalCurveCallback
+    from specguard.training.callback import StopTrainingOnMetCheckpoint, StopTrainingOnWallClock, training_callbacks
 
     spec, budget = run.spec, run.spec.budget
     confidence = spec.verdict_confidence  # corrected for every look (specguard.stats.anytime)
@@ -225,29 +229,36 @@ def _learn(run: _Run, emit: Emit) -> tuple[GoalCurve, WeightAdapter | None, dict
             looked.update(counts=counts, episodes=episodes)
         return ok
 
-    checkpoints = checkpoint_steps(budget.timesteps, budget.checkpoints) if spec.thresholds else []
     # weights="auto" adapts on the constructed env's reward; a baseline trains on the initial env's own.
     adapter = None if spec.baseline else WeightAdapter.of(spec.tree)
-    curve = GoalCurve(
-        budget.timesteps // CURVE_POINTS,
-        budget.wall_clock_s,
-        budget.timesteps,
-        emit,
-        checkpoints,
-        look,
+    curve = GoalCurve(adapter)
+    checkpoints = checkpoint_steps(budget.timesteps, budget.checkpoints) if spec.thresholds else []
+    stop_on_checkpoint = StopTrainingOnMetCheckpoint(checkpoints, look)
+    stop_on_wall_clock = StopTrainingOnWallClock(budget.wall_clock_s)
+    callback = training_callbacks(
+        curve,
+        every=budget.timesteps // CURVE_POINTS,
+        total=budget.timesteps,
+        report=emit,
         adapter=adapter,
+        stop_on_checkpoint=stop_on_checkpoint,
+        stop_on_wall_clock=stop_on_wall_clock,
     )
     emit("train", 0, None)
     start = time.perf_counter()
     try:
-        run.model.learn(total_timesteps=budget.timesteps, callback=GoalCurveCallback(curve, adapter))
+        run.model.learn(total_timesteps=budget.timesteps, callback=callback)
     except TrainingError:
         run.eval_env.close()
         raise
     except Exception as e:
         run.eval_env.close()
         raise run.failure(f"training step {run.model.num_timesteps}", e) from e
-    return curve, adapter, looked, time.perf_counter() - start
+    seconds = time.perf_counter() - start
+    # A look that met every threshold stopped training, even if the evaluation itself ran past the cap.
+    run.met_early = stop_on_checkpoint.met_early
+    run.hit_wall_clock = stop_on_wall_clock.hit_wall_clock and not run.met_early
+    return curve, adapter, looked, seconds
 
 
 def _evaluate(run: _Run, curve: GoalCurve, looked: Mapping[str, Any], emit: Emit) -> tuple[dict[str, int], int]:
@@ -261,7 +272,7 @@ def _evaluate(run: _Run, curve: GoalCurve, looked: Mapping[str, Any], emit: Emit
         run.normalizer.training = False
     emit("evaluate", 0, None)
     try:
-        if curve.met_early:
+        if run.met_early:
             counts, episodes = looked["counts"], looked["episodes"]
         else:
             stages, thresholds = spec.budget.evaluation_stages, spec.thresholds
@@ -320,9 +331,9 @@ def train_run(
         episodes=episodes,
         successes=counts,
         train_seconds=train_seconds,
-        hit_wall_clock=curve.hit_wall_clock,
+        hit_wall_clock=run.hit_wall_clock,
         curve=curve.points,
-        met_early=curve.met_early,
+        met_early=run.met_early,
         weights={} if adapter is None else adapter.in_force_lists(),
         started_in_goal=run.started_in_goal(episodes),
         terminated=run.ended_by_termination(episodes),
