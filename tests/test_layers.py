@@ -216,6 +216,19 @@ def deep_learning_imports(package: Path) -> list[str]:
     ]
 
 
+MAX_MODULES = 10  # a folder is one concept: past ten modules it holds more than one
+
+
+def crowded_folders(package: Path, limit: int = MAX_MODULES) -> list[str]:
+    """Folders of ``package`` (itself included) holding more than ``limit`` modules, ``__init__`` not counted."""
+    crowded = []
+    for folder in sorted({package, *(p.parent for p in package.rglob("__init__.py"))}):
+        modules = [p for p in folder.glob("*.py") if p.name != "__init__.py"]
+        if len(modules) > limit:
+            crowded.append(f"{folder.relative_to(package.parent)}: {len(modules)} modules")
+    return crowded
+
+
 # -- the package itself ------------------------------------------------------------------
 
 
@@ -226,6 +239,22 @@ def test_every_module_belongs_to_a_part_with_rules():
 
 def test_no_module_imports_against_the_layering():
     assert layer_violations(import_graph(PACKAGE)) == []
+
+
+def test_no_folder_holds_more_than_ten_modules():
+    assert crowded_folders(PACKAGE) == []
+
+
+def test_a_folder_of_eleven_modules_is_crowded(tmp_path):
+    folder = tmp_path / "pkg" / "part"
+    folder.mkdir(parents=True)
+    for parent in (tmp_path / "pkg", folder):
+        (parent / "__init__.py").write_text("")
+    for i in range(11):
+        (folder / f"m{i}.py").write_text("")
+    assert crowded_folders(tmp_path / "pkg") == ["pkg/part: 11 modules"]
+    (folder / "m10.py").unlink()
+    assert crowded_folders(tmp_path / "pkg") == []
 
 
 def test_no_import_cycles():
