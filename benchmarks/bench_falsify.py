@@ -55,7 +55,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the case studies live beside the package
 
 import specguard as sg
-from specguard.engine.falsification import batch_policy, property_keys
+from specguard.engine.falsify_run import batch_policy, property_keys
 from specguard.falsify.search import EpisodeRunner, falsify
 from specguard.starts.space import StartSpace
 from specguard.training.policy import one_torch_thread, policy

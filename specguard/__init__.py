@@ -42,7 +42,7 @@ _EXPORTS = {
     "Constraint": "specguard.tree.builtin_annotations",
     "Distance": "specguard.tree.builtin_annotations",
     "EvaluationError": "specguard.error",
-    "Falsify": "specguard.falsify.check",
+    "Falsify": "specguard.falsify.assertion",
     "FingerprintError": "specguard.error",
     "Goal": "specguard.tree.nodes",
     "GoalMetAtStart": "specguard.error",
@@ -123,7 +123,7 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.error import VersionMismatch as VersionMismatch
     from specguard.extend import Annotation as Annotation
     from specguard.extend import Node as Node
-    from specguard.falsify.check import Falsify as Falsify
+    from specguard.falsify.assertion import Falsify as Falsify
     from specguard.pytest_plugin.declare import goal_spec as goal_spec
     from specguard.pytest_plugin.declare import goal_specs as goal_specs
     from specguard.spec.budget import Budget as Budget

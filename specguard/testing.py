@@ -1,7 +1,7 @@
 """Testing tools: the operator contract kit and a simulator-free test double.
 
 For authors of operators and annotations (:mod:`specguard.extend`): each
-check of :mod:`specguard.contract.checks` states one invariant of the operator contract
+check of :mod:`specguard.contract.invariants` states one invariant of the operator contract
 (docs/semantics.md, "What the contract kit checks")
 and tests it with Hypothesis on random trees that contain the class, the way
 scikit-learn's ``parametrize_with_checks`` tests an estimator.
@@ -52,15 +52,15 @@ from specguard.contract.replay import ReplayEnv
 if TYPE_CHECKING:
     import pytest
 
-    from specguard.contract.checks import CHECKS
+    from specguard.contract.invariants import CHECKS
 
 __all__ = ["CHECKS", "ReplayEnv", "check_operator", "checks_for", "parametrize_with_checks"]
 
 
 def __getattr__(name: str) -> Any:
-    # CHECKS lives in specguard.contract.checks, which imports Hypothesis: load it on first use only.
+    # CHECKS lives in specguard.contract.invariants, which imports Hypothesis: load it on first use only.
     if name == "CHECKS":
-        from specguard.contract.checks import CHECKS
+        from specguard.contract.invariants import CHECKS
 
         return CHECKS
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
@@ -75,7 +75,7 @@ def checks_for(cls: type) -> tuple[Callable[..., None], ...]:
     Raises:
         TypeError: ``cls`` is not a ``Node`` or ``Annotation`` subclass.
     """
-    from specguard.contract.checks import checks_for as applicable
+    from specguard.contract.invariants import checks_for as applicable
 
     return applicable(cls)
 

@@ -1,7 +1,7 @@
 """Deliberately broken operators, written on the public extension API, for ``tests/test_contract.py``.
 
 Each breaks one invariant of the operator contract (docs/semantics.md) the way a plausible bug would,
-and one check of :mod:`specguard.contract.checks` must catch it (``CAUGHT_BY``).
+and one check of :mod:`specguard.contract.invariants` must catch it (``CAUGHT_BY``).
 """
 
 from __future__ import annotations

@@ -11,8 +11,8 @@ import pytest
 
 from specguard.cli.main import main
 from specguard.error import SpecError
-from specguard.spec.files import load_objects
-from specguard.utils.files import write_atomic
+from specguard.spec.loading import load_objects
+from specguard.utils.atomic import write_atomic
 
 SPEC_FILE = textwrap.dedent(
     """

@@ -10,7 +10,7 @@ import pytest
 
 import specguard as sg
 from specguard.construction.env import SpecEnv
-from specguard.contract import checks as contract
+from specguard.contract import invariants as contract
 from specguard.testing import check_operator, parametrize_with_checks
 
 

@@ -24,7 +24,7 @@ import specguard.cache.versions
 import specguard.engine.run_spec
 import specguard.engine.train_task
 from specguard.cli.main import main
-from specguard.spec.files import load_objects
+from specguard.spec.loading import load_objects
 from specguard.stats.intervals import GoalOutcome
 
 SPEC_FILE = """

@@ -301,8 +301,8 @@ UPWARD = [
     ("training/train.py", "cache/store.py"),
     ("cache/store.py", "engine/runs.py"),
     ("engine/runs.py", "gate/comparison.py"),
-    ("gate/comparison.py", "report/session.py"),
-    ("report/session.py", "pytest_plugin/items.py"),
+    ("gate/comparison.py", "report/session_report.py"),
+    ("report/session_report.py", "pytest_plugin/items.py"),
 ]
 
 
@@ -323,7 +323,7 @@ def test_an_upward_import_between_the_running_parts_is_a_violation(tmp_path, imp
     [
         ("spec/spec.py", "falsify/search.py"),
         ("training/train.py", "falsify/search.py"),
-        ("cache/fingerprint.py", "falsify/check.py"),
+        ("cache/fingerprint.py", "falsify/assertion.py"),
         ("starts/space.py", "construction/env.py"),
         ("starts/space.py", "tree/nodes.py"),
     ],

@@ -9,7 +9,7 @@ from sb3_contrib import MaskablePPO, RecurrentPPO
 
 import specguard as sg
 from specguard.construction.policy import EpisodePolicy
-from specguard.engine.falsification import batch_policy, property_keys
+from specguard.engine.falsify_run import batch_policy, property_keys
 from specguard.falsify.search import EpisodeRunner
 from specguard.training.policy import Policy, policy
 from specguard.training.rollout import rollout

@@ -9,8 +9,8 @@ import pytest
 
 from specguard.report.gifs import Gif
 from specguard.report.plots import curves_figure, plot_curves
-from specguard.report.session import session_markdown as markdown
-from specguard.report.session import table_lines, write_reports
+from specguard.report.session_report import session_markdown as markdown
+from specguard.report.session_report import table_lines, write_reports
 
 
 def curve(*rates, evaluation=None):

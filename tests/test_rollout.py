@@ -66,7 +66,7 @@ def test_gif_has_the_episode_and_a_caption_naming_the_goals(trained, tmp_path):
 
 
 def test_a_gif_from_a_start_replays_the_falsifiers_episode_from_it(trained, tmp_path):
-    from specguard.engine.falsification import batch_policy, property_keys
+    from specguard.engine.falsify_run import batch_policy, property_keys
     from specguard.falsify.search import EpisodeRunner
 
     spec, _, model = trained
@@ -213,7 +213,7 @@ def test_a_policy_acts_on_one_torch_thread_and_the_process_keeps_its_setting(tra
     # Two threads for a few-row batch of a small network were 60 times slower on a busy 2-core machine.
     import torch
 
-    from specguard.engine import falsification
+    from specguard.engine.falsify_run import falsify_run
 
     spec, _, model = trained
     seen: list[int] = []
@@ -228,7 +228,7 @@ def test_a_policy_acts_on_one_torch_thread_and_the_process_keeps_its_setting(tra
     torch.set_num_threads(2)
     try:
         rollout(model, spec, episodes=1)
-        falsification.falsify_run(spec, model, None, seed=0, spec_key=None, examples=2, uniform=0)
+        falsify_run(spec, model, None, seed=0, spec_key=None, examples=2, uniform=0)
         assert seen and set(seen) == {1}
         assert torch.get_num_threads() == 2
     finally:

@@ -41,7 +41,7 @@ def test_importing_the_kit_imports_neither_pytest_nor_hypothesis():
 
 
 def test_checks_lists_every_check_and_each_states_one_invariant():
-    from specguard.contract import checks as contract
+    from specguard.contract import invariants as contract
 
     assert testing.CHECKS == contract.CHECKS
     assert [c.__name__ for c in testing.CHECKS] == [

@@ -314,4 +314,4 @@ def test_every_open_interval_check_is_check_open_fraction(path):
 def test_the_default_cache_dir_is_written_once():
     package = Path(sg.__file__).parent
     writers = [p.relative_to(package) for p in sorted(package.rglob("*.py")) if '".specguard/cache"' in p.read_text()]
-    assert writers == [Path("utils/files.py")]
+    assert writers == [Path("utils/atomic.py")]

@@ -45,7 +45,7 @@ from specguard.error import CacheLockTimeout
 from specguard.spec.spec import Spec
 from specguard.training.result import RunResult
 from specguard.tree.keys import result_keys
-from specguard.utils.files import staged
+from specguard.utils.atomic import staged
 
 __all__ = [
     "SECRET_ENV",

@@ -44,13 +44,13 @@ from typing import Any, TypeVar
 from specguard.error import ExecutorError, InvalidSpec, SpecError
 from specguard.parallel.executors import check_address
 from specguard.parallel.workers import parse_workers
-from specguard.spec.files import load_objects, spec_path
+from specguard.spec.loading import load_objects, spec_path
 from specguard.spec.spec import Spec
 from specguard.stats.anytime import parse_checkpoints
 from specguard.stats.intervals import UNDECIDED_OUTCOMES
 from specguard.tree.keys import require_thresholds
 from specguard.tree.nodes import Node
-from specguard.utils.files import DEFAULT_CACHE_DIR, write_atomic
+from specguard.utils.atomic import DEFAULT_CACHE_DIR, write_atomic
 from specguard.utils.options import parse_choice, parse_count, parse_natural, parse_positive
 from specguard.validation import check_unique
 from specguard.version import __version__
@@ -383,7 +383,7 @@ def _start_range(text: str) -> tuple[str, tuple[float, float]]:
 
 def _falsify(args: argparse.Namespace) -> int:
     """Train (or find in the cache) each spec, then search its start space for counterexamples, per run."""
-    from specguard.engine.falsification import start_space
+    from specguard.engine.falsify_run import start_space
     from specguard.engine.run_spec import run_spec
     from specguard.starts.space import StartSpace
     from specguard.training.progress import print_event

@@ -23,7 +23,7 @@ from typing import Any, SupportsFloat
 
 import gymnasium as gym
 
-from specguard.construction.checks import episode_limit
+from specguard.construction.preflight import episode_limit
 
 __all__ = ["CAPPED", "EPISODE_CAP", "EpisodeCap", "capped"]
 

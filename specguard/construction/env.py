@@ -31,10 +31,10 @@ import numpy as np
 from gymnasium.utils import RecordConstructorArgs
 
 from specguard.construction.cap import capped
-from specguard.construction.checks import START_SAMPLES, check_goals, check_starts
 from specguard.construction.compiled import CompiledTree, compile_tree
 from specguard.construction.evaluator import Evaluator
 from specguard.construction.initial_env import InitialEnv, check_identity_observation, read_env_features
+from specguard.construction.preflight import START_SAMPLES, check_goals, check_starts
 from specguard.construction.reference import ReferenceEvaluator
 from specguard.error import EvaluationError, InitialEnvError, InvalidSpec, SpecError, StateMappingError
 from specguard.starts.setter import Range
@@ -577,7 +577,7 @@ class EnvFactory:
 
     As Gymnasium's env checker, the checks run once: :meth:`check` (the goals against the bounds of the
     observation space, and the root goal judged on seeded resets of an env of its own, :func:`starts_in_root_goal`,
-    :func:`~specguard.construction.checks.check_starts`); the first call that builds an env runs them unless
+    :func:`~specguard.construction.preflight.check_starts`); the first call that builds an env runs them unless
     ``check=False``, and no later call of the same factory does. Every call runs :func:`preflight` (compiled once;
     a failure is raised again) and builds a base env (under :func:`~specguard.construction.cap.capped` where it
     declares no episode limit, so every episode ends) before wrapping it.

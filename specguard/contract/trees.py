@@ -1,4 +1,4 @@
-"""The examples the contract checks run on, and how their failures read (support of :mod:`specguard.contract.checks`).
+"""The examples the contract checks run on, and how their failures read (for :mod:`specguard.contract.invariants`).
 
 An example (:class:`Example`) is a random goal tree over :data:`FEATURES` that
 contains the class under test, a trajectory of float32 states and the actions
@@ -34,7 +34,7 @@ __all__ = ["FEATURES", "Broken", "Example", "cases", "fail", "refinement_cases",
 class Broken(Exception):
     """What breaks an invariant, raised by a contract property; :func:`run_property` adds the rest.
 
-    An internal signal: the kit's checks (:mod:`specguard.contract.checks`) raise it and
+    An internal signal: the kit's checks (:mod:`specguard.contract.invariants`) raise it and
     :func:`run_property` turns it into the check's readable :class:`AssertionError` (:func:`fail`).
     """
 

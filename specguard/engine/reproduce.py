@@ -32,10 +32,10 @@ from specguard.error import SpecError
 from specguard.parallel.signals import STOP_POLL_S, stopping_all_tasks
 from specguard.parallel.workers import resolve_workers
 from specguard.spec.budget import Budget
-from specguard.spec.files import import_file, load_objects
+from specguard.spec.loading import import_file, load_objects
 from specguard.spec.spec import Spec
 from specguard.training.progress import ProgressEvent
-from specguard.utils.files import DEFAULT_CACHE_DIR
+from specguard.utils.atomic import DEFAULT_CACHE_DIR
 
 __all__ = ["CaseStudy", "Reproduction", "load_case", "machine", "reproduce", "sized"]
 

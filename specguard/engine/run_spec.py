@@ -32,7 +32,7 @@ from specguard.parallel.executors import LOCAL, Executor, make_executor
 from specguard.parallel.workers import resolve_workers
 from specguard.spec.spec import Spec, check_spec
 from specguard.training.progress import ProgressEvent, print_event
-from specguard.utils.files import DEFAULT_CACHE_DIR
+from specguard.utils.atomic import DEFAULT_CACHE_DIR
 
 __all__ = ["RunOptions", "check_before_training", "run_spec", "run_with", "train_seeds"]
 

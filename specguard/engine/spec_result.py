@@ -227,7 +227,7 @@ class SpecResult:
         Raises:
             SpecError: a run was not cached.
         """
-        from specguard.engine.falsification import falsify_run
+        from specguard.engine.falsify_run import falsify_run
 
         found = {}
         for seed in seeds if seeds is not None else [r.seed for r in self.runs]:

@@ -13,7 +13,7 @@ Safety rates (keys ``path:name``, :mod:`specguard.tree.keys`) are stored and
 compared exactly as goals are, under ``group::path:name``. A goal or safety
 rate that a baseline has no figures for (a baseline saved before it was
 asserted, or before safety rates were measured) is not compared:
-:func:`specguard.pytest_plugin.gate.check_item` notes that instead of failing.
+:func:`specguard.pytest_plugin.verdicts.check_item` notes that instead of failing.
 
 Each stored goal also records its spec's identity
 (:attr:`specguard.cache.fingerprint.SpecFingerprint.spec_key`, the key the cache and
@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from specguard.error import BaselineError
-from specguard.utils.files import write_atomic
+from specguard.utils.atomic import write_atomic
 from specguard.utils.text import value_text
 from specguard.validation import is_natural
 

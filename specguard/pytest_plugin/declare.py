@@ -93,10 +93,10 @@ def _check_declaration(where: str, expect: object, xfail: object) -> tuple[dict[
 
 
 def _check_falsify(where: str, falsify: object) -> Any:
-    """The decorator's falsify check (:func:`specguard.falsify.check.as_falsify`), or None."""
+    """The decorator's falsify check (:func:`specguard.falsify.assertion.as_falsify`), or None."""
     if falsify is None or falsify is False:
         return None
-    from specguard.falsify.check import as_falsify
+    from specguard.falsify.assertion import as_falsify
 
     return as_falsify(where, falsify)
 
@@ -119,7 +119,7 @@ class SpecItem:
     spec: str
     goal: str
     xfail: str | None = None  # the spec's reason when it expects this goal to miss
-    falsify: Any = None  # the falsify item's check (specguard.falsify.check.Falsify); its goal is "falsify"
+    falsify: Any = None  # the falsify item's check (specguard.falsify.assertion.Falsify); its goal is "falsify"
 
     @property
     def id(self) -> str:

@@ -93,7 +93,7 @@ def spec_of(item: pytest.Function, expect: Any) -> tuple[Any, list[str]]:
     Fails the item when the function does not return a ``Spec``; call it inside
     :func:`one_line_errors`, which turns a ``SpecError`` into the item's one line.
     """
-    from specguard.pytest_plugin.gate import with_thresholds
+    from specguard.pytest_plugin.verdicts import with_thresholds
     from specguard.spec.spec import Spec
 
     spec = item.obj(**{name: item.funcargs[name] for name in item._fixtureinfo.argnames})

@@ -14,7 +14,7 @@ from typing import Any
 import pytest
 
 from specguard.stats.sequential import DEFAULT_COMPARE_SEEDS
-from specguard.utils.files import DEFAULT_CACHE_DIR
+from specguard.utils.atomic import DEFAULT_CACHE_DIR
 
 PROGRESS_EVERY_S = 60
 """In a log (not a terminal), the most seconds between two progress lines while a run trains."""

@@ -4,7 +4,7 @@ Hooks, fixtures and the marker only. The logic lives in plain modules:
 :mod:`~specguard.pytest_plugin.options` (the options and their one parse),
 :mod:`~specguard.pytest_plugin.session` (one result per spec),
 :mod:`~specguard.pytest_plugin.items` (what an item runs and its outcome),
-:mod:`~specguard.pytest_plugin.gate` (judging each goal),
+:mod:`~specguard.pytest_plugin.verdicts` (judging each goal),
 :mod:`~specguard.pytest_plugin.recorder` (reports and baselines) and
 :mod:`~specguard.report.show` (``--goal-specs-show``, ``--goal-specs-plan``). Training
 imports only when a goal spec runs, so plain ``pytest`` in a project with
@@ -136,7 +136,7 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     marker = pyfuncitem.get_closest_marker(MARKER)
     if marker is None:
         return None
-    from specguard.pytest_plugin.gate import check_item
+    from specguard.pytest_plugin.verdicts import check_item
 
     state = pyfuncitem.config.stash[_SESSION]
     if marker.kwargs.get("error"):  # a malformed @goal_spec fails its own item, not the collection
@@ -144,7 +144,7 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     group = group_of(pyfuncitem)
     check = falsify_check(pyfuncitem, marker)
     if check is not None:
-        from specguard.pytest_plugin.falsifying import run_falsify_item
+        from specguard.pytest_plugin.falsify_item import run_falsify_item
 
         run_falsify_item(pyfuncitem, state, check, marker.kwargs.get("expect"))
         return True

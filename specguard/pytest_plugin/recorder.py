@@ -15,7 +15,7 @@ from typing import Any
 
 import pytest
 
-from specguard.pytest_plugin.falsifying import COUNTEREXAMPLES
+from specguard.pytest_plugin.falsify_item import COUNTEREXAMPLES
 from specguard.pytest_plugin.session import Session
 
 __all__ = ["PROPERTY", "Recorder", "apply_family", "unsigned_cache_note", "write_outputs"]
@@ -63,7 +63,7 @@ class Recorder:
     def pytest_terminal_summary(self, terminalreporter: Any) -> None:
         if not self.state.rows and not self.state.counterexamples:
             return
-        from specguard.report.session import family_lines, table_lines
+        from specguard.report.session_report import family_lines, table_lines
 
         terminalreporter.write_sep("=", "specguard goal specs")
         for line in table_lines(self.state.rows) if self.state.rows else []:
@@ -127,7 +127,7 @@ def _reason(error: OSError) -> str:
 def _write_report(state: Session, directory: Path) -> list[str]:
     """The ``--goal-specs-report`` files and GIFs: a line per file written and per spec without a GIF."""
     from specguard.report.gifs import report_gifs
-    from specguard.report.session import write_reports
+    from specguard.report.session_report import write_reports
 
     try:
         directory.mkdir(parents=True, exist_ok=True)  # before the GIFs: one warning, not one note per spec

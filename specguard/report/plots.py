@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from specguard.tree.keys import label
-from specguard.utils.files import write_atomic
+from specguard.utils.atomic import write_atomic
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

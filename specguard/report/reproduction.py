@@ -20,7 +20,7 @@ from specguard.engine.spec_result import SpecResult
 from specguard.error import SpecError
 from specguard.report.plots import plot_curves
 from specguard.stats.intervals import RunVerdict, success_interval
-from specguard.utils.files import write_atomic
+from specguard.utils.atomic import write_atomic
 from specguard.utils.text import interval_text, markdown_table, per_seed_text
 
 __all__ = [
@@ -127,7 +127,7 @@ def reproduction_markdown(reproduction: Reproduction, images: Mapping[str, str],
 
 
 def rows_for_plots(case: CaseStudy, results: Mapping[str, SpecResult]) -> list[dict[str, Any]]:
-    """Report rows (:mod:`specguard.report.session`) of every goal of every spec of a case, with their curves."""
+    """Report rows (:mod:`specguard.report.session_report`) of every goal of every spec of a case, with their curves."""
     rows = []
     for key, spec in case.specs.items():
         result = results[key]

@@ -2,7 +2,7 @@
 
 :func:`render_spec` is the one rendering, used by ``specguard show`` and by
 ``pytest --goal-specs --goal-specs-show``; it builds the env (to read its
-observation space, and so runs the static checks of :mod:`specguard.construction.checks`)
+observation space, and so runs the static checks of :mod:`specguard.construction.preflight`)
 but trains nothing. :func:`show_goal_spec_file` shows the goal specs of a
 pytest file, whose fixtures only pytest can resolve, by running pytest on it
 in-process with ``--goal-specs-show``. :func:`plan_text` is the plan of a goal

@@ -3,7 +3,7 @@
 The one assembly of a policy from an SB3 model, used wherever a model acts: a
 run's evaluation and anytime checkpoints (:mod:`specguard.training.train`),
 rollouts and GIFs (:mod:`specguard.training.rollout`) and the falsifier
-(:mod:`specguard.engine.falsification`). Per env it keeps
+(:mod:`specguard.engine.falsify_run`). Per env it keeps
 
 * the model's ``VecNormalize`` statistics, applied to every observation;
 * a recurrent policy's state (sb3-contrib's RecurrentPPO: its LSTM's hidden and

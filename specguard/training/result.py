@@ -44,7 +44,7 @@ class RunResult:
             Empty when no node adapts its weights.
         started_in_goal: of the ``episodes``, those whose first state (at reset) was
             already in the root goal: met before the policy acted (the root goal
-            judged on sampled starts before training, :mod:`specguard.construction.checks`).
+            judged on sampled starts before training, :mod:`specguard.construction.preflight`).
         terminated: of the ``episodes``, those that ended by termination rather than truncation:
             where the root goal holds until the end, episodes the env ended before their horizon
             (a fall, a crash; or a constraint's budget spent), which an ``Always`` goal does not

@@ -33,7 +33,7 @@ class ExitAtImport(BaseException):
     raised instead of ending the process (an internal signal: :func:`no_exit` raises it).
 
     A ``BaseException``, as ``SystemExit`` is: the spec file's own ``except Exception`` cannot swallow it.
-    :func:`specguard.spec.files.import_file` turns it into a :class:`~specguard.error.SpecError` naming the file,
+    :func:`specguard.spec.loading.import_file` turns it into a :class:`~specguard.error.SpecError` naming the file,
     :func:`import_module` into an :class:`ImportFailed` naming the string.
     """
 

@@ -9,7 +9,7 @@ import textwrap
 import pytest
 
 import specguard as sg
-from specguard.falsify.check import Falsify, as_falsify, falsify_verdict
+from specguard.falsify.assertion import Falsify, as_falsify, falsify_verdict
 from specguard.falsify.search import Falsification
 from specguard.starts.space import StartSpace
 from specguard.stats.intervals import RunVerdict

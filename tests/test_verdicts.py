@@ -9,7 +9,7 @@ from example_specs import pendulum
 from specguard.engine.judging import judge as _judge
 from specguard.engine.spec_result import SpecResult
 from specguard.gate.baseline import Baseline
-from specguard.pytest_plugin.gate import gate_goal
+from specguard.pytest_plugin.verdicts import judge_goal
 from specguard.stats.intervals import GoalOutcome, success_interval
 from specguard.training.result import RunResult
 from specguard.tree.keys import ROOT
@@ -44,14 +44,14 @@ def spec(tree="b", expect=None, **budget):
 
 def test_passed():
     s = spec()
-    check = gate_goal(result_of(s, [(30, 30), (30, 30)]), s, "pendulum", "g")
+    check = judge_goal(result_of(s, [(30, 30), (30, 30)]), s, "pendulum", "g")
     assert check.outcome == "passed" and check.hint is None
     assert check.message().startswith("goal 'pendulum' of spec 'pendulum' met its threshold")
 
 
 def test_failed_sparse_goal_hints_at_a_distance():
     s = spec()
-    check = gate_goal(result_of(s, [(0, 30), (30, 30)]), s, "pendulum", "g")
+    check = judge_goal(result_of(s, [(0, 30), (30, 30)]), s, "pendulum", "g")
     assert check.outcome == "failed"
     assert check.hint == "sparse goal never reached in 1/2 seeds: consider a Distance annotation on 'pendulum'"
     assert "per seed: seed 0: 0/30 (missed), seed 1: 30/30 (met)" in check.message()
@@ -59,13 +59,13 @@ def test_failed_sparse_goal_hints_at_a_distance():
 
 def test_shaped_goal_gets_another_hint():
     s = spec("c", expect={"position": 0.8})
-    check = gate_goal(result_of(s, [(0, 30), (30, 30)]), s, "pendulum/position", "g")
+    check = judge_goal(result_of(s, [(0, 30), (30, 30)]), s, "pendulum/position", "g")
     assert check.hint.startswith("goal never reached in 1/2 seeds")
 
 
 def test_undecided_runs_leave_the_goal_undecided():
     s = spec(max_eval_episodes=30)
-    check = gate_goal(result_of(s, [(25, 30), (30, 30)]), s, "pendulum", "g")
+    check = judge_goal(result_of(s, [(25, 30), (30, 30)]), s, "pendulum", "g")
     assert check.outcome is GoalOutcome.UNDECIDED
     assert "could not be decided" in check.message()
     assert check.hint.startswith("runs stayed undecided after 30 evaluation episodes")
@@ -78,7 +78,7 @@ def test_undecided_runs_leave_the_goal_undecided():
 
 def test_crashed_seeds_fail_and_are_listed():
     s = spec()
-    check = gate_goal(result_of(s, [(30, 30)], errors={1: "seed 1 exploded"}), s, "pendulum", "g")
+    check = judge_goal(result_of(s, [(30, 30)], errors={1: "seed 1 exploded"}), s, "pendulum", "g")
     assert check.outcome == "failed" and check.runs == 2
     assert "seed 1 failed: seed 1 exploded" in check.message()
     assert check.to_row()["errors"] == {"1": "seed 1 exploded"}
@@ -99,7 +99,7 @@ def test_competing_subgoals_hint_at_weights():
     ]
     result = SpecResult(spec="pendulum", runs=runs, goals={})
     result.goals = _judge(s, runs, 0)
-    check = gate_goal(result, s, "pendulum", "g")
+    check = judge_goal(result, s, "pendulum", "g")
     assert check.hint == (
         "subgoals compete: 'pendulum/stabilization' is reached in 100% of episodes, 'pendulum/position' in 33%; "
         "consider a Distance on 'pendulum/position' or a larger weight for it"
@@ -107,7 +107,7 @@ def test_competing_subgoals_hint_at_weights():
 
 
 def test_with_thresholds_resolves_decorator_goals():
-    from specguard.pytest_plugin.gate import with_thresholds
+    from specguard.pytest_plugin.verdicts import with_thresholds
 
     s, paths = with_thresholds(spec(), {ROOT: 0.5, "position": 0.7}, "position")
     assert s.thresholds == {"pendulum": 0.5, "pendulum/position": 0.7} and paths == ["pendulum/position"]
@@ -117,7 +117,7 @@ def test_with_thresholds_resolves_decorator_goals():
 
 
 def test_check_item_fails_a_passing_goal_that_dropped_against_the_baseline():
-    from specguard.pytest_plugin.gate import check_item
+    from specguard.pytest_plugin.verdicts import check_item
 
     s = spec(expect={"pendulum": 0.3}, max_seeds=4)
     result = result_of(s, [(20, 30), (21, 30), (19, 30), (22, 30)])
@@ -145,7 +145,7 @@ def test_check_item_fails_a_passing_goal_that_dropped_against_the_baseline():
 
 
 def test_a_spec_whose_identity_and_runs_are_the_baselines_own_is_not_compared():
-    from specguard.pytest_plugin.gate import check_item
+    from specguard.pytest_plugin.verdicts import check_item
 
     s = spec(expect={"pendulum": 0.3})
     result = result_of(s, [(20, 30), (21, 30)])
@@ -167,11 +167,11 @@ def test_never_reached_suggests_a_distance_only_for_a_reachable_goal():
 
     with pytest.raises(UnreachableGoal):  # an impossible goal never reaches training ...
         sg.make_env(cartpole, sg.Goal("far", x=(10, None)))
-    hint = gate_goal(result_of(inside, [(0, 30), (0, 30)]), inside, "edge_zone", "g").hint
+    hint = judge_goal(result_of(inside, [(0, 30), (0, 30)]), inside, "edge_zone", "g").hint
     assert hint == "sparse goal never reached in 2/2 seeds: consider a Distance annotation on 'edge_zone'"
     # ... and should a result for one arrive (an old cache), the hint says impossible, not "add a Distance".
     far = sg.Spec(cartpole, sg.Goal("far", x=(10, None)), budget=budget, expect=0.5)
-    hint = gate_goal(result_of(far, [(0, 30), (0, 30)]), far, "far", "g").hint
+    hint = judge_goal(result_of(far, [(0, 30), (0, 30)]), far, "far", "g").hint
     assert hint.startswith("goal impossible, not just never reached: goal box x in [10, inf] lies outside")
     assert "Distance" not in hint
 
@@ -205,7 +205,7 @@ def safety_result(spec, safe_per_seed, episodes=30):
 
 def test_a_missed_safety_threshold_speaks_of_violations():
     s = safety_spec({"fast": 0.8})
-    check = gate_goal(safety_result(s, [0, 10]), s, "pendulum:fast", "g")
+    check = judge_goal(safety_result(s, [0, 10]), s, "pendulum:fast", "g")
     assert check.outcome == "failed" and check.kind == "safety"
     assert check.hint == (
         "'pendulum:fast' was violated in 83% of evaluation episodes; in every episode of 1/2 seeds (an episode with "
@@ -222,18 +222,18 @@ def test_a_missed_safety_threshold_speaks_of_violations():
 
 def test_a_passing_or_undecided_safety_rate():
     s = safety_spec({"pendulum:fast": 0.8, "pendulum": 0.5}, max_eval_episodes=30)
-    passed = gate_goal(safety_result(s, [30, 30]), s, "pendulum:fast", "g")
+    passed = judge_goal(safety_result(s, [30, 30]), s, "pendulum:fast", "g")
     assert passed.outcome == "passed" and passed.hint is None
     assert passed.message().startswith("safety rate 'pendulum:fast' of spec 'pendulum' met its threshold")
-    undecided = gate_goal(safety_result(s, [26, 30]), s, "pendulum:fast", "g")
+    undecided = judge_goal(safety_result(s, [26, 30]), s, "pendulum:fast", "g")
     assert undecided.outcome is GoalOutcome.UNDECIDED
     assert undecided.hint.startswith("runs stayed undecided after 30 evaluation episodes")
-    goal = gate_goal(safety_result(s, [30, 30]), s, "pendulum", "g")
+    goal = judge_goal(safety_result(s, [30, 30]), s, "pendulum", "g")
     assert goal.kind == "goal" and dict(goal.junit_properties())["kind"] == "goal"
 
 
 def test_old_baselines_without_a_safety_rate_are_noted_not_compared():
-    from specguard.pytest_plugin.gate import check_item
+    from specguard.pytest_plugin.verdicts import check_item
 
     s = safety_spec({"pendulum": 0.3, "fast": 0.3})
     result = safety_result(s, [20, 21])
@@ -262,7 +262,7 @@ def compared_row(goal, p_drop, state="open", verdict="passed", seeds=(0, 1, 2, 3
 
 def test_holm_over_the_session_flags_what_the_items_first_step_could_not():
     from specguard.pytest_plugin.recorder import apply_family
-    from specguard.report.session import family_lines
+    from specguard.report.session_report import family_lines
 
     rows = [
         compared_row("a", 0.001, state="dropped", verdict="failed"),
@@ -282,7 +282,7 @@ def test_holm_over_the_session_flags_what_the_items_first_step_could_not():
 
 def test_holm_leaves_expected_misses_and_a_quiet_session_alone():
     from specguard.pytest_plugin.recorder import apply_family
-    from specguard.report.session import family_lines
+    from specguard.report.session_report import family_lines
 
     xfailed = [compared_row("a", 0.001, verdict="xfailed")]
     assert not apply_family(xfailed) and xfailed[0]["verdict"] == "xfailed"

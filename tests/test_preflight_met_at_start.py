@@ -16,7 +16,7 @@ import pytest
 
 import specguard as sg
 from specguard.cli.main import main
-from specguard.construction.checks import START_SAMPLES
+from specguard.construction.preflight import START_SAMPLES
 from specguard.error import GoalMetAtStart, InvalidSpec, SpecWarning
 
 TINY = {"n_steps": 32, "batch_size": 32, "n_epochs": 1}

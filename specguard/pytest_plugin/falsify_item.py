@@ -3,7 +3,7 @@
 The spec is trained (or read back) once per session, as for its goal items; the
 falsifier then searches each run's start space on the cached model
 (:meth:`specguard.SpecResult.falsify`) and each run is judged by
-:func:`specguard.falsify.check.falsify_verdict`. A run falsified fails the item
+:func:`specguard.falsify.assertion.falsify_verdict`. A run falsified fails the item
 with its report: the shrunk start, the goals it missed, a summary of its episode,
 and the failure rate over the start space with its interval. A run left
 undecided by ``max_rate`` counts as the spec's ``Spec.undecided`` says, as an
@@ -29,7 +29,7 @@ COUNTEREXAMPLES = "specguard.counterexamples"
 
 def falsify_lines(found: dict[int, Any], verdicts: dict[int, Any], max_rate: float | None) -> list[str]:
     """Per run, its verdict and the falsifier's report, indented."""
-    from specguard.falsify.check import rule_text
+    from specguard.falsify.assertion import rule_text
 
     rule = rule_text(max_rate)
     lines = []
@@ -41,8 +41,8 @@ def falsify_lines(found: dict[int, Any], verdicts: dict[int, Any], max_rate: flo
 
 def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: Any) -> None:
     """Train (or read back) the item's spec, falsify every run, and pass, fail or xfail the item."""
-    from specguard.engine.falsification import start_space
-    from specguard.falsify.check import falsify_verdict
+    from specguard.engine.falsify_run import start_space
+    from specguard.falsify.assertion import falsify_verdict
     from specguard.stats.intervals import RunVerdict
 
     with one_line_errors(item):

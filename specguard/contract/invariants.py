@@ -16,7 +16,7 @@ checks for pytest (:func:`specguard.testing.parametrize_with_checks`).
 
 Example:
     >>> import specguard as sg
-    >>> from specguard.contract.checks import check_core_reward_telescopes
+    >>> from specguard.contract.invariants import check_core_reward_telescopes
     >>> check_core_reward_telescopes(sg.Distance, max_examples=5)
 """
 

@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     from specguard.gate.baseline import Baseline
     from specguard.gate.comparison import SpecGate
 
-__all__ = ["GoalCheck", "check_item", "gate_goal", "with_thresholds"]
+__all__ = ["GoalCheck", "check_item", "judge_goal", "with_thresholds"]
 
 
 @dataclass
@@ -178,7 +178,7 @@ def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[RunVerdict])
     never = [r.seed for r in runs if r.successes[path] == 0]
     shaped = any(a.role == SHAPING for _, n in _node(spec.tree, path).walk() for a in n.annotations)
     if never:
-        from specguard.construction.checks import unreachable_reason
+        from specguard.construction.preflight import unreachable_reason
 
         # "Impossible" is refused before training; should a result from elsewhere (an old cache) get here,
         # no Distance can help: say why, instead of "never reached".
@@ -209,7 +209,7 @@ def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[RunVerdict])
     return None
 
 
-def gate_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalCheck:
+def judge_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalCheck:
     """The figures and outcome of goal (or safety key) ``path``, which must have a threshold in ``spec``."""
     verdict = result.goals[path]
     per_seed = [
@@ -291,7 +291,7 @@ def check_item(
         gate = _one_look(result, spec, group, baseline[0])
     checks = []
     for path in paths:
-        check = gate_goal(result, spec, path, group)
+        check = judge_goal(result, spec, path, group)
         if baseline is not None and gate is not None:
             _compare(check, gate, *baseline)
         checks.append(check)

@@ -15,13 +15,13 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
-from test_met_at_start import TINY, Drift, share_inside
+from test_preflight_met_at_start import TINY, Drift, share_inside
 
 import specguard as sg
 from specguard import strategies as sgst
 from specguard.construction import cap
 from specguard.construction.cap import CAPPED, EPISODE_CAP
-from specguard.construction.checks import START_SAMPLES
+from specguard.construction.preflight import START_SAMPLES
 from specguard.construction.reference import ReferenceEvaluator
 from specguard.engine.spec_result import SpecResult
 from specguard.error import GoalMetAtStart, SpecWarning, UnreachableGoal

@@ -17,7 +17,7 @@ import pytest
 import specguard as sg
 from specguard.cache.fingerprint import _algorithm_fields, _fields, fingerprint_spec
 from specguard.construction.env import ENV_KEY, SPEC_KEY, stack_observations
-from specguard.engine.falsification import batch_policy, property_keys
+from specguard.engine.falsify_run import batch_policy, property_keys
 from specguard.falsify.search import EpisodeRunner
 from specguard.report.show import render_spec
 from specguard.training.policy import policy

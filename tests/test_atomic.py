@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from specguard.utils.files import staged, write_atomic
+from specguard.utils.atomic import staged, write_atomic
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="POSIX file modes")
 

@@ -1,6 +1,6 @@
 """Reports of a ``pytest --goal-specs`` session: terminal table, JSON, Markdown, PNG.
 
-Every function takes *rows*: the plain dicts of :meth:`specguard.pytest_plugin.gate.GoalCheck.to_row`
+Every function takes *rows*: the plain dicts of :meth:`specguard.pytest_plugin.verdicts.GoalCheck.to_row`
 plus ``"verdict"`` (what pytest reported: passed, failed, xfailed, xpassed,
 undecided) and optionally ``"comparison"`` and ``"curves"`` (one curve per run,
 in the order of ``"per_seed"``). The Markdown links the PNG and the rollout
@@ -19,9 +19,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 from urllib.parse import quote
 
-from specguard.falsify.check import rule_text
+from specguard.falsify.assertion import rule_text
 from specguard.falsify.search import start_text
-from specguard.utils.files import write_atomic
+from specguard.utils.atomic import write_atomic
 from specguard.utils.text import interval_text, markdown_table
 
 if TYPE_CHECKING:

@@ -7,8 +7,8 @@ import warnings
 import pytest
 
 import specguard as sg
-from specguard.construction.checks import check_goals_off_the_edge, check_goals_reachable, unreachable_reason
 from specguard.construction.compiled import compile_tree
+from specguard.construction.preflight import check_goals_off_the_edge, check_goals_reachable, unreachable_reason
 from specguard.engine.run_spec import run_spec
 from specguard.error import InvalidSpec, UnreachableGoal
 
