@@ -23,6 +23,8 @@ design dependency). Parts, lowest first:
 
 Every exception and warning class a user may catch is defined in ``error``; the internal signals (raised and
 caught inside specguard) each beside the code that raises them (:data:`SIGNALS`); any other is a violation.
+Beside the layering: every docstring example is collected, no folder holds more than ten modules, and every
+test file is named after the module, part or topic it tests.
 """
 
 from __future__ import annotations
@@ -536,3 +538,53 @@ def test_a_signal_at_its_home_is_no_violation(tmp_path):
         },
     )
     assert misplaced_exception_classes(package, {"specguard.contract.trees": frozenset({"Broken"})}) == []
+
+
+# -- every test file is named after what it tests ----------------------------------------------
+
+TESTS = PACKAGE.parent / "tests"
+TOPICS: Mapping[str, str] = {
+    "ci_recipe": "the CI workflows of examples/ci and their local play",
+    "docs": "the pages under docs/: links, examples, the layout table",
+    "doors": "one spec judged alike by run_spec, specguard run and pytest --goal-specs",
+    "layers": "the package's architecture (this file)",
+    "packaging": "the two distributions as an index shows them",
+    "readme": "README, the front page",
+    "semantics": "the rules of docs/semantics.md, across both evaluators",
+}
+"""The test files that test no one module or part: each its own topic, kept short."""
+
+
+def misnamed_tests(tests: Path, package: Path, topics: Iterable[str] = TOPICS) -> list[str]:
+    """The ``test_*.py`` files of ``tests`` whose name names no module, part or topic.
+
+    ``test_<name>.py`` is named for what it tests when ``<name>`` is a module's name (a
+    package's ``__init__`` is ``init``, a private ``_draw`` is ``draw``), a part's (a folder's)
+    or a topic's, or starts with one of them and ``_``: ``test_preflight_met_at_start.py``
+    tests one behaviour of ``construction/preflight.py``. A module renamed without its test
+    file leaves the old name naming nothing, unless the old name starts with another name
+    (``falsify_item`` with the part ``falsify``).
+    """
+    modules = modules_of(package)
+    known = {name.rpartition(".")[2] for name in modules} | {path.stem.strip("_") for path in modules.values()}
+    known |= set(topics)
+    out = []
+    for path in sorted(tests.glob("test_*.py")):
+        words = path.stem.removeprefix("test_").split("_")
+        if not any("_".join(words[:k]) in known for k in range(1, len(words) + 1)):
+            out.append(path.name)
+    return out
+
+
+def test_every_test_file_names_the_module_part_or_topic_it_tests():
+    assert misnamed_tests(TESTS, PACKAGE) == [], "rename them after what they test, or add a topic to TOPICS"
+
+
+def test_a_test_file_named_after_a_renamed_module_is_found(tmp_path):
+    package = write_package(tmp_path, {"construction/preflight.py": "", "tree/_draw.py": ""})
+    tests = tmp_path / "tests"
+    tests.mkdir()
+    for name in ["checks", "preflight", "preflight_met_at_start", "construction", "draw", "init", "docs", "doc"]:
+        (tests / f"test_{name}.py").touch()
+    (tests / "helpers.py").touch()
+    assert misnamed_tests(tests, package, topics=["docs"]) == ["test_checks.py", "test_doc.py"]

@@ -15,6 +15,9 @@ pytest session, ``[falsify]``, that searches each trained run's start space
   it, *missed* once it lies above, *undecided* in between, which counts as
   the spec's ``Spec.undecided`` says.
 
+:func:`verdict_lines` writes each run's verdict and report for the item's
+failure message.
+
 Example:
     >>> check = Falsify({"x": (-1.0, 1.0)}, max_rate=0.05)
     >>> check.starts.ranges, check.max_rate
@@ -39,7 +42,7 @@ from specguard.starts.space import StartSpace, as_start_space
 from specguard.stats.intervals import RunVerdict, run_verdict
 from specguard.validation import check_count, check_natural, check_open_fraction
 
-__all__ = ["Falsify", "as_falsify", "falsify_verdict", "rule_text"]
+__all__ = ["Falsify", "as_falsify", "falsify_verdict", "rule_text", "verdict_lines"]
 
 
 @dataclass(frozen=True, init=False)
@@ -124,6 +127,30 @@ def rule_text(max_rate: float | None) -> str:
         ('no counterexample', 'a failure rate at most 0.05 over the start space')
     """
     return "no counterexample" if max_rate is None else f"a failure rate at most {max_rate:g} over the start space"
+
+
+def verdict_lines(
+    found: Mapping[int, Falsification], verdicts: Mapping[int, RunVerdict], max_rate: float | None
+) -> list[str]:
+    """Per run (by seed), its verdict under the rule, then the search's report, indented.
+
+    Example:
+        >>> import gymnasium as gym
+        >>> from specguard.falsify.starts import StartSpace
+        >>> from specguard.falsify.search import Falsification
+        >>> starts = StartSpace({"x": (-0.05, 0.05)}).resolve(gym.make("CartPole-v1"))
+        >>> found = {0: Falsification(starts, guided=200)}
+        >>> print("\\n".join(verdict_lines(found, {0: falsify_verdict(found[0], None)}, None)))
+        seed 0: met (no counterexample)
+          StartSpace for CartPole-v1: starts set by state over x, v, theta, omega
+          no counterexample in 200 guided episodes
+    """
+    rule = rule_text(max_rate)
+    lines = []
+    for seed, falsification in sorted(found.items()):
+        lines.append(f"seed {seed}: {verdicts[seed].value} ({rule})")
+        lines += [f"  {line}" for line in falsification.report().splitlines()]
+    return lines
 
 
 def as_falsify(where: str, value: object) -> Falsify | None:

@@ -21,28 +21,16 @@ import pytest
 from specguard.pytest_plugin.items import GoalMissed, group_of, one_line_errors, spec_of
 from specguard.pytest_plugin.session import Session, run, scaled, terminal_lines
 
-__all__ = ["COUNTEREXAMPLES", "falsify_lines", "run_falsify_item"]
+__all__ = ["COUNTEREXAMPLES", "run_falsify_item"]
 
 COUNTEREXAMPLES = "specguard.counterexamples"
 """The user property carrying a falsify item's runs (JSON) to the reports, on the xdist controller too."""
 
 
-def falsify_lines(found: dict[int, Any], verdicts: dict[int, Any], max_rate: float | None) -> list[str]:
-    """Per run, its verdict and the falsifier's report, indented."""
-    from specguard.falsify.assertion import rule_text
-
-    rule = rule_text(max_rate)
-    lines = []
-    for seed, falsification in sorted(found.items()):
-        lines.append(f"seed {seed}: {verdicts[seed].value} ({rule})")
-        lines += [f"  {line}" for line in falsification.report().splitlines()]
-    return lines
-
-
 def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: Any) -> None:
     """Train (or read back) the item's spec, falsify every run, and pass, fail or xfail the item."""
     from specguard.engine.falsify_run import start_space
-    from specguard.falsify.assertion import falsify_verdict
+    from specguard.falsify.assertion import falsify_verdict, verdict_lines
     from specguard.stats.intervals import RunVerdict
 
     with one_line_errors(item):
@@ -53,7 +41,7 @@ def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: 
         result = run(state, trained)
         found = result.falsify(space, **check.kwargs(), progress=terminal_lines(item.config))
     verdicts = {seed: falsify_verdict(f, check.max_rate, trained.confidence) for seed, f in found.items()}
-    lines = falsify_lines(found, verdicts, check.max_rate)
+    lines = verdict_lines(found, verdicts, check.max_rate)
     gifs: dict[int, Any] = {}
     if state.options.report_dir is not None:  # the counterexamples' episodes, replayed as GIFs
         from specguard.report.gifs import counterexample_gifs
