@@ -41,7 +41,9 @@ def pytest_goal_spec_result(item: pytest.Item, spec: Spec, result: SpecResult) -
         item: the item that ran the spec.
         spec: the spec as trained: the session's options applied
             (``--goal-specs-budget-scale``, ``--goal-specs-checkpoints``, ``--goal-specs-undecided``).
-        result: its :class:`~specguard.SpecResult`: per-goal verdicts, runs, models.
+        result: its :class:`~specguard.SpecResult`: per-goal verdicts, runs, models. Its words are the
+            spec's own: a goal only ``@goal_spec(xfail=...)`` expects to miss is ``failed`` here and
+            ``xfailed`` on its item (the decorator's xfail is pytest's).
     """
 
 
