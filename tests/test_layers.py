@@ -25,6 +25,8 @@ Every exception and warning class a user may catch is defined in ``error``; the 
 caught inside specguard) each beside the code that raises them (:data:`SIGNALS`); any other is a violation.
 Beside the layering: every docstring example is collected, no folder holds more than ten modules, and every
 test file is named after the module, part or topic it tests.
+Only the pytest door (and ``testing``, the kit's pytest parametrisation) imports pytest: the CLI shows a pytest
+goal-spec file by running pytest in a child process.
 """
 
 from __future__ import annotations
@@ -91,6 +93,10 @@ NO_DEEP_LEARNING = (
     *BASE,
 )
 DEEP_LEARNING = ("torch", "stable_baselines3")
+# The parts that may import pytest: the pytest door, and the contract kit's pytest parametrisation. The CLI is the
+# other door, beside the plugin: it neither imports pytest nor runs pytest in its process (a lazy door is a door).
+PYTEST_PARTS = ("pytest_plugin", "testing")
+PYTEST = ("pytest", "_pytest", "pluggy", "xdist")
 
 
 def module_name(path: Path, package: Path) -> str:
@@ -218,6 +224,15 @@ def deep_learning_imports(package: Path) -> list[str]:
     ]
 
 
+def pytest_imports(package: Path) -> list[str]:
+    """Modules outside the parts of :data:`PYTEST_PARTS` that import pytest (its internals, pluggy or xdist)."""
+    return [
+        f"{module} imports {', '.join(sorted(names & set(PYTEST)))}"
+        for module, names in sorted(third_party_imports(package).items())
+        if part_of(module) not in PYTEST_PARTS and names & set(PYTEST)
+    ]
+
+
 MAX_MODULES = 10  # a folder is one concept: past ten modules it holds more than one
 
 
@@ -265,6 +280,11 @@ def test_no_import_cycles():
 
 def test_the_core_and_the_tools_never_import_torch_or_stable_baselines3():
     assert deep_learning_imports(PACKAGE) == []
+
+
+def test_only_the_pytest_door_and_the_kit_import_pytest():
+    """``specguard show``/``plan`` on a pytest file runs pytest in a child process, never in the CLI's."""
+    assert pytest_imports(PACKAGE) == []
 
 
 # -- the checker can fail ----------------------------------------------------------------------
@@ -415,6 +435,19 @@ def test_relative_imports_and_the_facade_are_resolved(tmp_path):
 def test_torch_in_the_construction_is_found(tmp_path):
     package = write_package(tmp_path, {"construction/env.py": "def f():\n    import torch.nn\n"})
     assert deep_learning_imports(package) == ["specguard.construction.env imports torch"]
+
+
+def test_a_lazy_pytest_import_in_the_report_or_the_cli_is_found(tmp_path):
+    package = write_package(
+        tmp_path,
+        {
+            "report/show.py": "def look(args):\n    import pytest\n    return pytest.main(args)\n",
+            "cli/main.py": "from _pytest.config import ExitCode\n",
+            "pytest_plugin/plugin.py": "import pytest\nimport pluggy\n",
+            "testing.py": "import pytest\n",
+        },
+    )
+    assert pytest_imports(package) == ["specguard.cli.main imports _pytest", "specguard.report.show imports pytest"]
 
 
 @pytest.mark.parametrize("module", ["specguard.tree.nodes", "specguard.engine.run_spec", "specguard.cli.main"])

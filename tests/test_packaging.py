@@ -128,3 +128,32 @@ def test_the_plugins_sdist_ships_its_tests_whole(tmp_path):
     shipped = {n for n in sdist_names(ROOT / "plugins", tmp_path) if n.startswith("tests/")}
     assert shipped == {f"tests/{p.relative_to(tests).as_posix()}" for p in tests.rglob("*.py")}
     assert {"tests/__init__.py", "tests/conftest.py", "tests/helpers.py"} <= shipped
+
+
+DOCTESTS_OFF_THE_CHECKOUT = """
+import doctest, importlib, importlib.util, pkgutil, sys
+from pathlib import Path
+
+import specguard
+
+root = Path(specguard.__file__).resolve().parents[1]
+sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != root]
+if importlib.util.find_spec("example_specs") is not None:
+    sys.exit("the checkout's example_specs is still importable")
+tried = failed = 0
+for info in pkgutil.walk_packages(specguard.__path__, "specguard."):
+    if info.name != "specguard.__main__":  # importing it runs the command line
+        outcome = doctest.testmod(importlib.import_module(info.name), optionflags=doctest.ELLIPSIS)
+        tried, failed = tried + outcome.attempted, failed + outcome.failed
+print(f"{tried} examples, {failed} failed")
+"""
+
+
+def test_the_docstring_examples_pass_without_the_checkout(tmp_path):
+    """An installed wheel's examples: every module's, run with the repository root (example_specs/) off sys.path."""
+    done = subprocess.run(
+        [sys.executable, "-c", DOCTESTS_OFF_THE_CHECKOUT], cwd=tmp_path, capture_output=True, text=True, check=False
+    )
+    assert done.returncode == 0, done.stdout[-4000:] + done.stderr[-4000:]
+    tried, failed = re.fullmatch(r"(\d+) examples, (\d+) failed", done.stdout.strip().splitlines()[-1]).groups()
+    assert int(tried) > 100 and failed == "0", done.stdout[-4000:]

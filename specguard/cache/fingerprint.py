@@ -28,8 +28,9 @@ nor anything in training beyond the library versions.
 
 Example:
     >>> import specguard as sg
-    >>> from example_specs import pendulum
-    >>> spec = sg.Spec(pendulum.initial_env, pendulum.trees["w"], budget=sg.Budget(timesteps=1000))
+    >>> pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
+    >>> upright = sg.Goal("upright", x=(0.966, 1.0), y=(-0.259, 0.259), omega=(-0.25, 0.25))
+    >>> spec = sg.Spec(pendulum, upright, budget=sg.Budget(timesteps=1000))
     >>> fp = fingerprint_spec(spec)
     >>> fp.run_key(0) != fp.run_key(1) and len(fp.spec_key) == 64
     True

@@ -9,8 +9,9 @@ Runs come from the cache when an identical run was trained before
 
 Example:
     >>> import specguard as sg
-    >>> from example_specs import pendulum
-    >>> spec = sg.Spec(pendulum.initial_env, pendulum.trees["w"], budget=sg.Budget(timesteps=100_000))
+    >>> pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
+    >>> upright = sg.Goal("upright", x=(0.966, 1.0), y=(-0.259, 0.259), omega=(-0.25, 0.25))
+    >>> spec = sg.Spec(pendulum, upright, budget=sg.Budget(timesteps=100_000), expect=0.8)
     >>> result = sg.run_spec(spec, workers=2)  # doctest: +SKIP
     >>> print(result.table())  # doctest: +SKIP
 """

@@ -144,8 +144,9 @@ def goal_specs(
 
     Example:
         >>> import specguard as sg
-        >>> from example_specs import pendulum
-        >>> test_pendulum = sg.goal_specs({"w": pendulum.specs["w"]})
+        >>> pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
+        >>> slow = sg.Spec(pendulum, sg.Goal("slow", omega=(-0.25, 0.25)), budget=sg.Budget(timesteps=1000), expect=0.8)
+        >>> test_pendulum = sg.goal_specs({"slow": slow})
         >>> [m.name for m in test_pendulum.pytestmark]
         ['usefixtures', 'goal_spec']
     """

@@ -38,9 +38,13 @@ def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: 
         trained = scaled(state, spec)
         space = start_space(trained, check.starts)
         space.resolve(trained.initial_env.make())  # names and bounds checked before anything trains
-        result = run(state, trained)
+        result = run(state, trained, item)
         found = result.falsify(space, **check.kwargs(), progress=terminal_lines(item.config))
     verdicts = {seed: falsify_verdict(f, check.max_rate, trained.confidence) for seed, f in found.items()}
+    for seed, falsification in sorted(found.items()):
+        item.config.hook.pytest_goal_spec_falsification(
+            item=item, spec=trained, seed=seed, falsification=falsification, verdict=verdicts[seed]
+        )
     lines = verdict_lines(found, verdicts, check.max_rate)
     gifs: dict[int, Any] = {}
     if state.options.report_dir is not None:  # the counterexamples' episodes, replayed as GIFs

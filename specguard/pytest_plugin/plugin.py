@@ -5,7 +5,8 @@ Hooks, fixtures and the marker only. The logic lives in plain modules:
 :mod:`~specguard.pytest_plugin.session` (one result per spec),
 :mod:`~specguard.pytest_plugin.items` (what an item runs and its outcome),
 :mod:`~specguard.pytest_plugin.verdicts` (judging each goal),
-:mod:`~specguard.pytest_plugin.recorder` (reports and baselines) and
+:mod:`~specguard.pytest_plugin.recorder` (reports and baselines),
+:mod:`~specguard.pytest_plugin.hooks` (the hooks other plugins implement) and
 :mod:`~specguard.report.show` (``--goal-specs-show``, ``--goal-specs-plan``). Training
 imports only when a goal spec runs, so plain ``pytest`` in a project with
 specguard installed stays fast.
@@ -32,6 +33,13 @@ MARKER = "goal_spec"
 SKIP_REASON = "goal spec: run `pytest --goal-specs` to train it and check its goals"
 
 _SESSION = pytest.StashKey[Session]()
+
+
+def pytest_addhooks(pluginmanager: pytest.PytestPluginManager) -> None:
+    """Other plugins' hooks into goal specs (:mod:`~specguard.pytest_plugin.hooks`), as pytest-xdist adds its own."""
+    from specguard.pytest_plugin import hooks
+
+    pluginmanager.add_hookspecs(hooks)
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -89,7 +97,7 @@ def goal_spec_result(request: pytest.FixtureRequest) -> Callable[[Any], Any]:
     state = request.config.stash[_SESSION]
     if not state.options.enabled:
         pytest.skip(SKIP_REASON)
-    return lambda spec: run(state, scaled(state, spec))
+    return lambda spec: run(state, scaled(state, spec), request.node)
 
 
 def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
@@ -151,7 +159,7 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     with one_line_errors(pyfuncitem):
         spec, paths = spec_of(pyfuncitem, marker.kwargs.get("expect"))
         trained = scaled(state, spec)
-        result = run(state, trained)
+        result = run(state, trained, pyfuncitem)
         gate = gate_of(state, trained, result, group)
         stored = saved_runs(state, trained, result, gate) if state.options.save else None
     baseline = (state.baseline, state.options.compare or "latest") if state.baseline is not None else None

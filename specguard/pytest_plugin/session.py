@@ -114,8 +114,12 @@ def _terminal_line(config: pytest.Config, text: str, *, final: bool, fallback: C
     return True
 
 
-def run(state: Session, spec: Spec) -> SpecResult:
-    """The spec's result: trained (or read from the cache) once per session, shared by all its goal items."""
+def run(state: Session, spec: Spec, item: pytest.Item) -> SpecResult:
+    """The spec's result: trained (or read from the cache) once per session, shared by all its goal items.
+
+    The first time, other plugins hear of it (``pytest_goal_spec_result``, :mod:`~specguard.pytest_plugin.hooks`),
+    with ``item``, the item that ran it.
+    """
     from specguard.cache.fingerprint import fingerprint_spec
     from specguard.engine.run_spec import run_with
 
@@ -123,8 +127,10 @@ def run(state: Session, spec: Spec) -> SpecResult:
     # (seeds, quorum and `undecided` included), the one the cache and baselines use.
     key = fingerprint_spec(spec).spec_key
     if key not in state.memo:
-        state.memo[key] = run_with(spec, run_options(state))
-        state.memo[key].spec_key = key
+        result = run_with(spec, run_options(state))
+        result.spec_key = key
+        state.memo[key] = result
+        item.config.hook.pytest_goal_spec_result(item=item, spec=spec, result=result)
     return state.memo[key]
 
 

@@ -4,15 +4,20 @@
 ``pytest --goal-specs --goal-specs-show``; it builds the env (to read its
 observation space, and so runs the static checks of :mod:`specguard.construction.preflight`)
 but trains nothing. :func:`show_goal_spec_file` shows the goal specs of a
-pytest file, whose fixtures only pytest can resolve, by running pytest on it
-in-process with ``--goal-specs-show``. :func:`plan_text` is the plan of a goal
-item's spec (``--goal-specs-plan``, :mod:`specguard.gate.plan`), and
-:func:`plan_goal_spec_file` the same for ``specguard plan`` on a pytest file.
+pytest file, whose fixtures only pytest can resolve (conftest files, other
+plugins' fixtures, ``request``), by running ``python -m pytest --goal-specs-show``
+on it in a child process: the CLI imports neither pytest nor the plugin, and
+the user's test file is imported by pytest, not into the CLI's process.
+:func:`plan_text` is the plan of a goal item's spec (``--goal-specs-plan``,
+:mod:`specguard.gate.plan`), and :func:`plan_goal_spec_file` the same for
+``specguard plan`` on a pytest file.
 """
 
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -155,12 +160,12 @@ def plan_goal_spec_file(target: str, *, compare_seeds: int) -> int:
 
 
 def _look_at_goal_spec_file(target: str, *flags: str) -> int:
-    import pytest
-
+    """``python -m pytest PATH[::TEST] --goal-specs FLAGS`` in a child process, its output on ours: 0 if it passed."""
     path, _, test = target.partition("::")
     args = [f"{path}::{test}" if test else path, "--goal-specs", *flags, "-q", "-p", "no:cacheprovider"]
-    code = pytest.main(args)
-    return 0 if code == pytest.ExitCode.OK else 2
+    sys.stdout.flush()  # what was printed before comes before pytest's lines
+    done = subprocess.run([sys.executable, "-m", "pytest", *args], check=False)
+    return 0 if done.returncode == 0 else 2
 
 
 def plan_text(spec: Spec, group: str, *, family: int, compare_seeds: int, baseline: Any = None) -> str:

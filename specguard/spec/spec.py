@@ -2,10 +2,16 @@
 
 Example:
     >>> import specguard as sg
-    >>> from example_specs import pendulum
+    >>> pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
+    >>> tree = sg.All(
+    ...     sg.Goal("position", x=(0.966, 1.0), y=(-0.259, 0.259)),
+    ...     sg.Goal("stabilization", omega=(-0.25, 0.25)),
+    ...     name="pendulum",
+    ...     weights=(0.8, 0.2),
+    ... )
     >>> spec = sg.Spec(
-    ...     pendulum.initial_env,
-    ...     pendulum.trees["w"],
+    ...     pendulum,
+    ...     tree,
     ...     budget=sg.Budget(timesteps=100_000),
     ...     expect={"pendulum": 0.8, "position": 0.9},
     ... )
