@@ -61,6 +61,6 @@ def pytest_goal_spec_falsification(
         seed: the run's seed.
         falsification: what the search found (:class:`~specguard.falsify.search.Falsification`:
             the counterexample, if any, and the failure rate over the start space).
-        verdict: the run judged by the item's rule (:func:`~specguard.falsify.check.falsify_verdict`):
+        verdict: the run judged by the item's rule (:func:`~specguard.falsify.assertion.falsify_verdict`):
             ``met``, ``missed`` (falsified) or ``undecided``.
     """
