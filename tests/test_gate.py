@@ -10,7 +10,8 @@ from specguard.engine.judging import judge as _judge
 from specguard.engine.spec_result import SpecResult
 from specguard.gate.baseline import Baseline
 from specguard.pytest_plugin.gate import gate_goal
-from specguard.stats.intervals import GoalOutcome, success_interval
+from specguard.stats.intervals import success_interval
+from specguard.stats.verdicts import GoalOutcome
 from specguard.training.result import RunResult
 from specguard.tree.keys import ROOT
 from specguard.utils.text import interval_text

@@ -47,7 +47,7 @@ from specguard.parallel.workers import parse_workers
 from specguard.spec.files import load_objects, spec_path
 from specguard.spec.spec import Spec
 from specguard.stats.anytime import parse_checkpoints
-from specguard.stats.intervals import UNDECIDED_OUTCOMES
+from specguard.stats.verdicts import UNDECIDED_OUTCOMES
 from specguard.tree.keys import require_thresholds
 from specguard.tree.nodes import Node
 from specguard.utils.files import DEFAULT_CACHE_DIR, write_atomic
@@ -148,6 +148,7 @@ def _write_results(path: Path, text: str) -> None:
 def _run_all(args: argparse.Namespace, specs: dict[str, Any], executor: Any) -> tuple[dict[str, Any], bool]:
     """Train and print every spec; returns the results as JSON data and whether one failed."""
     from specguard.engine.run_spec import run_spec
+    from specguard.report.table import table
     from specguard.training.progress import print_event
 
     results = {}
@@ -163,7 +164,7 @@ def _run_all(args: argparse.Namespace, specs: dict[str, Any], executor: Any) -> 
         )
         results[name] = result.to_dict()
         print(f"== {name}: {result.status()} ({result.seconds:.1f}s)")
-        print(result.table())
+        print(table(result))
         print()
         failed = failed or not result.as_expected
     return results, failed
@@ -382,7 +383,7 @@ def _start_range(text: str) -> tuple[str, tuple[float, float]]:
 
 def _falsify(args: argparse.Namespace) -> int:
     """Train (or find in the cache) each spec, then search its start space for counterexamples, per run."""
-    from specguard.engine.falsification import start_space
+    from specguard.engine.falsification import falsify_runs, start_space
     from specguard.engine.run_spec import run_spec
     from specguard.falsify.starts import StartSpace
     from specguard.training.progress import print_event
@@ -396,8 +397,8 @@ def _falsify(args: argparse.Namespace) -> int:
         quiet = args.quiet
         result = run_spec(spec, cache_dir=args.cache_dir, progress=None if quiet else print_event)
         say = None if quiet else (lambda line: print(f"[specguard] {line}", file=sys.stderr))
-        found = result.falsify(
-            starts, examples=args.examples, uniform=args.uniform, search_seed=args.seed, progress=say
+        found = falsify_runs(
+            result, starts, examples=args.examples, uniform=args.uniform, search_seed=args.seed, progress=say
         )
         for seed, f in found.items():
             print(f"== {name} seed {seed}: {'COUNTEREXAMPLE' if f.found else 'none found'}")

@@ -12,7 +12,7 @@ Example:
     >>> from example_specs import pendulum
     >>> spec = sg.Spec(pendulum.initial_env, pendulum.trees["w"], budget=sg.Budget(timesteps=100_000))
     >>> result = sg.run_spec(spec, workers=2)  # doctest: +SKIP
-    >>> print(result.table())  # doctest: +SKIP
+    >>> print(sg.table(result))  # doctest: +SKIP
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from specguard.cache.store import Cache
-from specguard.engine.judging import judge, seeds_still_needed
+from specguard.engine.judging import episode_notes, judge, seeds_still_needed
 from specguard.engine.runs import Runs
 from specguard.engine.spec_result import SpecResult
 from specguard.error import SpecError
@@ -166,7 +166,15 @@ def _seeds_of(spec: Spec, options: RunOptions) -> Iterator[tuple[Runs, SpecResul
     n_workers = resolve_workers(options.workers)
     cache = Cache(Path(options.cache_dir)) if options.cache_dir is not None else None
     executor = options.executor
-    result = SpecResult(spec=spec.label, runs=[], goals={}, confidence=spec.confidence, trained=spec)
+    result = SpecResult(
+        spec=spec.label,
+        runs=[],
+        goals={},
+        confidence=spec.confidence,
+        undecided=spec.undecided,
+        xfail=dict(spec.xfail),
+        trained=spec,
+    )
     owned = isinstance(executor, str)
     runner = make_executor(executor, workers=n_workers) if isinstance(executor, str) else executor
     try:
@@ -174,6 +182,7 @@ def _seeds_of(spec: Spec, options: RunOptions) -> Iterator[tuple[Runs, SpecResul
         result.spec_key = None if runs.fingerprint is None else runs.fingerprint.spec_key
         result.cache_dir = None if runs.cache is None else runs.cache.root
         yield runs, result
+        result.notes = episode_notes(spec.tree, result.runs)
     finally:
         if owned:
             runner.close()

@@ -36,7 +36,8 @@ from typing import Any
 from specguard.error import InvalidSpec
 from specguard.falsify.search import Falsification
 from specguard.falsify.starts import StartSpace, as_start_space
-from specguard.stats.intervals import RunVerdict, run_verdict
+from specguard.stats.intervals import run_verdict
+from specguard.stats.verdicts import RunVerdict
 from specguard.validation import check_count, check_natural, check_open_fraction
 
 __all__ = ["Falsify", "as_falsify", "falsify_verdict", "rule_text"]
@@ -89,7 +90,7 @@ class Falsify:
         object.__setattr__(self, "seed", seed)
 
     def kwargs(self) -> dict[str, Any]:
-        """The keyword arguments of :meth:`specguard.SpecResult.falsify` this check runs with."""
+        """The keyword arguments of :func:`specguard.engine.falsification.falsify_runs` this check runs with."""
         return {"examples": self.examples, "uniform": self.uniform, "search_seed": self.seed}
 
 

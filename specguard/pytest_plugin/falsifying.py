@@ -2,7 +2,7 @@
 
 The spec is trained (or read back) once per session, as for its goal items; the
 falsifier then searches each run's start space on the cached model
-(:meth:`specguard.SpecResult.falsify`) and each run is judged by
+(:func:`specguard.engine.falsification.falsify_runs`) and each run is judged by
 :func:`specguard.falsify.check.falsify_verdict`. A run falsified fails the item
 with its report: the shrunk start, the goals it missed, a summary of its episode,
 and the failure rate over the start space with its interval. A run left
@@ -41,9 +41,9 @@ def falsify_lines(found: dict[int, Any], verdicts: dict[int, Any], max_rate: flo
 
 def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: Any) -> None:
     """Train (or read back) the item's spec, falsify every run, and pass, fail or xfail the item."""
-    from specguard.engine.falsification import start_space
+    from specguard.engine.falsification import falsify_runs, start_space
     from specguard.falsify.check import falsify_verdict
-    from specguard.stats.intervals import RunVerdict
+    from specguard.stats.verdicts import UNDECIDED_AS, RunVerdict, Word
 
     with one_line_errors(item):
         spec, _ = spec_of(item, expect)
@@ -51,7 +51,7 @@ def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: 
         space = start_space(trained, check.starts)
         space.resolve(trained.initial_env.make())  # names and bounds checked before anything trains
         result = run(state, trained)
-        found = result.falsify(space, **check.kwargs(), progress=terminal_lines(item.config))
+        found = falsify_runs(result, space, **check.kwargs(), progress=terminal_lines(item.config))
     verdicts = {seed: falsify_verdict(f, check.max_rate, trained.confidence) for seed, f in found.items()}
     lines = falsify_lines(found, verdicts, check.max_rate)
     gifs: dict[int, Any] = {}
@@ -79,9 +79,10 @@ def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: 
     ]
     item.user_properties.append((COUNTEREXAMPLES, json.dumps(runs)))
     states = set(verdicts.values())
-    if RunVerdict.MISSED in states or (RunVerdict.UNDECIDED in states and trained.undecided == "fail"):
+    undecided_as = UNDECIDED_AS[trained.undecided]
+    if RunVerdict.MISSED in states or (RunVerdict.UNDECIDED in states and undecided_as is Word.FAILED):
         raise GoalMissed(f"falsified:\n{text}")
-    if RunVerdict.UNDECIDED in states and trained.undecided == "xfail":
+    if RunVerdict.UNDECIDED in states and undecided_as is Word.XFAILED:
         pytest.xfail(f"undecided:\n{text}")
     if RunVerdict.UNDECIDED in states:
         warnings.warn(f"undecided falsification passed by undecided='pass':\n{text}", stacklevel=1)

@@ -201,7 +201,7 @@ def parse_options(config: pytest.Config) -> Options:
     from specguard.error import InvalidSpec
     from specguard.parallel.workers import resolve_workers
     from specguard.stats.anytime import parse_checkpoints
-    from specguard.stats.intervals import UNDECIDED_OUTCOMES
+    from specguard.stats.verdicts import UNDECIDED_OUTCOMES
 
     try:
         text = get("--goal-specs-checkpoints")

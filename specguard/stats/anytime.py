@@ -47,7 +47,8 @@ import functools
 import math
 from collections.abc import Callable, Mapping
 
-from specguard.stats.intervals import RunVerdict, run_verdict, success_interval
+from specguard.stats.intervals import run_verdict, success_interval
+from specguard.stats.verdicts import RunVerdict
 
 __all__ = [
     "DEFAULT_CHECKPOINTS",
