@@ -15,7 +15,7 @@ module-level dicts of specs (named by key); ``show`` also lists goal trees.
 starts from which it misses the spec.
 
 ``run`` says pytest's words for the same run, per goal and per spec
-(:func:`specguard.engine.spec_result.verdict_word`): ``passed``, ``failed``
+(:func:`specguard.stats.verdicts.verdict_word`): ``passed``, ``failed``
 (``FAILED`` on the spec's line), ``xfailed`` (a goal the spec declares in
 ``xfail`` missed), ``xpassed`` (it passed), and ``undecided`` (with what it
 counts as).
