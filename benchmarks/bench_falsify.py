@@ -153,7 +153,7 @@ def run_suite(args: argparse.Namespace) -> None:
         result = sg.run_spec(spec, cache_dir=args.cache_dir, progress=None, workers=args.workers)
         for seed in args.seeds:
             began = time.perf_counter()
-            model, normalizer = result.model(seed), result.normalizer(seed)
+            model, normalizer = sg.load_model(result, seed), sg.load_normalizer(result, seed)
             act = batch_policy(model, normalizer, spec.deterministic)
             runner = EpisodeRunner(spec.make_env, act, space, property_keys(spec))
             found = []

@@ -63,6 +63,11 @@ _EXPORTS = {
     "UnreachableGoal": "specguard.error",
     "VersionMismatch": "specguard.error",
     "check_spec": "specguard.spec.spec",
+    "falsify_runs": "specguard.engine.falsify_run",
+    "load_model": "specguard.engine.trained",
+    "load_normalizer": "specguard.engine.trained",
+    "rollout": "specguard.engine.trained",
+    "table": "specguard.report.table",
     "compile_tree": "specguard.construction.compiled",
     "formula": "specguard.tree.formula",
     "goal_spec": "specguard.pytest_plugin.declare",
@@ -106,9 +111,13 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.construction.env import make_baseline_env as make_baseline_env
     from specguard.construction.env import make_env as make_env
     from specguard.construction.initial_env import InitialEnv as InitialEnv
+    from specguard.engine.falsify_run import falsify_runs as falsify_runs
     from specguard.engine.run_spec import run_spec as run_spec
     from specguard.engine.spec_result import GoalVerdict as GoalVerdict
     from specguard.engine.spec_result import SpecResult as SpecResult
+    from specguard.engine.trained import load_model as load_model
+    from specguard.engine.trained import load_normalizer as load_normalizer
+    from specguard.engine.trained import rollout as rollout
     from specguard.error import CacheWarning as CacheWarning
     from specguard.error import EvaluationError as EvaluationError
     from specguard.error import FingerprintError as FingerprintError
@@ -126,6 +135,7 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.falsify.assertion import Falsify as Falsify
     from specguard.pytest_plugin.declare import goal_spec as goal_spec
     from specguard.pytest_plugin.declare import goal_specs as goal_specs
+    from specguard.report.table import table as table
     from specguard.spec.budget import Budget as Budget
     from specguard.spec.spec import Spec as Spec
     from specguard.spec.spec import check_spec as check_spec

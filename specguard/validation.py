@@ -5,7 +5,7 @@ the same shape: *where* (the node or annotation at fault), *what was expected*,
 *what was given*, and a hint where one helps (see :class:`specguard.InvalidSpec`).
 Each rule is one ``is_*`` predicate; its ``check_*`` raises that message, and
 the doors read an option's text by the same predicate
-(:mod:`specguard.utils.options`).
+(:mod:`specguard.utils.parsing`).
 
 :func:`number_text` (from :mod:`specguard.utils.text`) is here too, the one way
 an operator's ``describe()`` writes a number; node paths are built by

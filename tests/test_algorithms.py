@@ -317,8 +317,8 @@ def test_a_contrib_spec_trains_is_judged_and_is_served_from_the_cache(tmp_path, 
     result = sg.run_spec(first, workers=1, cache_dir=tmp_path, progress=None)
     assert [r.timesteps for r in result.runs] == [64] and result.cached == {0: False}
     assert not result.passed  # 64 steps hold no pendulum up: judged, missed
-    assert type(result.model(0)) is getattr(sb3_contrib, algorithm)
-    assert len(result.rollout(0)[0]) == 200  # the cached model acts (Pendulum's episodes are 200 steps)
+    assert type(sg.load_model(result, 0)) is getattr(sb3_contrib, algorithm)
+    assert len(sg.rollout(result, 0)[0]) == 200  # the cached model acts (Pendulum's episodes are 200 steps)
     by_class = spec(algorithm=getattr(sb3_contrib, algorithm), hyperparameters=hyperparameters, expect=0.5)
     again = sg.run_spec(by_class, workers=1, cache_dir=tmp_path, progress=None)
     assert again.cached == {0: True} and again.runs[0].successes == result.runs[0].successes

@@ -102,7 +102,7 @@ def test_safety_rates_round_trip_and_old_baselines_without_them_are_noted(tmp_pa
     from example_specs import pendulum
     from specguard.engine.judging import judge as _judge
     from specguard.engine.spec_result import SpecResult
-    from specguard.pytest_plugin.verdicts import check_item
+    from specguard.pytest_plugin.judge import check_item
     from specguard.training.result import RunResult
 
     old = tmp_path / "old.json"  # saved before safety rates were measured: goals only

@@ -25,7 +25,7 @@ import specguard.engine.run_spec
 import specguard.engine.train_task
 from specguard.cli.main import main
 from specguard.spec.loading import load_objects
-from specguard.stats.intervals import GoalOutcome
+from specguard.stats.verdicts import GoalOutcome
 
 SPEC_FILE = """
 import specguard as sg

@@ -19,8 +19,7 @@ import pytest
 import scipy.stats  # noqa: F401
 
 from specguard.cli.main import main
-from specguard.engine.spec_result import VERDICT_WORDS, verdict_word
-from specguard.stats.intervals import GoalOutcome
+from specguard.stats.verdicts import VERDICT_WORDS, GoalOutcome, verdict_word
 
 SPEC_FILE = """
 import specguard as sg

@@ -12,7 +12,7 @@ import specguard as sg
 from specguard.falsify.assertion import Falsify, as_falsify, falsify_verdict
 from specguard.falsify.search import Falsification
 from specguard.starts.space import StartSpace
-from specguard.stats.intervals import RunVerdict
+from specguard.stats.verdicts import RunVerdict
 
 HEADER = """
 import pytest

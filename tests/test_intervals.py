@@ -7,7 +7,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.stats import beta
 
-from specguard.stats.intervals import QuorumVerdict, RunVerdict, quorum_verdict, run_verdict, success_interval
+from specguard.stats.intervals import quorum_verdict, run_verdict, success_interval
+from specguard.stats.verdicts import QuorumVerdict, RunVerdict
 
 M, X, U = RunVerdict.MET, RunVerdict.MISSED, RunVerdict.UNDECIDED
 

@@ -9,7 +9,7 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.pytest_plugin.verdicts import with_thresholds
+from specguard.pytest_plugin.judge import with_thresholds
 from specguard.tree.keys import (
     ROOT,
     XFAIL_REASON,

@@ -258,6 +258,24 @@ def test_no_module_imports_against_the_layering():
     assert layer_violations(import_graph(PACKAGE)) == []
 
 
+def clashing_module_names(package: Path) -> list[str]:
+    """Module names (``__init__`` aside) that more than one folder of ``package`` uses, with the modules."""
+    by_name: dict[str, list[str]] = {}
+    for name, path in modules_of(package).items():
+        if path.name != "__init__.py":
+            by_name.setdefault(path.stem, []).append(name)
+    return [f"{stem}: {', '.join(sorted(names))}" for stem, names in sorted(by_name.items()) if len(names) > 1]
+
+
+def test_no_two_modules_share_a_name():
+    assert clashing_module_names(PACKAGE) == [], "a module's name says its one job, once in the package"
+
+
+def test_two_policy_modules_clash(tmp_path):
+    package = write_package(tmp_path, {"construction/policy.py": "", "training/policy.py": "", "training/train.py": ""})
+    assert clashing_module_names(package) == ["policy: specguard.construction.policy, specguard.training.policy"]
+
+
 def test_no_folder_holds_more_than_ten_modules():
     assert crowded_folders(PACKAGE) == []
 
@@ -365,9 +383,9 @@ def test_the_construction_and_the_falsifier_importing_start_spaces_are_allowed(t
         {
             "construction/env.py": "from specguard.starts.space import StartSpace\n",
             "falsify/search.py": "from specguard.starts.space import starts_of\n",
-            "training/train.py": "from specguard.construction.policy import EpisodePolicy\n",
+            "training/train.py": "from specguard.construction.episode_policy import EpisodePolicy\n",
             "starts/space.py": "",
-            "construction/policy.py": "",
+            "construction/episode_policy.py": "",
         },
     )
     assert layer_violations(import_graph(package)) == []

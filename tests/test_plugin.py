@@ -546,9 +546,9 @@ def test_a_crashed_run_fails_a_goal_expected_to_miss_rather_than_xfailing_it(pyt
 TRAJECTORY = """
 def test_the_trained_agent(goal_spec_result, pendulum, tree):
     result = goal_spec_result(tiny(pendulum, tree))
-    model = result.model(0)
+    model = sg.load_model(result, 0)
     assert type(model).__name__ == "PPO"
-    episodes = result.rollout(0, episodes=2)
+    episodes = sg.rollout(result, 0, episodes=2)
     assert len(episodes) == 2
     last = episodes[0][-1]
     assert last["truncated"] and len(episodes[0]) == 200  # Pendulum's time limit: never upright in 128 steps

@@ -8,7 +8,7 @@ import pytest
 from sb3_contrib import MaskablePPO, RecurrentPPO
 
 import specguard as sg
-from specguard.construction.policy import EpisodePolicy
+from specguard.construction.episode_policy import EpisodePolicy
 from specguard.engine.falsify_run import batch_policy, property_keys
 from specguard.falsify.search import EpisodeRunner
 from specguard.training.policy import Policy, policy

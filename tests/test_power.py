@@ -31,7 +31,8 @@ def test_chance_met_is_what_the_final_evaluation_does(p):
             return {"g": int(outcomes[start : start + count].sum())}
 
         counts, episodes = final_evaluation(evaluate, stages, {"g": 0.8}, confidence)
-        from specguard.stats.intervals import RunVerdict, run_verdict
+        from specguard.stats.intervals import run_verdict
+        from specguard.stats.verdicts import RunVerdict
 
         met += run_verdict(counts["g"], episodes, 0.8, confidence) is RunVerdict.MET
     exact = chance_met(p, threshold=0.8, stages=stages, confidence=confidence)

@@ -7,6 +7,7 @@ evaluation episodes started inside the root goal.
 
 from __future__ import annotations
 
+import dataclasses
 import pickle
 import warnings
 
@@ -150,16 +151,20 @@ def test_the_verdict_counts_evaluation_episodes_that_started_in_the_root_goal():
     expected = sum(env.reset(seed=first + i)[0][0] >= np.float32(0.5) for i in range(run.episodes))
     assert expected > 0  # the evaluation seeds of seed 0 do start inside the goal: the count is tested
     assert run.started_in_goal == expected
-    assert f"{expected} of {run.episodes} evaluation episodes started inside the root goal 'up'" in result.table()
+    assert f"{expected} of {run.episodes} evaluation episodes started inside the root goal 'up'" in sg.table(result)
     assert result.to_dict()["runs"][0]["started_in_goal"] == expected
 
 
-def test_the_table_says_nothing_when_no_episode_started_in_the_root_goal():
-    from specguard.engine.spec_result import SpecResult
+def test_the_notes_say_nothing_when_no_episode_started_in_the_root_goal():
+    from specguard.engine.judging import episode_notes
     from specguard.training.result import RunResult
 
     run = RunResult(spec="s", seed=0, timesteps=1, episodes=3, successes={"up": 1}, train_seconds=0.0)
-    assert "started inside" not in SpecResult(spec="s", runs=[run], goals={}).table()
+    assert episode_notes(None, [run]) == []
+    started = dataclasses.replace(run, started_in_goal=2)
+    assert episode_notes(None, [started]) == [
+        "2 of 3 evaluation episodes started inside the root goal 'up': met before the policy acted"
+    ]
 
 
 def test_a_spec_is_checked_once_however_many_envs_it_builds():

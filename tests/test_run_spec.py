@@ -36,7 +36,7 @@ def test_clearly_missed_goal_stops_after_the_minimum_seeds(tmp_path):
     assert goal.verdict == "failed" and goal.required == 4
     assert not result.passed
     assert json.loads(json.dumps(result.to_dict()))["goals"]["pendulum"]["verdict"] == "failed"
-    assert "pendulum" in result.table() and "failed" in result.table()
+    assert "pendulum" in sg.table(result) and "failed" in sg.table(result)
 
 
 def test_trivially_met_goal_passes_with_a_quorum(tmp_path):
@@ -306,7 +306,7 @@ def test_safety_rates_are_judged_tabled_and_serialised_like_goals():
     assert crash.runs == ["missed", "met"] and crash.verdict == "failed" and not result.passed
     assert (crash.successes, crash.episodes) == (42, 60) and result.success("pendulum:fast") == (42, 60)
     assert crash.interval[0] < 0.7 < crash.interval[1]
-    lines = result.table().splitlines()
+    lines = sg.table(result).splitlines()
     assert [line.split()[0] for line in lines[2:]] == [
         "pendulum",
         "pendulum/position",
@@ -336,7 +336,7 @@ def test_a_safety_threshold_is_asserted_end_to_end(tmp_path):
     result = sg.run_spec(s, workers=2, cache_dir=None, progress=None)
     assert result.passed and result.goals["pendulum:never"].runs == ["met", "met"]
     assert result.success("pendulum:never") == (8, 8)
-    assert result.table().splitlines()[-1].split()[:4] == ["pendulum:never", "(safe)", "100%", "(8/8)"]
+    assert sg.table(result).splitlines()[-1].split()[:4] == ["pendulum:never", "(safe)", "100%", "(8/8)"]
 
 
 def test_a_script_without_a_main_guard_fails_fast_instead_of_hanging(tmp_path):
@@ -366,8 +366,8 @@ def test_a_script_without_a_main_guard_fails_fast_instead_of_hanging(tmp_path):
 def test_the_table_lists_each_seeds_adapted_weights():
     result = _safety_result([30, 30], {"fast": 0.8})
     result.runs[1].weights = {"pendulum": [0.75, 0.25]}
-    assert result.table().splitlines()[-1] == "seed 1 adapted weights: pendulum (0.75, 0.25)"
-    assert "adapted weights" not in _safety_result([30], {"fast": 0.8}).table()
+    assert sg.table(result).splitlines()[-1] == "seed 1 adapted weights: pendulum (0.75, 0.25)"
+    assert "adapted weights" not in sg.table(_safety_result([30], {"fast": 0.8}))
 
 
 def test_a_worker_running_other_code_than_the_key_names_refuses_to_train(tmp_path, monkeypatch):

@@ -23,7 +23,7 @@ from specguard.construction import cap
 from specguard.construction.cap import CAPPED, EPISODE_CAP
 from specguard.construction.preflight import START_SAMPLES
 from specguard.construction.reference import ReferenceEvaluator
-from specguard.engine.spec_result import SpecResult
+from specguard.engine.judging import judged
 from specguard.error import GoalMetAtStart, SpecWarning, UnreachableGoal
 from specguard.extend import until_end
 from specguard.testing import ReplayEnv
@@ -228,8 +228,8 @@ def test_a_spec_trains_on_it_and_its_table_counts_the_episodes_that_started_outs
     (run,) = result.runs
     outside = run.episodes - run.started_in_goal
     assert outside > 0  # seed 0's evaluation starts include some outside the goal: the line is tested
-    assert f"{outside} of {run.episodes} evaluation episodes started outside the root goal 'stay'" in result.table()
-    assert "started inside" not in result.table()
+    assert f"{outside} of {run.episodes} evaluation episodes started outside the root goal 'stay'" in sg.table(result)
+    assert "started inside" not in sg.table(result)
     assert run.successes["stay"] <= run.started_in_goal  # an episode that started outside cannot succeed
 
 
@@ -339,9 +339,9 @@ def test_a_run_counts_the_episodes_the_env_ended_before_the_horizon(until):
     assert run.successes["stay"] == (0 if until == "horizon" else run.episodes)  # Hopper passed 30/30 before
     assert result.passed is (until == "termination")
     line = f"{run.episodes} of {run.episodes} evaluation episodes were ended by termination before their horizon"
-    assert line in result.table()
+    assert line in sg.table(result)
     good_end = "until='termination' takes that as a good end: they were judged on their last state"
-    assert (good_end in result.table()) is (until == "termination")
+    assert (good_end in sg.table(result)) is (until == "termination")
     assert result.to_dict()["runs"][0]["terminated"] == run.episodes
 
 
@@ -353,5 +353,5 @@ def test_a_run_on_an_env_that_never_ends_finishes_and_says_where_it_cut(monkeypa
     spec = sg.Spec(initial, tree, budget=budget, hyperparameters=TINY, expect=0.5)
     run, _ = train_run(spec, 0)
     assert run.capped == run.episodes and run.terminated == 0
-    table = SpecResult(spec=spec.label, runs=[run], goals={}, trained=spec).table()
+    table = sg.table(judged(spec, [run]))
     assert f"{run.episodes} of {run.episodes} evaluation episodes were cut at 50 steps" in table

@@ -269,9 +269,9 @@ def test_a_dict_spec_trains_with_multi_input_policy_is_judged_and_served_from_th
         "end",
         "end:constraint",
     }
-    model = result.model(0)
+    model = sg.load_model(result, 0)
     assert isinstance(model.policy, MultiInputActorCriticPolicy)
-    steps = result.rollout(0)[0]  # the cached model acts on Dict observations
+    steps = sg.rollout(result, 0)[0]  # the cached model acts on Dict observations
     assert set(steps[0]["obs"]) == {SPEC_KEY, "view", "clock"}
     again = sg.run_spec(
         spec(observation="features+env", expect={"end": 0.5}), workers=1, cache_dir=tmp_path, progress=None
@@ -285,9 +285,9 @@ def test_normalize_normalizes_the_features_and_own_state_only(tmp_path):
     assert normalizer.norm_obs_keys == [SPEC_KEY] and set(normalizer.obs_rms) == {SPEC_KEY}
     assert result.timesteps == 128
     cached = sg.run_spec(spec(observation="features+env", normalize=True), workers=1, cache_dir=tmp_path, progress=None)
-    assert set(cached.normalizer(0).obs_rms) == {SPEC_KEY}  # the statistics kept in the cache, per key
-    obs = cached.rollout(0)[0][0]["obs"]  # the cached policy acts through them
-    normalized = cached.normalizer(0).normalize_obs(obs)
+    assert set(sg.load_normalizer(cached, 0).obs_rms) == {SPEC_KEY}  # the statistics kept in the cache, per key
+    obs = sg.rollout(cached, 0)[0][0]["obs"]  # the cached policy acts through them
+    normalized = sg.load_normalizer(cached, 0).normalize_obs(obs)
     assert np.array_equal(normalized["view"], obs["view"]) and not np.array_equal(normalized[SPEC_KEY], obs[SPEC_KEY])
 
 

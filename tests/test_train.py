@@ -237,7 +237,7 @@ def test_the_cached_model_of_a_run_stopped_at_a_checkpoint_is_the_one_judged(tmp
     spec = sg.Spec(reached_initial(), sg.Goal("up", x=(0.5, None)), budget=budget, hyperparameters=TINY, expect=0.8)
     result = sg.run_spec(spec, workers=1, cache_dir=tmp_path, progress=None)
     assert result.runs[0].met_early
-    assert result.model(0).num_timesteps == result.runs[0].timesteps == 1024
+    assert sg.load_model(result, 0).num_timesteps == result.runs[0].timesteps == 1024
 
 
 def test_a_run_whose_thresholds_are_not_met_trains_its_whole_budget():

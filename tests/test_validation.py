@@ -13,7 +13,7 @@ import pytest
 
 import specguard as sg
 from specguard.utils.node_paths import child_path
-from specguard.utils.options import parse_choice, parse_count, parse_natural, parse_positive
+from specguard.utils.parsing import parse_choice, parse_count, parse_natural, parse_positive
 from specguard.validation import (
     check_budget,
     check_callable,

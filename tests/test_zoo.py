@@ -366,7 +366,7 @@ def test_a_zoo_entry_trains_with_its_schedules_and_is_cached(tmp_path):
     )
     first = sg.run_spec(spec, workers=2, cache_dir=tmp_path, progress=None)
     assert first.cached == {0: False, 1: False}
-    model = first.model(0)
+    model = sg.load_model(first, 0)
     assert model.n_envs == 8 and model.n_steps == 32 and model.gamma == 0.98
     assert model.learning_rate == LinearSchedule(0.001)
     assert model.clip_range(0.5) == pytest.approx(0.1) and model.lr_schedule(0.25) == pytest.approx(0.00025)

@@ -15,7 +15,7 @@ module-level dicts of specs (named by key); ``show`` also lists goal trees.
 starts from which it misses the spec.
 
 ``run`` says pytest's words for the same run, per goal and per spec
-(:func:`specguard.engine.spec_result.verdict_word`): ``passed``, ``failed``
+(:func:`specguard.stats.verdicts.verdict_word`): ``passed``, ``failed``
 (``FAILED`` on the spec's line), ``xfailed`` (a goal the spec declares in
 ``xfail`` missed), ``xpassed`` (it passed), and ``undecided`` (with what it
 counts as).
@@ -47,11 +47,11 @@ from specguard.parallel.workers import parse_workers
 from specguard.spec.loading import load_objects, spec_path
 from specguard.spec.spec import Spec
 from specguard.stats.anytime import parse_checkpoints
-from specguard.stats.intervals import UNDECIDED_OUTCOMES
+from specguard.stats.verdicts import UNDECIDED_OUTCOMES
 from specguard.tree.keys import require_thresholds
 from specguard.tree.nodes import Node
 from specguard.utils.atomic import DEFAULT_CACHE_DIR, write_atomic
-from specguard.utils.options import parse_choice, parse_count, parse_natural, parse_positive
+from specguard.utils.parsing import parse_choice, parse_count, parse_natural, parse_positive
 from specguard.validation import check_unique
 from specguard.version import __version__
 
@@ -149,6 +149,7 @@ def _write_results(path: Path, text: str) -> None:
 def _run_all(args: argparse.Namespace, specs: dict[str, Any], executor: Any) -> tuple[dict[str, Any], bool]:
     """Train and print every spec; returns the results as JSON data and whether one failed."""
     from specguard.engine.run_spec import run_spec
+    from specguard.report.table import table
     from specguard.training.progress import print_event
 
     results = {}
@@ -164,7 +165,7 @@ def _run_all(args: argparse.Namespace, specs: dict[str, Any], executor: Any) -> 
         )
         results[name] = result.to_dict()
         print(f"== {name}: {result.status()} ({result.seconds:.1f}s)")
-        print(result.table())
+        print(table(result))
         print()
         failed = failed or not result.as_expected
     return results, failed
@@ -174,7 +175,7 @@ _T = TypeVar("_T")
 
 
 def _option(parse: Callable[[str], _T]) -> Callable[[str], _T]:
-    """An option's argparse type from its shared check (:mod:`specguard.utils.options` and the rules built on it).
+    """An option's argparse type from its shared check (:mod:`specguard.utils.parsing` and the rules built on it).
 
     The check's message (a ``ValueError``'s, or a ``SpecError``'s without where
     and hint) becomes argparse's usage error: ``argument --NAME: <message>``, exit status 2.
@@ -224,7 +225,7 @@ _case_scale = _option(_parse_case_scale)
 
 
 def _natural(meaning: str) -> Callable[[str], int]:
-    """An option's type: an integer >= 0 (:func:`specguard.utils.options.parse_natural`); ``meaning`` names it."""
+    """An option's type: an integer >= 0 (:func:`specguard.utils.parsing.parse_natural`); ``meaning`` names it."""
 
     def natural(text: str) -> int:
         return parse_natural(text, meaning)
@@ -383,7 +384,7 @@ def _start_range(text: str) -> tuple[str, tuple[float, float]]:
 
 def _falsify(args: argparse.Namespace) -> int:
     """Train (or find in the cache) each spec, then search its start space for counterexamples, per run."""
-    from specguard.engine.falsify_run import start_space
+    from specguard.engine.falsify_run import falsify_runs, start_space
     from specguard.engine.run_spec import run_spec
     from specguard.starts.space import StartSpace
     from specguard.training.progress import print_event
@@ -397,8 +398,8 @@ def _falsify(args: argparse.Namespace) -> int:
         quiet = args.quiet
         result = run_spec(spec, cache_dir=args.cache_dir, progress=None if quiet else print_event)
         say = None if quiet else (lambda line: print(f"[specguard] {line}", file=sys.stderr))
-        found = result.falsify(
-            starts, examples=args.examples, uniform=args.uniform, search_seed=args.seed, progress=say
+        found = falsify_runs(
+            result, starts, examples=args.examples, uniform=args.uniform, search_seed=args.seed, progress=say
         )
         for seed, f in found.items():
             print(f"== {name} seed {seed}: {'COUNTEREXAMPLE' if f.found else 'none found'}")

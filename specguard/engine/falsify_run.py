@@ -1,6 +1,7 @@
 """Falsifying a spec's trained runs: the cached model as a batched policy, the spec's property and identity.
 
-:func:`falsify_run` loads run ``seed``'s model from the cache (no retraining),
+:func:`falsify_runs` falsifies the runs of a :class:`~specguard.engine.spec_result.SpecResult`, each as
+:func:`falsify_run` does: it takes run ``seed``'s model from the cache (no retraining),
 makes it a policy over a batch of observations (its ``VecNormalize``
 statistics applied where the run used them, its deterministic action where
 the spec evaluates so) and searches a start space with
@@ -19,12 +20,14 @@ from typing import Any
 
 import numpy as np
 
+from specguard.engine.spec_result import SpecResult
+from specguard.engine.trained import load_run
 from specguard.falsify.search import EpisodeRunner, Falsification, falsify
 from specguard.spec.spec import Spec
 from specguard.starts.space import StartSpace
 from specguard.training.policy import one_torch_thread
 
-__all__ = ["batch_policy", "database_key", "falsify_run", "property_keys", "start_space"]
+__all__ = ["batch_policy", "database_key", "falsify_run", "falsify_runs", "property_keys", "start_space"]
 
 
 def start_space(spec: Spec, starts: StartSpace | None = None) -> StartSpace:
@@ -57,6 +60,60 @@ def batch_policy(model: Any, normalizer: Any, deterministic: bool) -> Callable[[
     from specguard.training.policy import policy
 
     return policy(model, normalizer, deterministic=deterministic, batch=True)
+
+
+def falsify_runs(
+    result: SpecResult,
+    starts: StartSpace | None = None,
+    *,
+    seeds: list[int] | None = None,
+    examples: int = 200,
+    uniform: int = 100,
+    search_seed: int = 0,
+    database: str | Path | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> dict[int, Falsification]:
+    """Search ``starts`` for starts from which each of ``result``'s cached policies misses the spec (no retraining).
+
+    Args:
+        starts: the start space (:class:`~specguard.starts.space.StartSpace`); ``None``: the spec's own
+            (``Spec.starts``), else the env's.
+        seeds: the runs to falsify; ``None``: every run.
+        examples: guided episodes per run at most; ``uniform``: uniform draws for the failure rate.
+        search_seed: the seed of the search.
+        database: the Hypothesis example database directory counterexamples are stored in and
+            replayed from; default ``<cache_dir>/falsify``.
+        progress: called with a line per round of the search; ``None`` for silence.
+
+    Returns:
+        Per seed, what was found (:class:`~specguard.falsify.search.Falsification`).
+
+    Raises:
+        SpecError: a run was not cached (:func:`specguard.engine.trained.load_run`).
+
+    Example:
+        >>> import specguard as sg
+        >>> result = sg.run_spec(spec)  # doctest: +SKIP
+        >>> for seed, found in sg.falsify_runs(result, sg.StartSpace({"theta": (-0.2, 0.2)})).items():  # doctest: +SKIP
+        ...     print(seed, found.report())
+    """
+    found = {}
+    for seed in seeds if seeds is not None else [r.seed for r in result.runs]:
+        spec, model, normalizer = load_run(result, seed)
+        found[seed] = falsify_run(
+            spec,
+            model,
+            normalizer,
+            seed=seed,
+            spec_key=result.spec_key,
+            starts=starts,
+            examples=examples,
+            uniform=uniform,
+            search_seed=search_seed,
+            database=database if database is not None else (Path(result.cache_dir or ".") / "falsify"),
+            progress=progress,
+        )
+    return found
 
 
 def falsify_run(

@@ -13,7 +13,7 @@ Example:
     >>> upright = sg.Goal("upright", x=(0.966, 1.0), y=(-0.259, 0.259), omega=(-0.25, 0.25))
     >>> spec = sg.Spec(pendulum, upright, budget=sg.Budget(timesteps=100_000), expect=0.8)
     >>> result = sg.run_spec(spec, workers=2)  # doctest: +SKIP
-    >>> print(result.table())  # doctest: +SKIP
+    >>> print(sg.table(result))  # doctest: +SKIP
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from specguard.cache.store import Cache
-from specguard.engine.judging import judge, seeds_still_needed
+from specguard.engine.judging import episode_notes, judge, seeds_still_needed
 from specguard.engine.runs import Runs
 from specguard.engine.spec_result import SpecResult
 from specguard.error import SpecError
@@ -167,7 +167,15 @@ def _seeds_of(spec: Spec, options: RunOptions) -> Iterator[tuple[Runs, SpecResul
     n_workers = resolve_workers(options.workers)
     cache = Cache(Path(options.cache_dir)) if options.cache_dir is not None else None
     executor = options.executor
-    result = SpecResult(spec=spec.label, runs=[], goals={}, confidence=spec.confidence, trained=spec)
+    result = SpecResult(
+        spec=spec.label,
+        runs=[],
+        goals={},
+        confidence=spec.confidence,
+        undecided=spec.undecided,
+        xfail=dict(spec.xfail),
+        trained=spec,
+    )
     owned = isinstance(executor, str)
     runner = make_executor(executor, workers=n_workers) if isinstance(executor, str) else executor
     try:
@@ -175,6 +183,7 @@ def _seeds_of(spec: Spec, options: RunOptions) -> Iterator[tuple[Runs, SpecResul
         result.spec_key = None if runs.fingerprint is None else runs.fingerprint.spec_key
         result.cache_dir = None if runs.cache is None else runs.cache.root
         yield runs, result
+        result.notes = episode_notes(spec.tree, result.runs)
     finally:
         if owned:
             runner.close()

@@ -1,60 +1,48 @@
-"""A spec's runs judged: per-goal verdicts (:class:`GoalVerdict`), and :class:`SpecResult` with its table and models."""
+"""A spec's runs judged, as plain data: per-goal verdicts (:class:`GoalVerdict`) and :class:`SpecResult`.
+
+A result says what was measured and how each goal is judged, in the words of
+:mod:`specguard.stats.verdicts`; ``to_dict()`` is JSON and
+:meth:`SpecResult.from_dict` reads it back. What acts on a result lives
+elsewhere: its models, rollouts and falsification in :mod:`specguard.engine.trained`
+and :mod:`specguard.engine.falsify_run`, its table in :mod:`specguard.report.table`.
+
+Example:
+    >>> from specguard.stats.verdicts import QuorumVerdict, RunVerdict
+    >>> from specguard.training.result import RunResult
+    >>> run = RunResult(spec="p", seed=0, timesteps=64, episodes=10, successes={"p": 9}, train_seconds=1.0)
+    >>> goal = GoalVerdict("p", 0.5, 1, [RunVerdict.MET], QuorumVerdict.PASSED, 9, 10, (0.555, 0.997))
+    >>> result = SpecResult(spec="p", runs=[run], goals={"p": goal})
+    >>> result.passed, result.word("p"), result.status()
+    (True, <Word.PASSED: 'passed'>, 'passed')
+    >>> SpecResult.from_dict(result.to_dict()) == result
+    True
+"""
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from specguard.construction import cap
-from specguard.error import SpecError
-from specguard.extend import until_end
 from specguard.spec.spec import Spec
-from specguard.stats.intervals import GoalOutcome, QuorumVerdict, RunVerdict, success_interval
+from specguard.stats.verdicts import (
+    DEFAULT_UNDECIDED,
+    UNDECIDED_AS,
+    GoalOutcome,
+    QuorumVerdict,
+    RunVerdict,
+    Word,
+    counted,
+    goal_outcome,
+    spec_word,
+    verdict_word,
+)
 from specguard.training.result import RunResult
-from specguard.tree.keys import GOAL, kind, label
-from specguard.tree.nodes import keeps_to_horizon
-from specguard.utils.text import interval_text, render_table, weights_text
+from specguard.tree.keys import kind
 
-if TYPE_CHECKING:
-    from collections.abc import Callable
+__all__ = ["GoalVerdict", "SpecResult"]
 
-    from specguard.falsify.search import Falsification
-    from specguard.starts.space import StartSpace
-
-__all__ = ["VERDICT_WORDS", "GoalVerdict", "SpecResult", "verdict_word"]
-
-# The words every door shows for a goal, worst first: pytest's outcomes, and undecided.
-VERDICT_WORDS = ("failed", "undecided", "xfailed", "xpassed", "passed")
-
-
-def verdict_word(counted: str, outcome: GoalOutcome | str, *, expected_miss: bool = False) -> str:
-    """The word every door shows for a goal: pytest's (passed, failed, xfailed, xpassed), or undecided.
-
-    The one rule ``specguard run``'s table and the pytest plugin's summary both follow.
-
-    Args:
-        counted: what the goal counts as: ``"passed"``, ``"failed"`` or ``"xfailed"``
-            (:meth:`SpecResult.counted`; in pytest, the item's outcome).
-        outcome: the goal's :class:`~specguard.stats.intervals.GoalOutcome` (passed, failed, undecided).
-        expected_miss: the spec declares the goal in ``xfail``: passing it is ``xpassed``, as a
-            non-strict ``pytest.mark.xfail`` that passes.
-
-    An undecided goal that counts as passed or failed says ``undecided``
-    (what it counts as decides the exit status); one that counts as xfailed is
-    ``xfailed``, as pytest reports it.
-
-    Example:
-        >>> verdict_word("passed", "passed", expected_miss=True), verdict_word("xfailed", "failed")
-        ('xpassed', 'xfailed')
-        >>> verdict_word("failed", "undecided"), verdict_word("passed", "undecided")
-        ('undecided', 'undecided')
-    """
-    if counted == "passed" and expected_miss:
-        return "xpassed"
-    if GoalOutcome(outcome) is GoalOutcome.UNDECIDED and counted in ("passed", "failed"):
-        return "undecided"
-    return counted
+_GOAL_FIELDS = ("path", "threshold", "required", "runs", "verdict", "successes", "episodes", "interval")
 
 
 @dataclass
@@ -84,268 +72,190 @@ class GoalVerdict:
     def success(self) -> float:
         return self.successes / self.episodes if self.episodes else 0.0
 
+    def to_dict(self) -> dict[str, Any]:
+        """The goal as JSON-ready data, its verdicts as their words; :meth:`from_dict` reads it back."""
+        return {**asdict(self), "runs": [str(v) for v in self.runs], "verdict": str(self.verdict)}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> GoalVerdict:
+        """The goal :meth:`to_dict` wrote (extra keys, such as a result's ``kind`` and ``word``, ignored).
+
+        Raises:
+            ValueError: a field is missing, or a verdict is not one of its words.
+        """
+        missing = sorted(set(_GOAL_FIELDS) - set(data))
+        if missing:
+            raise ValueError(f"goal verdict {data.get('path', '?')!r} lacks {', '.join(missing)}")
+        lo, hi = data["interval"]
+        return cls(
+            path=data["path"],
+            threshold=data["threshold"],
+            required=data["required"],
+            runs=[RunVerdict(v) for v in data["runs"]],
+            verdict=QuorumVerdict(data["verdict"]),
+            successes=data["successes"],
+            episodes=data["episodes"],
+            interval=(lo, hi),
+        )
+
 
 @dataclass
 class SpecResult:
-    """Everything ``run_spec`` measured; ``to_dict()`` is JSON-serialisable."""
+    """Everything a spec's runs measured and how each goal is judged: plain data.
+
+    ``to_dict()`` is JSON, and :meth:`from_dict` reads it back equal. The words it
+    reports (:meth:`outcome`, :meth:`counted`, :meth:`word`, :meth:`status`,
+    :attr:`passed`) are :mod:`specguard.stats.verdicts`'s, as at every door.
+
+    Attributes:
+        spec: the spec's label.
+        runs: what each finished run measured, by seed.
+        goals: per thresholded goal (and safety rate), its verdict and pooled figures: all a door
+            reports of a goal (a result of evaluation episodes alone, without training, fills
+            ``goals`` the same way, with its episodes as one run).
+        errors, tracebacks: per seed whose run crashed, what happened (the worker's traceback is shown under -v).
+        cached: per seed, whether its run came from the cache.
+        seconds: wall-clock time of the call.
+        confidence: the level of the pooled intervals.
+        spec_key: the spec's identity in the cache (``None`` without a cache).
+        undecided: what a goal whose runs stayed undecided counts as (``Spec.undecided``).
+        xfail: the goals the spec expects to miss, with the reasons (``Spec.xfail``).
+        notes: the facts about the evaluation episodes that every door shows beside the
+            verdicts, one line each (:func:`specguard.engine.judging.episode_notes`).
+        trained: the spec as run, which with ``cache_dir`` reaches the runs' models
+            (:func:`specguard.engine.trained.load_model`); neither is reported nor serialised.
+    """
 
     spec: str
     runs: list[RunResult]
     goals: dict[str, GoalVerdict]
     errors: dict[int, str] = field(default_factory=dict)
-    tracebacks: dict[int, str] = field(default_factory=dict)  # the worker's, per failed seed (shown under -v)
+    tracebacks: dict[int, str] = field(default_factory=dict)
     cached: dict[int, bool] = field(default_factory=dict)
     seconds: float = 0.0
     confidence: float = 0.95
     spec_key: str | None = None
-    trained: Spec | None = field(default=None, repr=False, compare=False)  # the spec as run, for model()/rollout()
+    undecided: str = DEFAULT_UNDECIDED
+    xfail: dict[str, str] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+    trained: Spec | None = field(default=None, repr=False, compare=False)
     cache_dir: Path | None = field(default=None, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        if self.undecided not in UNDECIDED_AS:
+            raise ValueError(f"expected undecided to be one of {tuple(UNDECIDED_AS)}, got {self.undecided!r}")
 
     def outcome(self, path: str) -> GoalOutcome:
         """Thresholded goal ``path`` at the end: passed, failed, or undecided.
 
-        Undecided when it failed only through runs that stayed undecided: none
-        missed, no seed failed (more evaluation episodes could have decided it).
+        Undecided when it failed only through runs that stayed undecided
+        (:func:`~specguard.stats.verdicts.goal_outcome`).
         """
         goal = self.goals[path]
-        if goal.verdict is QuorumVerdict.PASSED:
-            return GoalOutcome.PASSED
-        if not self.errors and goal.runs and RunVerdict.MISSED not in goal.runs:
-            return GoalOutcome.UNDECIDED
-        return GoalOutcome.FAILED
+        return goal_outcome(goal.verdict, goal.runs, crashed=bool(self.errors))
 
-    def counted(self, path: str) -> str:
-        """What goal ``path`` counts as at every door: ``"passed"``, ``"xfailed"`` or ``"failed"``.
+    def counted(self, path: str) -> Word:
+        """What goal ``path`` counts as at every door: passed, xfailed or failed.
 
-        The one place the spec's ``undecided`` and ``xfail`` apply: an undecided
-        goal counts as the spec's ``undecided`` says; a goal the spec expects
-        to miss (``xfail``) that did not pass counts as xfailed, unless runs
-        crashed: a crash is not a miss, so the goal counts as failed.
+        The spec's ``undecided`` and ``xfail`` apply here (:func:`~specguard.stats.verdicts.counted`).
         """
-        outcome = self.outcome(path)
-        if self.errors and outcome is not GoalOutcome.PASSED:
-            return "failed"
-        undecided_as = self.trained.undecided if self.trained is not None else "fail"
-        if outcome is GoalOutcome.PASSED or (outcome is GoalOutcome.UNDECIDED and undecided_as == "pass"):
-            return "passed"
-        xfail = self.trained.xfail if self.trained is not None else {}
-        if path in xfail or (outcome is GoalOutcome.UNDECIDED and undecided_as == "xfail"):
-            return "xfailed"
-        return "failed"
+        return counted(
+            self.outcome(path), crashed=bool(self.errors), undecided_as=self.undecided, expected_miss=path in self.xfail
+        )
 
-    def word(self, path: str) -> str:
-        """The word shown for goal ``path`` (:func:`verdict_word`): pytest's for the same run, or undecided."""
-        xfail = self.trained.xfail if self.trained is not None else {}
-        return verdict_word(self.counted(path), self.outcome(path), expected_miss=path in xfail)
+    def word(self, path: str) -> Word:
+        """The word shown for goal ``path`` (:func:`~specguard.stats.verdicts.verdict_word`): pytest's, or undecided."""
+        return verdict_word(self.counted(path), self.outcome(path), expected_miss=path in self.xfail)
 
     def status(self) -> str:
-        """The spec's word at the end: ``FAILED`` when a seed failed, else its goals' worst (:data:`VERDICT_WORDS`).
+        """The spec's word at the end (:func:`~specguard.stats.verdicts.spec_word`): ``FAILED``, or its goals' worst.
 
-        ``undecided`` says what it counts as (``Spec.undecided``), which decides the exit status.
+        ``undecided`` says what it counts as (:attr:`undecided`), which decides the exit status.
         """
-        if self.errors:
-            return "FAILED"
-        words = [self.word(p) for p in self.goals] or ["passed"]
-        worst = min(words, key=VERDICT_WORDS.index)
-        if worst == "failed":
-            return "FAILED"
-        if worst == "undecided":
-            undecided = [p for p, w in zip(self.goals, words) if w == "undecided"]
-            return f"undecided, counted as {self.counted(undecided[0])}"
-        return worst
+        words = [self.word(p) for p in self.goals]
+        undecided = [p for p, w in zip(self.goals, words) if w is Word.UNDECIDED]
+        return spec_word(
+            words, crashed=bool(self.errors), undecided_counts_as=self.counted(undecided[0]) if undecided else None
+        )
 
     @property
     def passed(self) -> bool:
         """No seed failed and every thresholded goal counts as passed (:meth:`counted`)."""
-        return not self.errors and all(self.counted(p) == "passed" for p in self.goals)
+        return not self.errors and all(self.counted(p) is Word.PASSED for p in self.goals)
 
     @property
     def as_expected(self) -> bool:
         """No seed failed and no thresholded goal counts as failed: each passed, or was expected to miss."""
-        return not self.errors and all(self.counted(p) != "failed" for p in self.goals)
-
-    def model(self, seed: int) -> Any:
-        """The trained SB3 model of run ``seed`` (loaded from the cache, after its checksums are verified).
-
-        Raises:
-            SpecError: the run was not cached (``cache_dir=None``) or is gone.
-        """
-        return self._load(seed)[0]
-
-    def normalizer(self, seed: int) -> Any:
-        """Run ``seed``'s ``VecNormalize`` statistics (``None`` where the run did not normalise observations).
-
-        A policy outside specguard must normalise observations with these before asking the model.
-
-        Raises:
-            SpecError: the run was not cached (``cache_dir=None``) or is gone.
-        """
-        return self._load(seed)[1]
-
-    def rollout(self, seed: int, episodes: int = 1, *, deterministic: bool = True) -> list[list[dict[str, Any]]]:
-        """Episodes of run ``seed``'s policy on its env, seeded as evaluation episodes are.
-
-        Returns:
-            One list of steps per episode: ``{"obs", "action", "reward",
-            "terminated", "truncated", "info"}`` with ``info["goals"]``.
-
-        Example:
-            >>> result = goal_spec_result(spec)  # doctest: +SKIP
-            >>> last = result.rollout(0, episodes=1)[0][-1]  # doctest: +SKIP
-            >>> assert last["info"]["goals"]["pendulum/stabilization"]  # doctest: +SKIP
-        """
-        from specguard.training.rollout import rollout
-
-        model, normalizer = self._load(seed)
-        assert self.trained is not None
-        return rollout(model, self.trained, episodes=episodes, deterministic=deterministic, normalizer=normalizer)
-
-    def falsify(
-        self,
-        starts: StartSpace | None = None,
-        *,
-        seeds: list[int] | None = None,
-        examples: int = 200,
-        uniform: int = 100,
-        search_seed: int = 0,
-        database: str | Path | None = None,
-        progress: Callable[[str], None] | None = None,
-    ) -> dict[int, Falsification]:
-        """Search ``starts`` for starts from which each run's cached policy misses the spec (no retraining).
-
-        Args:
-            starts: the start space (:class:`~specguard.starts.space.StartSpace`); ``None``: the spec's own
-                (``Spec.starts``), else the env's.
-            seeds: the runs to falsify; ``None``: every run.
-            examples: guided episodes per run at most; ``uniform``: uniform draws for the failure rate.
-            database: the Hypothesis example database directory counterexamples are stored in and
-                replayed from; default ``<cache_dir>/falsify``.
-
-        Returns:
-            Per seed, what was found (:class:`~specguard.falsify.search.Falsification`).
-
-        Raises:
-            SpecError: a run was not cached.
-        """
-        from specguard.engine.falsify_run import falsify_run
-
-        found = {}
-        for seed in seeds if seeds is not None else [r.seed for r in self.runs]:
-            model, normalizer = self._load(seed)
-            assert self.trained is not None
-            found[seed] = falsify_run(
-                self.trained,
-                model,
-                normalizer,
-                seed=seed,
-                spec_key=self.spec_key,
-                starts=starts,
-                examples=examples,
-                uniform=uniform,
-                search_seed=search_seed,
-                database=database if database is not None else (Path(self.cache_dir or ".") / "falsify"),
-                progress=progress,
-            )
-        return found
-
-    def _load(self, seed: int) -> tuple[Any, Any]:
-        from specguard.cache.models import load_model
-
-        if self.trained is None or self.cache_dir is None:
-            raise SpecError(
-                f"Spec {self.spec!r}: no model kept for seed {seed}: the runs were not cached",
-                hint="run with a cache (the default) to reach trained models",
-            )
-        try:
-            return load_model(self.trained, seed, self.cache_dir)
-        except FileNotFoundError as e:
-            raise SpecError(f"Spec {self.spec!r}: {e}", hint="train it again: its cache entry is gone") from None
+        return not self.errors and all(self.counted(p) is not Word.FAILED for p in self.goals)
 
     def success(self, path: str) -> tuple[int, int]:
         """Pooled ``(successes, episodes)`` of a goal (or safe episodes of a safety key) over all runs."""
         return sum(r.successes[path] for r in self.runs), sum(r.episodes for r in self.runs)
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as JSON-ready data, with the words it reports (``passed``, ``status``, each goal's ``word``)."""
         return {
             "spec": self.spec,
             "passed": self.passed,
+            "status": self.status(),
             "seconds": self.seconds,
             "runs": [r.to_dict() for r in self.runs],
-            "goals": {p: {**asdict(g), "kind": kind(p)} for p, g in self.goals.items()},
+            "goals": {
+                p: {**g.to_dict(), "kind": kind(p), "outcome": str(self.outcome(p)), "word": str(self.word(p))}
+                for p, g in self.goals.items()
+            },
             "errors": {str(k): v for k, v in self.errors.items()},
+            "tracebacks": {str(k): v for k, v in self.tracebacks.items()},
             "cached": {str(k): v for k, v in self.cached.items()},
             "confidence": self.confidence,
             "spec_key": self.spec_key,
+            "undecided": self.undecided,
+            "xfail": dict(self.xfail),
+            "notes": list(self.notes),
         }
 
-    def notes(self) -> list[str]:
-        """The facts about the evaluation episodes that every door shows beside the verdicts, one line each.
+    @classmethod
+    def from_dict(
+        cls, data: dict[str, Any], *, trained: Spec | None = None, cache_dir: str | Path | None = None
+    ) -> SpecResult:
+        """The result :meth:`to_dict` wrote, equal to it in everything it reports.
 
-        Where the root goal holds until the end: the episodes that started outside it (failed before the
-        policy acted) and those the env ended by termination before their horizon (docs/semantics.md,
-        "Goals that hold until the end"); for a reach goal, the episodes that started inside it (met
-        before the policy acted).
+        Each run is read by :meth:`RunResult.from_dict <specguard.training.result.RunResult.from_dict>`, which
+        checks every field. The words ``to_dict`` adds (``passed``, ``status``, ``kind``, ``outcome``,
+        ``word``) are derived again, not read.
+
+        Args:
+            trained, cache_dir: the spec as run and its cache, to reach the runs' models again.
+
+        Raises:
+            ValueError: a field is missing or malformed, naming it.
         """
-        episodes = sum(r.episodes for r in self.runs)
-        started = sum(r.started_in_goal for r in self.runs)
-        tree = self.trained.tree if self.trained is not None else None
-        root = tree.name if tree is not None else next((p for r in self.runs[:1] for p in r.successes), "?")
-        lines = []
-        capped = sum(r.capped for r in self.runs)
-        if capped:
-            lines.append(
-                f"{capped} of {episodes} evaluation episodes were cut at {cap.EPISODE_CAP} steps, specguard's cap "
-                "for an env that declares no episode limit: give it the horizon you mean (max_episode_steps=N for "
-                "an env id, a TimeLimit in a factory)"
-            )
-        if tree is None or not until_end(tree):
-            if started:
-                lines.append(
-                    f"{started} of {episodes} evaluation episodes started inside the root goal {root!r}: "
-                    "met before the policy acted"
-                )
-            return lines
-        if episodes - started:  # a goal that must hold from the first state on
-            lines.append(
-                f"{episodes - started} of {episodes} evaluation episodes started outside the root goal "
-                f"{root!r}, which must hold until the end: failed before the policy acted"
-            )
-        terminated = sum(r.terminated for r in self.runs)
-        if terminated:
-            horizon = keeps_to_horizon(tree)
-            why = (
-                "an Always goal does not keep such an episode unless until='termination'"
-                if horizon
-                else "until='termination' takes that as a good end: they were judged on their last state"
-            )
-            lines.append(
-                f"{terminated} of {episodes} evaluation episodes were ended by termination before their horizon "
-                f"(the env's: a fall, a crash): the root goal {root!r} holds until the end, and {why}"
-            )
-        return lines
+        missing = sorted({"spec", "runs", "goals"} - set(data))
+        if missing:
+            raise ValueError(f"a spec result needs {', '.join(missing)}, got the fields {sorted(data)}")
+        return cls(
+            spec=data["spec"],
+            runs=[_run_of(run, data["spec"]) for run in data["runs"]],
+            goals={p: GoalVerdict.from_dict(g) for p, g in data["goals"].items()},
+            errors={int(k): v for k, v in data.get("errors", {}).items()},
+            tracebacks={int(k): v for k, v in data.get("tracebacks", {}).items()},
+            cached={int(k): v for k, v in data.get("cached", {}).items()},
+            seconds=data.get("seconds", 0.0),
+            confidence=data.get("confidence", 0.95),
+            spec_key=data.get("spec_key"),
+            undecided=data.get("undecided", DEFAULT_UNDECIDED),
+            xfail=dict(data.get("xfail", {})),
+            notes=list(data.get("notes", [])),
+            trained=trained,
+            cache_dir=None if cache_dir is None else Path(cache_dir),
+        )
 
-    def table(self) -> str:
-        """A per-goal table: pooled success with interval, threshold, runs, verdict (:meth:`word`).
 
-        Goals first, then the safety rates, labelled ``path:name (safe)``; then the :meth:`notes` (the
-        episodes that started inside the root goal, or ended before their horizon, how many).
-        """
-        paths = [p for r in self.runs[:1] for p in r.successes] or list(self.goals)
-        paths.sort(key=lambda p: kind(p) != GOAL)  # stable: each kind keeps its order
-        header = ("goal", "success", f"{self.confidence:.0%} interval", "threshold", "runs met", "verdict")
-        rows = []
-        for p in paths:
-            k, n = self.success(p)
-            rate = f"{k / n:.0%} ({k}/{n})" if n else "-"
-            iv = "-" if not n else interval_text(success_interval(k, n, self.confidence))
-            g = self.goals.get(p)
-            met = "-" if g is None else f"{g.runs.count(RunVerdict.MET)}/{len(g.runs)} (need {g.required})"
-            threshold = "-" if g is None else f">= {g.threshold:g}"
-            rows.append((label(p), rate, iv, threshold, met, "-" if g is None else self.word(p)))
-        lines = render_table(header, rows) + self.notes()
-        for run in self.runs:
-            if run.weights:
-                lines.append(f"seed {run.seed} adapted weights: {weights_text(run.weights)}")
-        for seed, message in self.errors.items():
-            lines.append(f"seed {seed} failed: {message}")
-        return "\n".join(lines)
+def _run_of(data: Any, spec: str) -> RunResult:
+    """One run of a result's ``to_dict()``, checked as a worker's or the cache's is (its own seed and keys)."""
+    run = data if isinstance(data, dict) else {}
+    seed, successes = run.get("seed", -1), run.get("successes")
+    try:
+        return RunResult.from_dict(data, seed=seed, paths=successes if isinstance(successes, dict) else ())
+    except ValueError as e:
+        raise ValueError(f"spec result {spec!r}: run seed {seed!r}: {e}") from None

@@ -39,7 +39,8 @@ from typing import Any
 from specguard.error import InvalidSpec
 from specguard.falsify.search import Falsification
 from specguard.starts.space import StartSpace, as_start_space
-from specguard.stats.intervals import RunVerdict, run_verdict
+from specguard.stats.intervals import run_verdict
+from specguard.stats.verdicts import RunVerdict
 from specguard.validation import check_count, check_natural, check_open_fraction
 
 __all__ = ["Falsify", "as_falsify", "falsify_verdict", "rule_text", "verdict_lines"]
@@ -92,7 +93,7 @@ class Falsify:
         object.__setattr__(self, "seed", seed)
 
     def kwargs(self) -> dict[str, Any]:
-        """The keyword arguments of :meth:`specguard.SpecResult.falsify` this check runs with."""
+        """The keyword arguments of :func:`specguard.engine.falsify_run.falsify_runs` this check runs with."""
         return {"examples": self.examples, "uniform": self.uniform, "search_seed": self.seed}
 
 
@@ -136,7 +137,7 @@ def verdict_lines(
 
     Example:
         >>> import gymnasium as gym
-        >>> from specguard.falsify.starts import StartSpace
+        >>> from specguard.starts.space import StartSpace
         >>> from specguard.falsify.search import Falsification
         >>> starts = StartSpace({"x": (-0.05, 0.05)}).resolve(gym.make("CartPole-v1"))
         >>> found = {0: Falsification(starts, guided=200)}

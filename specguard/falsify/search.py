@@ -2,7 +2,7 @@
 
 :class:`EpisodeRunner` runs a policy (any callable from a batch of
 observations to a batch of actions: a trained model, or a planted policy in a
-test; one that carries something per env, an :class:`~specguard.construction.policy.EpisodePolicy`, is told
+test; one that carries something per env, an :class:`~specguard.construction.episode_policy.EpisodePolicy`, is told
 when episodes start and which rows still run) on the spec's env from chosen starts, several starts in lockstep so
 the policy is asked once per step for all of them, and judges each
 episode's end by the spec's property (:mod:`specguard.falsify.robustness`).
@@ -49,7 +49,7 @@ import gymnasium as gym
 import numpy as np
 
 from specguard.construction.env import features_space, stack_observations
-from specguard.construction.policy import EpisodePolicy
+from specguard.construction.episode_policy import EpisodePolicy
 from specguard.extend import until_end
 from specguard.falsify.portfolio import Portfolio
 from specguard.falsify.robustness import Judgement, feature_scales, judge_end, own_states, reached_early
@@ -112,7 +112,7 @@ class EpisodeRunner:
             it reports goals, safety and its evaluator), as :meth:`Spec.make_env
             <specguard.spec.spec.Spec.make_env>` and :func:`~specguard.construction.env.make_env` do.
         act: ``act(observations) -> actions``, a batch (rows) to a batch; an
-            :class:`~specguard.construction.policy.EpisodePolicy` is told when the batch's episodes start and
+            :class:`~specguard.construction.episode_policy.EpisodePolicy` is told when the batch's episodes start and
             which rows still run.
         space: the start space.
         keys: the asserted goal paths and safety keys (the property).

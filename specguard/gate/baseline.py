@@ -13,7 +13,7 @@ Safety rates (keys ``path:name``, :mod:`specguard.tree.keys`) are stored and
 compared exactly as goals are, under ``group::path:name``. A goal or safety
 rate that a baseline has no figures for (a baseline saved before it was
 asserted, or before safety rates were measured) is not compared:
-:func:`specguard.pytest_plugin.verdicts.check_item` notes that instead of failing.
+:func:`specguard.pytest_plugin.judge.check_item` notes that instead of failing.
 
 Each stored goal also records its spec's identity
 (:attr:`specguard.cache.fingerprint.SpecFingerprint.spec_key`, the key the cache and

@@ -29,6 +29,7 @@ from specguard.spec.spec import Spec
 from specguard.stats.family import first_level
 from specguard.stats.power import DEFAULT_SPREAD, chance_met, chance_passed, estimated_spread, min_detectable_drop
 from specguard.stats.sequential import DEFAULT_ALPHA, DEFAULT_COMPARE_SEEDS, Design
+from specguard.stats.verdicts import UNDECIDED_AS, Word
 
 __all__ = ["OFFSETS", "VISIBLE_DROP", "GoalPlan", "SpecPlan", "plan_spec"]
 
@@ -128,7 +129,7 @@ def plan_spec(
                 threshold=threshold,
                 stages=stages,
                 confidence=spec.verdict_confidence,
-                undecided_met=spec.undecided == "pass",
+                undecided_met=UNDECIDED_AS[spec.undecided] is Word.PASSED,
             )
             for p in _successes(threshold)
         }

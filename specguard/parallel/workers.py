@@ -53,7 +53,7 @@ import cloudpickle
 from specguard.error import InvalidSpec
 from specguard.parallel.protocol import Failure, Position, Task, TaskOutcome, TaskRunner, one_line, outcome_of
 from specguard.parallel.signals import STOP_POLL_S, SigtermGuard, raise_if_stopping
-from specguard.utils.options import parse_count
+from specguard.utils.parsing import parse_count
 
 __all__ = ["parse_workers", "resolve_workers", "run_tasks"]
 
@@ -68,7 +68,7 @@ _MAX_MESSAGES_PER_WAKEUP = 64
 
 
 def parse_workers(value: object) -> int | str:
-    """The one worker-count rule: ``"auto"`` or a count (:func:`specguard.utils.options.parse_count`).
+    """The one worker-count rule: ``"auto"`` or a count (:func:`specguard.utils.parsing.parse_count`).
 
     Raises:
         InvalidSpec: anything else, with what was expected (a ``SpecError``,

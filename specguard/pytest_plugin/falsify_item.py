@@ -2,7 +2,7 @@
 
 The spec is trained (or read back) once per session, as for its goal items; the
 falsifier then searches each run's start space on the cached model
-(:meth:`specguard.SpecResult.falsify`) and each run is judged by
+(:func:`specguard.engine.falsify_run.falsify_runs`) and each run is judged by
 :func:`specguard.falsify.assertion.falsify_verdict`. A run falsified fails the item
 with its report: the shrunk start, the goals it missed, a summary of its episode,
 and the failure rate over the start space with its interval. A run left
@@ -29,9 +29,9 @@ COUNTEREXAMPLES = "specguard.counterexamples"
 
 def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: Any) -> None:
     """Train (or read back) the item's spec, falsify every run, and pass, fail or xfail the item."""
-    from specguard.engine.falsify_run import start_space
+    from specguard.engine.falsify_run import falsify_runs, start_space
     from specguard.falsify.assertion import falsify_verdict, verdict_lines
-    from specguard.stats.intervals import RunVerdict
+    from specguard.stats.verdicts import UNDECIDED_AS, RunVerdict, Word
 
     with one_line_errors(item):
         spec, _ = spec_of(item, expect)
@@ -39,7 +39,7 @@ def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: 
         space = start_space(trained, check.starts)
         space.resolve(trained.initial_env.make())  # names and bounds checked before anything trains
         result = run(state, trained, item)
-        found = result.falsify(space, **check.kwargs(), progress=terminal_lines(item.config))
+        found = falsify_runs(result, space, **check.kwargs(), progress=terminal_lines(item.config))
     verdicts = {seed: falsify_verdict(f, check.max_rate, trained.confidence) for seed, f in found.items()}
     for seed, falsification in sorted(found.items()):
         item.config.hook.pytest_goal_spec_falsification(
@@ -71,9 +71,10 @@ def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: 
     ]
     item.user_properties.append((COUNTEREXAMPLES, json.dumps(runs)))
     states = set(verdicts.values())
-    if RunVerdict.MISSED in states or (RunVerdict.UNDECIDED in states and trained.undecided == "fail"):
+    undecided_as = UNDECIDED_AS[trained.undecided]
+    if RunVerdict.MISSED in states or (RunVerdict.UNDECIDED in states and undecided_as is Word.FAILED):
         raise GoalMissed(f"falsified:\n{text}")
-    if RunVerdict.UNDECIDED in states and trained.undecided == "xfail":
+    if RunVerdict.UNDECIDED in states and undecided_as is Word.XFAILED:
         pytest.xfail(f"undecided:\n{text}")
     if RunVerdict.UNDECIDED in states:
         warnings.warn(f"undecided falsification passed by undecided='pass':\n{text}", stacklevel=1)

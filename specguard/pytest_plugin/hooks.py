@@ -23,7 +23,7 @@ if TYPE_CHECKING:
     from specguard.engine.spec_result import SpecResult
     from specguard.falsify.search import Falsification
     from specguard.spec.spec import Spec
-    from specguard.stats.intervals import RunVerdict
+    from specguard.stats.verdicts import RunVerdict
 
 __all__ = ["pytest_goal_spec_falsification", "pytest_goal_spec_result"]
 

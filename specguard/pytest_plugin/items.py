@@ -93,7 +93,7 @@ def spec_of(item: pytest.Function, expect: Any) -> tuple[Any, list[str]]:
     Fails the item when the function does not return a ``Spec``; call it inside
     :func:`one_line_errors`, which turns a ``SpecError`` into the item's one line.
     """
-    from specguard.pytest_plugin.verdicts import with_thresholds
+    from specguard.pytest_plugin.judge import with_thresholds
     from specguard.spec.spec import Spec
 
     spec = item.obj(**{name: item.funcargs[name] for name in item._fixtureinfo.argnames})
@@ -113,11 +113,12 @@ def raise_outcome(item: pytest.Function, checks: Sequence[Any], undecided_as: st
     ``undecided_as`` is the session's ``--goal-specs-undecided``: what a goal whose
     runs stayed undecided does (fail, xfail or pass).
     """
-    from specguard.stats.intervals import GoalOutcome
+    from specguard.stats.verdicts import UNDECIDED_AS, GoalOutcome, Word
 
+    counts_as = UNDECIDED_AS[undecided_as]
     failures = [c.message() for c in checks if c.outcome is GoalOutcome.FAILED]
     undecided = [c.message() for c in checks if c.outcome is GoalOutcome.UNDECIDED]
-    if result.errors or failures or (undecided and undecided_as == "fail"):
+    if result.errors or failures or (undecided and counts_as is Word.FAILED):
         text = "\n\n".join(failures + undecided)
         if detailed(item.config) and result.tracebacks:
             text += "".join(f"\n\nworker traceback (seed {k}):\n{tb}" for k, tb in sorted(result.tracebacks.items()))
@@ -127,7 +128,7 @@ def raise_outcome(item: pytest.Function, checks: Sequence[Any], undecided_as: st
                 f"runs crashed (a crash is not a miss, even for a goal expected to miss):\n{crashed}\n\n{text}"
             )
         raise GoalMissed(text)
-    if undecided and undecided_as == "xfail":
+    if undecided and counts_as is Word.XFAILED:
         pytest.xfail("undecided: " + "\n\n".join(undecided))
     if undecided:
         warnings.warn(

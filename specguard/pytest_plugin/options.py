@@ -1,6 +1,6 @@
 """The plugin's options: the command-line flags, their ini settings, and the one parse of both per session.
 
-Every value goes through the rule the other doors use (:mod:`specguard.utils.options`,
+Every value goes through the rule the other doors use (:mod:`specguard.utils.parsing`,
 :func:`specguard.parallel.workers.resolve_workers`, :func:`specguard.stats.anytime.parse_checkpoints`);
 a bad value is a ``pytest.UsageError`` before anything trains.
 """
@@ -192,7 +192,7 @@ def parse_options(config: pytest.Config) -> Options:
         ini = next(i for o, i, *_ in _SETTINGS if o == option)
         return _setting(config, option, ini)
 
-    from specguard.utils.options import parse_choice, parse_count, parse_natural, parse_positive
+    from specguard.utils.parsing import parse_choice, parse_count, parse_natural, parse_positive
 
     try:
         scale = parse_positive(get("--goal-specs-budget-scale"))
@@ -201,7 +201,7 @@ def parse_options(config: pytest.Config) -> Options:
     from specguard.error import InvalidSpec
     from specguard.parallel.workers import resolve_workers
     from specguard.stats.anytime import parse_checkpoints
-    from specguard.stats.intervals import UNDECIDED_OUTCOMES
+    from specguard.stats.verdicts import UNDECIDED_OUTCOMES
 
     try:
         text = get("--goal-specs-checkpoints")

@@ -4,7 +4,7 @@ Hooks, fixtures and the marker only. The logic lives in plain modules:
 :mod:`~specguard.pytest_plugin.options` (the options and their one parse),
 :mod:`~specguard.pytest_plugin.session` (one result per spec),
 :mod:`~specguard.pytest_plugin.items` (what an item runs and its outcome),
-:mod:`~specguard.pytest_plugin.verdicts` (judging each goal),
+:mod:`~specguard.pytest_plugin.judge` (judging each goal),
 :mod:`~specguard.pytest_plugin.recorder` (reports and baselines),
 :mod:`~specguard.pytest_plugin.hooks` (the hooks other plugins implement) and
 :mod:`~specguard.report.show` (``--goal-specs-show``, ``--goal-specs-plan``). Training
@@ -144,7 +144,7 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     marker = pyfuncitem.get_closest_marker(MARKER)
     if marker is None:
         return None
-    from specguard.pytest_plugin.verdicts import check_item
+    from specguard.pytest_plugin.judge import check_item
 
     state = pyfuncitem.config.stash[_SESSION]
     if marker.kwargs.get("error"):  # a malformed @goal_spec fails its own item, not the collection

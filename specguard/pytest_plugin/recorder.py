@@ -25,13 +25,13 @@ WARNING = "specguard: warning:"  # a line saying an output was not written
 
 
 def _verdict(report: pytest.TestReport, outcome: str) -> str:
-    """A goal row's word (:func:`~specguard.engine.spec_result.verdict_word`, as ``specguard run`` shows it)
+    """A goal row's word (:func:`~specguard.stats.verdicts.verdict_word`, as ``specguard run`` shows it)
     from its item's pytest report and the goal's own outcome (passed, failed, undecided)."""
-    from specguard.engine.spec_result import verdict_word
+    from specguard.stats.verdicts import pytest_counted, verdict_word
 
     expected_miss = hasattr(report, "wasxfail")
-    counted = "xfailed" if expected_miss and not report.passed else report.outcome
-    return verdict_word(counted, outcome, expected_miss=expected_miss)
+    counts_as = pytest_counted(report.outcome, expected_miss=expected_miss)
+    return str(verdict_word(counts_as, outcome, expected_miss=expected_miss))
 
 
 class Recorder:
@@ -172,6 +172,7 @@ def apply_family(rows: list[dict[str, Any]]) -> bool:
     """
     from specguard.stats.family import holm, step_level
     from specguard.stats.sequential import DEFAULT_ALPHA
+    from specguard.stats.verdicts import Word
 
     compared = {f"{r['group']}::{r['goal']}": r for r in rows if r.get("gate")}
     if not compared:
@@ -186,8 +187,8 @@ def apply_family(rows: list[dict[str, Any]]) -> bool:
                 f"dropped by Holm's step {step} (p = {row['gate']['p_drop']:.2g} <= {level:.2g}): "
                 + str(row.get("comparison") or "")
             )
-            if row.get("verdict") == "passed":  # an item that failed or was expected to miss keeps its verdict
-                row["verdict"] = "failed"
+            if row.get("verdict") == Word.PASSED:  # an item that failed or was expected to miss keeps its verdict
+                row["verdict"] = str(Word.FAILED)
                 row["hint"] = row["comparison"]
                 beyond = True
     return beyond

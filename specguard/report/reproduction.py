@@ -19,7 +19,8 @@ from specguard.engine.reproduce import CaseStudy, Reproduction
 from specguard.engine.spec_result import SpecResult
 from specguard.error import SpecError
 from specguard.report.plots import plot_curves
-from specguard.stats.intervals import RunVerdict, success_interval
+from specguard.stats.intervals import success_interval
+from specguard.stats.verdicts import RunVerdict
 from specguard.utils.atomic import write_atomic
 from specguard.utils.text import interval_text, markdown_table, per_seed_text
 

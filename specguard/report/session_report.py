@@ -1,6 +1,6 @@
 """Reports of a ``pytest --goal-specs`` session: terminal table, JSON, Markdown, PNG.
 
-Every function takes *rows*: the plain dicts of :meth:`specguard.pytest_plugin.verdicts.GoalCheck.to_row`
+Every function takes *rows*: the plain dicts of :meth:`specguard.pytest_plugin.judge.GoalCheck.to_row`
 plus ``"verdict"`` (what pytest reported: passed, failed, xfailed, xpassed,
 undecided) and optionally ``"comparison"`` and ``"curves"`` (one curve per run,
 in the order of ``"per_seed"``). The Markdown links the PNG and the rollout
@@ -21,6 +21,7 @@ from urllib.parse import quote
 
 from specguard.falsify.assertion import rule_text
 from specguard.falsify.search import start_text
+from specguard.stats.verdicts import FAILING_WORDS
 from specguard.utils.atomic import write_atomic
 from specguard.utils.text import interval_text, markdown_table
 
@@ -159,7 +160,7 @@ def session_markdown(
     family = family_lines(rows)
     if family:
         lines += ["", "### Compared with the baseline", ""] + [f"- {line}" for line in family]
-    failing = [r for r in _ordered(rows) if r["verdict"] in ("failed", "undecided")]
+    failing = [r for r in _ordered(rows) if r["verdict"] in FAILING_WORDS]
     if failing:
         lines += ["", "### Failing goals", ""]
         for r in failing:

@@ -35,7 +35,7 @@ from specguard.spec.budget import Budget
 from specguard.spec.zoo import SCHEDULED, LinearSchedule
 from specguard.starts.setter import Range
 from specguard.starts.space import StartSpace, as_start_space
-from specguard.stats.intervals import UNDECIDED_OUTCOMES
+from specguard.stats.verdicts import DEFAULT_UNDECIDED, UNDECIDED_OUTCOMES
 from specguard.tree.keys import check_expect, check_xfail, check_xfail_thresholded, resolve_goal
 from specguard.tree.nodes import Node
 from specguard.utils.text import shown
@@ -86,7 +86,7 @@ class Spec:
         starts: the start space the falsifier searches by default
             (:class:`~specguard.starts.space.StartSpace` or its ranges
             ``{variable: (lo, hi)}``; ``None``: the env's own reset ranges):
-            ``specguard falsify``, :meth:`SpecResult.falsify` and
+            ``specguard falsify``, :func:`~specguard.engine.falsify_run.falsify_runs` and
             ``falsify=True`` read it. Not part of the spec's identity: it
             changes no run and no verdict of its goals.
         policy: the algorithm's policy: one of its names (``"MlpPolicy"``, ``"CnnPolicy"``, ...)
@@ -120,7 +120,7 @@ class Spec:
     quorum: int | None = None
     deterministic: bool = True
     confidence: float = 0.95
-    undecided: str = "fail"
+    undecided: str = DEFAULT_UNDECIDED
     baseline: bool = False
     name: str | None = None
     xfail: Mapping[str, str] = field(default_factory=dict)

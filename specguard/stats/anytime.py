@@ -47,7 +47,8 @@ import functools
 import math
 from collections.abc import Callable, Mapping
 
-from specguard.stats.intervals import RunVerdict, run_verdict, success_interval
+from specguard.stats.intervals import run_verdict, success_interval
+from specguard.stats.verdicts import RunVerdict
 
 __all__ = [
     "DEFAULT_CHECKPOINTS",
@@ -79,7 +80,7 @@ def parse_checkpoints(text: str | int) -> int:
     Raises:
         ValueError: anything else, saying what was expected.
     """
-    from specguard.utils.options import parse_count
+    from specguard.utils.parsing import parse_count
 
     return parse_count(text, "1: train every run's whole budget")
 

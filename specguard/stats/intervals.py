@@ -15,7 +15,8 @@ true success rate is exactly ``t`` is called *missed* with probability at most
 conservative: the actual rates are lower.
 
 A spec's verdict counts runs against a quorum (:func:`quorum_verdict`), the
-way the paper reports "6 of 10 runs".
+way the paper reports "6 of 10 runs". The verdicts' words, and every word
+built on them, are :mod:`specguard.stats.verdicts`'s.
 
 Example:
     >>> lo, hi = success_interval(28, 30)
@@ -29,49 +30,17 @@ Example:
 
 from __future__ import annotations
 
-import enum
 import functools
 from collections.abc import Sequence
 
+from specguard.stats.verdicts import QuorumVerdict, RunVerdict
 from specguard.validation import check_open_fraction
 
 __all__ = [
-    "UNDECIDED_OUTCOMES",
-    "GoalOutcome",
-    "QuorumVerdict",
-    "RunVerdict",
     "quorum_verdict",
     "run_verdict",
     "success_interval",
 ]
-
-
-class RunVerdict(str, enum.Enum):
-    """One run against one goal's threshold."""
-
-    MET = "met"
-    MISSED = "missed"
-    UNDECIDED = "undecided"
-
-
-class QuorumVerdict(str, enum.Enum):
-    """A spec's goal over its runs."""
-
-    PASSED = "passed"
-    FAILED = "failed"
-    OPEN = "open"  # neither is settled yet: more runs could decide it
-
-
-# What a goal whose runs stayed undecided counts as (``Spec.undecided`` and every door's option).
-UNDECIDED_OUTCOMES = ("fail", "xfail", "pass")
-
-
-class GoalOutcome(str, enum.Enum):
-    """A test item's goal at the end: passed, failed, or undecided (failed only through undecided runs)."""
-
-    PASSED = "passed"
-    FAILED = "failed"
-    UNDECIDED = "undecided"
 
 
 def _check_counts(successes: int, episodes: int) -> None:

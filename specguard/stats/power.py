@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from specguard.stats.intervals import RunVerdict, run_verdict
+from specguard.stats.intervals import run_verdict
 from specguard.stats.sequential import (
     Design,
     GateState,
@@ -47,6 +47,7 @@ from specguard.stats.sequential import (
     transformed,
     z_of,
 )
+from specguard.stats.verdicts import RunVerdict
 
 __all__ = [
     "DEFAULT_SPREAD",

@@ -63,7 +63,7 @@ class Policy:
     """``model``'s action for an observation (or a batch of them, one row per env), with what it carries per env.
 
     Call :meth:`start` with the envs as their episodes start (after ``reset``), then the policy once per step.
-    It satisfies :class:`specguard.construction.policy.EpisodePolicy`.
+    It satisfies :class:`specguard.construction.episode_policy.EpisodePolicy`.
 
     Args:
         model: a trained SB3 model (any ``BaseAlgorithm``).

@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from specguard.construction.policy import EpisodePolicy
+from specguard.construction.episode_policy import EpisodePolicy
 from specguard.spec.spec import Spec
 from specguard.training.policy import one_torch_thread, policy
 from specguard.training.train import EVAL_SEED_BASE
@@ -28,7 +28,7 @@ def episode(
     options: dict[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
     """One episode of ``act`` on ``env`` from ``reset(seed=seed, options=options)``; ``on_step(n)`` after each of
-    its ``n`` steps. An :class:`~specguard.construction.policy.EpisodePolicy` is told as the episode starts."""
+    its ``n`` steps. An :class:`~specguard.construction.episode_policy.EpisodePolicy` is told as the episode starts."""
     obs, info = env.reset(seed=seed, options=options)
     if isinstance(act, EpisodePolicy):
         act.start([env])

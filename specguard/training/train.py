@@ -26,7 +26,7 @@ import gymnasium as gym
 
 from specguard.construction.cap import CAPPED
 from specguard.construction.env import SPEC_KEY, action_masks_problem
-from specguard.construction.policy import EpisodePolicy
+from specguard.construction.episode_policy import EpisodePolicy
 from specguard.error import InvalidSpec, SpecError, TrainingError
 from specguard.parallel.protocol import Report
 from specguard.spec.algorithms import ALGORITHMS, algorithm_class, algorithm_name, takes_action_masks
@@ -60,7 +60,7 @@ def evaluate(
 ) -> dict[str, int]:
     """Run ``episodes`` episodes of ``policy`` on ``env`` (which reports ``info["goals"]`` and ``info["safe"]``).
 
-    An :class:`~specguard.construction.policy.EpisodePolicy` (a trained model's
+    An :class:`~specguard.construction.episode_policy.EpisodePolicy` (a trained model's
     :class:`~specguard.training.policy.Policy`) is told as each episode starts.
 
     ``started``, if given, receives per episode whether its first state (at reset) was in the root goal

@@ -14,7 +14,8 @@ from typing import TYPE_CHECKING, Any
 from specguard.engine.spec_result import SpecResult
 from specguard.extend import SHAPING, Node, until_end
 from specguard.spec.spec import Spec
-from specguard.stats.intervals import GoalOutcome, RunVerdict, run_verdict, success_interval
+from specguard.stats.intervals import run_verdict, success_interval
+from specguard.stats.verdicts import OUTCOME_VERBS, GoalOutcome, RunVerdict
 from specguard.tree.keys import GOAL, SAFETY, kind, require_thresholds, resolve_goal
 from specguard.tree.nodes import keeps_to_horizon
 from specguard.utils.node_paths import child_path
@@ -42,7 +43,7 @@ class GoalCheck:
         gate: the comparison's figures (repeated p-values, state, seeds at each look, the seeds of
             each side, the level it was judged at), for the session's family-wise procedure.
         baseline_runs: ``[seed, successes, episodes]`` per run a saved baseline stores for this goal.
-        notes: the spec's facts about its evaluation episodes (:meth:`SpecResult.notes
+        notes: the spec's facts about its evaluation episodes (:attr:`SpecResult.notes
             <specguard.engine.spec_result.SpecResult.notes>`), shown under the table as ``specguard run`` shows them.
     """
 
@@ -86,11 +87,7 @@ class GoalCheck:
         return [(n, getattr(self, n)) for n in names] + [("interval", interval_text((lo, hi), digits=4))]
 
     def message(self) -> str:
-        verb = {
-            GoalOutcome.PASSED: "met",
-            GoalOutcome.FAILED: "missed",
-            GoalOutcome.UNDECIDED: "could not be decided for",
-        }[self.outcome]
+        verb = OUTCOME_VERBS[self.outcome]
         lo, hi = self.interval
         seeds = ", ".join(str(s["seed"]) for s in self.per_seed) or "none"
         safety = self.kind == SAFETY
@@ -246,7 +243,7 @@ def judge_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalChe
         spec_key=result.spec_key,
         hint=None if outcome is GoalOutcome.PASSED else _hint(spec, path, result, verdict.runs),
         kind=kind(path),
-        notes=result.notes(),
+        notes=list(result.notes),
     )
 
 

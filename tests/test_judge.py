@@ -9,8 +9,9 @@ from example_specs import pendulum
 from specguard.engine.judging import judge as _judge
 from specguard.engine.spec_result import SpecResult
 from specguard.gate.baseline import Baseline
-from specguard.pytest_plugin.verdicts import judge_goal
-from specguard.stats.intervals import GoalOutcome, success_interval
+from specguard.pytest_plugin.judge import judge_goal
+from specguard.stats.intervals import success_interval
+from specguard.stats.verdicts import GoalOutcome
 from specguard.training.result import RunResult
 from specguard.tree.keys import ROOT
 from specguard.utils.text import interval_text
@@ -107,7 +108,7 @@ def test_competing_subgoals_hint_at_weights():
 
 
 def test_with_thresholds_resolves_decorator_goals():
-    from specguard.pytest_plugin.verdicts import with_thresholds
+    from specguard.pytest_plugin.judge import with_thresholds
 
     s, paths = with_thresholds(spec(), {ROOT: 0.5, "position": 0.7}, "position")
     assert s.thresholds == {"pendulum": 0.5, "pendulum/position": 0.7} and paths == ["pendulum/position"]
@@ -117,7 +118,7 @@ def test_with_thresholds_resolves_decorator_goals():
 
 
 def test_check_item_fails_a_passing_goal_that_dropped_against_the_baseline():
-    from specguard.pytest_plugin.verdicts import check_item
+    from specguard.pytest_plugin.judge import check_item
 
     s = spec(expect={"pendulum": 0.3}, max_seeds=4)
     result = result_of(s, [(20, 30), (21, 30), (19, 30), (22, 30)])
@@ -145,7 +146,7 @@ def test_check_item_fails_a_passing_goal_that_dropped_against_the_baseline():
 
 
 def test_a_spec_whose_identity_and_runs_are_the_baselines_own_is_not_compared():
-    from specguard.pytest_plugin.verdicts import check_item
+    from specguard.pytest_plugin.judge import check_item
 
     s = spec(expect={"pendulum": 0.3})
     result = result_of(s, [(20, 30), (21, 30)])
@@ -233,7 +234,7 @@ def test_a_passing_or_undecided_safety_rate():
 
 
 def test_old_baselines_without_a_safety_rate_are_noted_not_compared():
-    from specguard.pytest_plugin.verdicts import check_item
+    from specguard.pytest_plugin.judge import check_item
 
     s = safety_spec({"pendulum": 0.3, "fast": 0.3})
     result = safety_result(s, [20, 21])
