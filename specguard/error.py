@@ -13,6 +13,8 @@ beside the code that raises them: ``Broken`` in :mod:`specguard.contract.trees`,
 from __future__ import annotations
 
 __all__ = [
+    "AgentError",
+    "AgentMismatch",
     "BaselineError",
     "CacheLockTimeout",
     "CacheWarning",
@@ -168,6 +170,28 @@ class TrainingError(SpecError):
     """The environment or a user function failed while a run trained or was evaluated."""
 
     default_hint = "reproduce it without training: build sg.make_env(...) and step it from the seed named above"
+
+
+class AgentError(SpecError):
+    """An agent trained elsewhere cannot be loaded or acts wrongly: a path with no model, a zip that is no
+    stable-baselines3 model, an algorithm or ``VecNormalize`` statistics that do not fit it, a callable that raised,
+    or an action outside its action space (:func:`specguard.agents.sources.load_agent`).
+
+    One line naming the culprit (the path, the file or the agent) and what was expected; an agent's own exception is
+    chained (``raise ... from``).
+    """
+
+    default_hint = (
+        "load_agent takes an SB3 or sb3-contrib .zip, an rl-zoo3 or Hugging Face Hub folder, an object with "
+        "predict(obs, state, episode_start, deterministic), or a callable obs -> action"
+    )
+
+
+class AgentMismatch(AgentError):
+    """An agent's spaces do not fit the env it is to act in (:func:`specguard.agents.agent.check_fits`), refused
+    before any episode: the message names both spaces."""
+
+    default_hint = "judge the agent in the env it was trained in (its env id and env_kwargs), or load the agent for it"
 
 
 class CacheLockTimeout(SpecError):

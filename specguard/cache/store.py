@@ -51,6 +51,7 @@ __all__ = [
     "SECRET_ENV",
     "Cache",
     "CacheLockTimeout",
+    "file_sha256",
     "model_files",
     "try_acquire",
     "validate_record",
@@ -64,7 +65,8 @@ NORMALIZER = "vecnormalize.pkl"
 RESULT = "result.json"
 
 
-def _sha256(path: Path) -> str:
+def file_sha256(path: Path) -> str:
+    """The SHA-256 of the file ``path``'s bytes, read a megabyte at a time (a model's zip, its statistics)."""
     h = hashlib.sha256()
     with path.open("rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
@@ -113,7 +115,7 @@ def _check_files(record: dict[str, Any], folder: Path) -> None:
     for name, expected in files.items():
         if name not in (MODEL, NORMALIZER):
             raise ValueError(f"unexpected file {name!r} recorded")
-        if not (folder / name).is_file() or _sha256(folder / name) != expected:
+        if not (folder / name).is_file() or file_sha256(folder / name) != expected:
             raise ValueError(f"{name} is missing or does not match its checksum")
 
 

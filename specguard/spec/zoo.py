@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import ast
 import difflib
+import functools
 import importlib.util
 import math
 import warnings
@@ -47,7 +48,7 @@ from specguard.spec.algorithms import (
 from specguard.utils.text import MAX_VALUE, elide, value_text
 from specguard.validation import check_text, is_count
 
-__all__ = ["SCHEDULED", "ZOO_FILES", "LinearSchedule", "ZooSettings", "zoo_settings"]
+__all__ = ["SCHEDULED", "ZOO_FILES", "LinearSchedule", "ZooSettings", "read_zoo_file", "zoo_settings"]
 
 ZOO_FILES: dict[str, str] = {
     "PPO": "ppo",
@@ -218,7 +219,7 @@ def _load(where: str, name: str, text: str) -> Any:
 
     if _too_deep(yaml.parse(text, Loader=yaml.SafeLoader)):
         raise InvalidSpec(where, f"cannot read {name}: it nests deeper than {_DEEPEST} levels")
-    loader = yaml.SafeLoader(text)
+    loader = _loader()(text)
     try:
         node = loader.get_single_node()
         if node is not None and _expanded_size(node) > _MOST_NODES:
@@ -230,7 +231,44 @@ def _load(where: str, name: str, text: str) -> Any:
         loader.dispose()
 
 
+@functools.cache
+def _loader() -> Any:
+    """PyYAML's safe loader, reading also the two Python tags rl-zoo3 writes in a run's ``config.yml`` and ``args.yml``
+    (``yaml.dump`` of an ``OrderedDict``: a mapping; of a tuple: a tuple); any other tag stays an error."""
+    import yaml
+
+    class ZooLoader(yaml.SafeLoader):  # type: ignore[misc]
+        pass
+
+    ZooLoader.add_constructor("tag:yaml.org,2002:python/object/apply:collections.OrderedDict", _ordered_dict)
+    ZooLoader.add_constructor("tag:yaml.org,2002:python/tuple", _tuple)
+    return ZooLoader
+
+
+def _ordered_dict(loader: Any, node: Any) -> dict[Any, Any]:
+    (pairs,) = loader.construct_sequence(node, deep=True)  # OrderedDict's one argument: its [key, value] pairs
+    return {key: value for key, value in pairs}
+
+
+def _tuple(loader: Any, node: Any) -> tuple[Any, ...]:
+    return tuple(loader.construct_sequence(node, deep=True))
+
+
 def _read(where: str, path: Path) -> dict[str, Any]:
+    entries = read_zoo_file(where, path)
+    if not isinstance(entries, dict):
+        raise InvalidSpec(where, f"expected {str(path)!r} to map env ids to settings, got {type(entries).__name__}")
+    return entries
+
+
+def read_zoo_file(where: str, path: Path) -> Any:
+    """What the YAML file ``path`` of rl-zoo3 says: a hyperparameter file, or a run's ``config.yml``, ``args.yml`` or
+    ``env_kwargs.yml`` (read safely: plain YAML and the ``OrderedDict`` and tuple rl-zoo3 writes, bounded in depth
+    and size).
+
+    Raises:
+        InvalidSpec: ``where``: the file cannot be read (PyYAML missing, not UTF-8, not YAML), naming it.
+    """
     try:
         import yaml
     except ImportError:
@@ -246,10 +284,9 @@ def _read(where: str, path: Path) -> dict[str, Any]:
         raise InvalidSpec(
             where, f"cannot read {name}: not UTF-8 text (byte {e.object[e.start]:#04x} at offset {e.start})"
         ) from None
-    except (yaml.YAMLError, ValueError, OverflowError) as e:  # ValueError: an integer of over 4,300 digits, ...
+    except (yaml.YAMLError, ValueError, OverflowError, TypeError) as e:  # ValueError: an integer of over 4,300 digits;
+        # TypeError: an OrderedDict's pairs that are no pairs
         raise InvalidSpec(where, f"cannot read {name}: {_yaml_error(e)}") from None
-    if not isinstance(entries, dict):
-        raise InvalidSpec(where, f"expected {name} to map env ids to settings, got {type(entries).__name__}")
     return entries
 
 
