@@ -16,8 +16,9 @@ design dependency). Parts, lowest first:
 - ``parallel/`` (tasks in processes or on a cluster: generic, it knows nothing of specs);
 - the public tools over the core: ``strategies``, ``registry``, ``contract/``, ``testing``;
 - ``spec/`` (the spec, its budget, the algorithms, spec files), then ``training/`` (one seed), then ``cache/``
-  (run identity and the store), then ``engine/`` (``run_spec``, its runs and verdicts), then ``gate/`` (the baseline
-  gate);
+  (run identity and the store), then ``agents/`` (an agent trained elsewhere, loaded as one policy: it acts as a
+  trained model does, and is fingerprinted as a spec's functions are), then ``engine/`` (``run_spec``, its runs and
+  verdicts), then ``gate/`` (the baseline gate);
 - ``report/`` (session reports, figures, GIFs, spec rendering);
 - the doors: ``pytest_plugin/`` and ``cli/``; and the facade ``specguard`` (``__init__``) and ``__main__``.
 
@@ -50,7 +51,7 @@ PACKAGE = Path(specguard.__file__).parent
 BASE = frozenset({"error", "validation", "version", "utils"})
 CORE = BASE | {"extend", "tree", "starts", "construction"}
 TOOLS = CORE | {"strategies", "registry", "contract", "testing"}
-RUNNING = TOOLS | {"stats", "parallel", "falsify", "spec", "training", "cache"}
+RUNNING = TOOLS | {"stats", "parallel", "falsify", "spec", "training", "cache", "agents"}
 # Per part, the parts its modules may import (its own included).
 ALLOWED: Mapping[str, frozenset[str]] = {
     "error": frozenset({"error"}),
@@ -71,6 +72,7 @@ ALLOWED: Mapping[str, frozenset[str]] = {
     "spec": CORE | {"stats", "spec"},
     "training": CORE | {"stats", "parallel", "spec", "training"},
     "cache": CORE | {"stats", "parallel", "spec", "training", "cache"},
+    "agents": CORE | {"stats", "spec", "training", "cache", "agents"},
     "engine": RUNNING | {"engine"},
     "gate": RUNNING | {"engine", "gate"},
     "report": RUNNING | {"engine", "gate", "report"},

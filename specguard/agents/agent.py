@@ -1,0 +1,286 @@
+"""An agent trained elsewhere as one policy: :class:`Agent`, and :func:`check_fits`, its spaces against an env's.
+
+Whatever it was loaded from (:func:`specguard.agents.sources.load_agent`: a
+saved model, an rl-zoo3 or Hub folder, a model in memory, a callable), an
+:class:`Agent` acts as an
+:class:`~specguard.construction.episode_policy.EpisodePolicy`: told as episodes
+start, then asked once per step. How it acts is decided once, when it is made;
+a step adds one call and one flag to the agent's own.
+
+Example:
+    >>> import gymnasium as gym
+    >>> agent = Agent(lambda obs: int(obs[2] > 0), name="lean")
+    >>> check_fits(agent, gym.spaces.Box(-1, 1, (4,)), gym.spaces.Discrete(2))
+    >>> agent.start([None]); agent([0.0, 0.0, 0.1, 0.0])
+    1
+    >>> agent.start([None]); agent([0.0, 0.0, -0.1, 0.0]), agent.name, agent.action_space
+    (0, 'lean', None)
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from specguard.error import AgentError, AgentMismatch, SpecError
+from specguard.utils.text import MAX_SHOWN, elide, shown
+
+__all__ = ["Agent", "action_problem", "check_fits", "observation_kind"]
+
+
+class Agent:
+    """An agent as a policy: its action for an observation (or a batch of them, one row per env), and what it is.
+
+    It satisfies :class:`specguard.construction.episode_policy.EpisodePolicy`: call :meth:`start` with the envs as
+    their episodes start, then the agent once per step. Made by :func:`~specguard.agents.sources.load_agent`.
+
+    Args:
+        act: the action for ``(observations, rows)``: a :class:`specguard.training.policy.Policy` (a model's, which
+            keeps a recurrent state and reads action masks), or a callable ``obs -> action`` for one observation
+            (``per_observation=True``, the default for a callable).
+        name: a short name for reports.
+        identity: computes the agent's :attr:`identity` on first use.
+        observation_space: what the agent reads, when it says (a model's); ``None``: unknown (a callable's).
+        action_space: what it gives, when it says.
+        normalizer: ``VecNormalize`` statistics applied to every observation before a callable sees it (a model's
+            policy applies its own).
+        batch: take a batch of observations (rows, one per env) and give their actions; a callable for one
+            observation is asked row by row.
+        check_actions: check the first action after each :meth:`start` against the action space
+            (:func:`check_fits` names it for an agent that does not say): for an agent whose actions may be of
+            another type or shape (a callable's, a ``predict`` of another library's).
+        model: the SB3 model (or ``predict`` object) behind the agent, if any.
+        algorithm: its algorithm's class, if known.
+        path: the file it was loaded from, if any.
+        env_kwargs: what its ``env_kwargs.yml`` (or rl-zoo3's ``args.yml`` and ``config.yml``) says the env was
+            made with; empty where nothing says.
+        config: what its ``config.yml`` says it was trained with (rl-zoo3's hyperparameters); empty where none.
+    """
+
+    def __init__(
+        self,
+        act: Callable[..., Any],
+        *,
+        name: str,
+        identity: Callable[[], str] | None = None,
+        observation_space: Any = None,
+        action_space: Any = None,
+        normalizer: Any = None,
+        batch: bool = False,
+        check_actions: bool = True,
+        model: Any = None,
+        algorithm: type | None = None,
+        path: Any = None,
+        env_kwargs: Mapping[str, Any] | None = None,
+        config: Mapping[str, Any] | None = None,
+    ) -> None:
+        from specguard.training.policy import Policy
+
+        self.name = name
+        self.observation_space = observation_space
+        self.action_space = action_space
+        self.normalizer = normalizer
+        self.batch = batch
+        self.model = model
+        self.algorithm = algorithm
+        self.path = path
+        self.env_kwargs: dict[str, Any] = dict(env_kwargs or {})
+        self.config: dict[str, Any] = dict(config or {})
+        self._source = act
+        self._identity = identity
+        self._check_actions = check_actions
+        self._convert: Callable[[Any], Any] | None = None  # a callable's action as the env takes it (_expect)
+        self._expected = action_space  # the space actions are checked against (check_fits names it)
+        self._policy = act if isinstance(act, Policy) else None
+        self._act = self._policy if self._policy is not None else self._callable_act(act)
+        self._unchecked = check_actions
+
+    # -- what it is ----------------------------------------------------------------------------------------
+
+    @functools.cached_property
+    def identity(self) -> str:
+        """A stable hex digest of what the agent computes, for cache keys: a file's bytes (a zip and its
+        ``vecnormalize.pkl``), a model's parameters, a callable's code (as a spec's functions are fingerprinted).
+
+        Raises:
+            FingerprintError: a callable holds something that cannot be fingerprinted exactly.
+        """
+        if self._identity is None:
+            raise AgentError(f"agent {self.name!r} has no identity: it was made without one", hint=None)
+        return self._identity()
+
+    def batched(self, batch: bool = True) -> Agent:
+        """The same agent taking a batch of observations (``batch=True``) or one: it shares the model, with its own
+        per-env state."""
+        from specguard.training.policy import Policy
+
+        act = self._source
+        if self._policy is not None:
+            act = Policy(self._policy.model, self._policy._norm, deterministic=self._policy.deterministic, batch=batch)
+        twin = Agent(
+            act,
+            name=self.name,
+            identity=self._identity,
+            observation_space=self.observation_space,
+            action_space=self.action_space,
+            normalizer=self.normalizer,
+            batch=batch,
+            check_actions=self._check_actions,
+            model=self.model,
+            algorithm=self.algorithm,
+            path=self.path,
+            env_kwargs=self.env_kwargs,
+            config=self.config,
+        )
+        twin._expect(self._expected)
+        return twin
+
+    def __repr__(self) -> str:
+        return f"Agent({self.name!r})"
+
+    # -- acting ---------------------------------------------------------------------------------------------
+
+    def start(self, envs: Sequence[Any]) -> None:
+        """Episodes start on ``envs`` (one env, or one per row of a batch): a recurrent state starts afresh, and the
+        next action is checked (for an agent whose actions are checked)."""
+        if self._policy is not None:
+            self._policy.start(envs)
+        self._unchecked = self._check_actions
+
+    def __call__(self, observations: Any, rows: Sequence[int] | None = None) -> Any:
+        """The action for ``observations`` (of every env started, or of the envs ``rows``), as the agent gives it
+        (a discrete one as a Python ``int`` unless batched).
+
+        Raises:
+            AgentError: the agent raised (its exception chained), or its first action after :meth:`start` is not one
+                of the action space.
+        """
+        try:
+            action = self._act(observations, rows)
+        except SpecError:
+            raise
+        except Exception as e:
+            first = str(e).strip().splitlines()[0] if str(e).strip() else ""
+            raise AgentError(f"agent {self.name!r} raised {type(e).__name__}: {elide(first, MAX_SHOWN)}") from e
+        if self._unchecked:
+            self._check(action)
+        return action if self._convert is None else self._convert(action)
+
+    def _callable_act(self, fn: Callable[[Any], Any]) -> Callable[[Any, Sequence[int] | None], Any]:
+        """``fn`` (one observation to one action) as the agent's step, decided once: normalized or not, batched or
+        not (its actions stacked)."""
+        norm = self.normalizer
+        one = fn if norm is None else (lambda obs: fn(norm.normalize_obs(obs)))
+        if not self.batch:
+            return lambda observations, rows: one(observations)
+
+        def rows_of(observations: Any, rows: Sequence[int] | None) -> Any:
+            if isinstance(observations, Mapping):  # a Dict observation's batch, key by key
+                n = len(next(iter(observations.values())))
+                each = [{k: v[i] for k, v in observations.items()} for i in range(n)]
+            else:
+                each = list(observations)
+            return np.stack([np.asarray(one(o)) for o in each])
+
+        return rows_of
+
+    def _expect(self, action_space: Any) -> None:
+        """Check actions against ``action_space`` (the env's, where the agent names none); a callable's discrete
+        action is then given as a Python ``int``."""
+        import gymnasium as gym
+
+        if action_space is None:
+            return
+        self._expected = action_space
+        self._unchecked = self._check_actions
+        if self._policy is None and not self.batch:
+            self._convert = int if isinstance(action_space, gym.spaces.Discrete) else np.asarray
+
+    def _check(self, action: Any) -> None:
+        space = self._expected
+        if space is None:  # nothing to check against (no check_fits): not checked until start
+            self._unchecked = False
+            return
+        for row in np.asarray(action) if self.batch else (action,):
+            problem = action_problem(space, row)
+            if problem:
+                raise AgentError(
+                    f"agent {self.name!r} gave the action {shown(row)} ({problem}), which is not one of {space}",
+                    hint="an agent's action must be one of the env's action space, as env.action_space.contains says",
+                )
+        self._unchecked = False
+
+
+def action_problem(space: Any, action: Any) -> str:
+    """What is wrong with ``action`` for ``space`` in a few words: its shape, its type, its range; ``""``: nothing.
+
+    A ``Box`` action is checked for its shape and a number type only (an env clips what lies outside its bounds);
+    any other space asks ``space.contains``.
+
+    Example:
+        >>> import gymnasium as gym
+        >>> action_problem(gym.spaces.Discrete(2), 1), action_problem(gym.spaces.Discrete(2), 2.0)
+        ('', 'a float64, not an integer')
+        >>> action_problem(gym.spaces.Box(-1, 1, (2,)), [0.5]), action_problem(gym.spaces.Discrete(2), 5)
+        ('shape (1,), not (2,)', 'outside the space')
+    """
+    import gymnasium as gym
+
+    try:
+        array = np.asarray(action)
+    except Exception as e:  # a tensor that needs .detach(), an object numpy cannot read
+        return f"numpy cannot read it: {type(e).__name__}"
+    if isinstance(space, (gym.spaces.Box, gym.spaces.Discrete, gym.spaces.MultiDiscrete, gym.spaces.MultiBinary)):
+        if array.shape != space.shape:
+            return f"shape {array.shape}, not {space.shape}"
+        numbers = "iuf" if isinstance(space, gym.spaces.Box) else "iu"
+        if array.dtype.kind not in numbers:
+            return f"a{'n' if array.dtype.name[0] in 'aeiou' else ''} {array.dtype}, not " + (
+                "a number" if numbers == "iuf" else "an integer"
+            )
+        if isinstance(space, gym.spaces.Box):
+            return ""
+        action = array.astype(space.dtype) if array.dtype != space.dtype else array
+        if isinstance(space, gym.spaces.Discrete):
+            action = action.item()
+    return "" if space.contains(action) else "outside the space"
+
+
+def observation_kind(space: Any) -> tuple[Any, ...]:
+    """What a network reads of an observation space: its kind and shape (a ``Dict``'s key by key)."""
+    import gymnasium as gym
+
+    if isinstance(space, gym.spaces.Dict):
+        return ("Dict", tuple((key, observation_kind(part)) for key, part in space.spaces.items()))
+    return (type(space).__name__, getattr(space, "shape", None))
+
+
+def check_fits(agent: Agent, observation_space: Any, action_space: Any) -> None:
+    """Refuse an agent whose spaces do not fit an env's, before any episode; an agent that names no action space
+    (a callable) has its first action after each start checked against ``action_space`` instead.
+
+    The observation must be of the same kind and shape as the agent's (what its network reads; its bounds may
+    differ); the action space must equal the agent's (what the env is given), as SB3's ``check_for_correct_spaces``
+    asks.
+
+    Raises:
+        AgentMismatch: one line naming the agent's space and the env's.
+    """
+    wanted = observation_kind(observation_space)
+    if agent.observation_space is not None and observation_kind(agent.observation_space) != wanted:
+        raise AgentMismatch(
+            f"agent {agent.name!r} reads observations of {agent.observation_space}, and the env gives "
+            f"{observation_space}"
+        )
+    norm = agent.normalizer
+    if agent.observation_space is None and norm is not None and observation_kind(norm.observation_space) != wanted:
+        raise AgentMismatch(
+            f"agent {agent.name!r} normalizes observations of {norm.observation_space}, and the env gives "
+            f"{observation_space}"
+        )
+    if agent.action_space is not None and agent.action_space != action_space:
+        raise AgentMismatch(f"agent {agent.name!r} acts in {agent.action_space}, and the env takes {action_space}")
+    agent._expect(action_space)

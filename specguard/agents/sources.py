@@ -1,0 +1,401 @@
+"""Where an agent trained elsewhere comes from, loaded as one :class:`~specguard.agents.agent.Agent` by
+:func:`load_agent`.
+
+Four sources, told apart once, when the agent is loaded:
+
+1. a stable-baselines3 or sb3-contrib ``.zip``: the algorithm is read from the file (its policy class, the
+   hyperparameters it stores, and the names rl-zoo3 and the Hub give its folders and files), or named with
+   ``algorithm=``; a ``vecnormalize.pkl`` beside it (rl-zoo3's, under ``<env_id>/``; the Hub's
+   ``vec_normalize.pkl``) normalizes its observations;
+2. a folder as rl-zoo3 (``<algo>/<env_id>_<n>/``: ``<env_id>.zip``, ``best_model.zip``, ``<env_id>/config.yml``,
+   ``args.yml``, ``vecnormalize.pkl``) or the Hugging Face Hub (``<algo>-<env_id>.zip``, ``config.yml``,
+   ``env_kwargs.yml``, ``vec_normalize.pkl``) lays it out on disk: its one model zip (rl-zoo3's final model,
+   ``<env_id>.zip``, where there are others, as ``rl_zoo3.enjoy`` loads by default), and what its files say the
+   env was made with (:attr:`Agent.env_kwargs`) and the agent trained with (:attr:`Agent.config`);
+3. an object with SB3's ``predict(obs, state=None, episode_start=None, deterministic=True)``: a model in memory,
+   whose recurrent state is carried from step to step (:class:`specguard.training.policy.Policy`);
+4. a callable ``obs -> action`` for one observation (CleanRL's, TorchRL's, a hand-written rule).
+
+Every bad input is one :class:`~specguard.error.AgentError` naming the path or the agent.
+
+Example:
+    >>> agent = load_agent(lambda obs: 0)
+    >>> agent.name, agent.observation_space, len(agent.identity)
+    ('<lambda>', None, 64)
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import pickle
+import zipfile
+from collections.abc import Callable, Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+from specguard.agents.agent import Agent, observation_kind
+from specguard.cache.canonical import digest
+from specguard.cache.store import file_sha256
+from specguard.error import AgentError, InvalidSpec, SpecError
+from specguard.spec.algorithms import ALGORITHMS, CONTRIB, SB3, algorithm_class, hyperparameter_names
+from specguard.spec.algorithms import resolve_algorithm as _resolve
+from specguard.spec.zoo import read_zoo_file
+from specguard.training.policy import Policy, normalizer_of
+from specguard.utils.text import MAX_SHOWN, elide, function_text, shown
+
+__all__ = ["STATISTICS", "load_agent"]
+
+STATISTICS = ("vecnormalize.pkl", "vec_normalize.pkl")
+"""The names a model's ``VecNormalize`` statistics have beside it: rl-zoo3's and SB3's, then the Hub's."""
+
+_ZOO_NAMES = {"ppo_lstm": "RecurrentPPO", "qr-dqn": "QRDQN"}  # rl-zoo3's algorithm names that are not ours lowered
+
+
+def _zero(_: float) -> float:
+    return 0.0
+
+
+# What rl_zoo3.enjoy replaces on loading: schedules pickled by another Python may not unpickle, and acting needs none.
+_CUSTOM_OBJECTS = {"learning_rate": 0.0, "lr_schedule": _zero, "clip_range": _zero, "exploration_schedule": _zero}
+
+
+def load_agent(
+    agent: Any,
+    *,
+    algorithm: str | type | None = None,
+    normalizer: Any = None,
+    deterministic: bool = True,
+    batch: bool = False,
+) -> Agent:
+    """``agent`` as an :class:`~specguard.agents.agent.Agent`, from wherever it was trained (see the module).
+
+    Args:
+        agent: a path to a ``.zip`` or a folder (``str`` or ``PathLike``), an object with SB3's ``predict``, or a
+            callable ``obs -> action``.
+        algorithm: the zip's algorithm (a name of :data:`specguard.spec.algorithms.ALGORITHMS`, a ``BaseAlgorithm``
+            subclass or ``"module:Class"``); default: read from the file.
+        normalizer: ``VecNormalize`` statistics (the object, or the path of its ``.pkl``) applied to every
+            observation; default: the ``vecnormalize.pkl`` beside a zip, a model's own training env's.
+        deterministic: a model's deterministic action, or a sampled one.
+        batch: the agent takes a batch of observations (one row per env), as
+            :class:`~specguard.training.policy.Policy` does; :meth:`Agent.batched` turns it.
+
+    Raises:
+        AgentError: one line naming what cannot be loaded and why (see :class:`~specguard.error.AgentError`).
+    """
+    if isinstance(agent, (str, os.PathLike)):
+        return _from_path(Path(agent), algorithm, normalizer, deterministic=deterministic, batch=batch)
+    if algorithm is not None:
+        raise AgentError(
+            f"algorithm={shown(algorithm)} names a saved zip's algorithm, and the agent {shown(agent)} is no path",
+            hint="leave algorithm out for a model in memory or a callable",
+        )
+    if callable(getattr(agent, "predict", None)):
+        return _from_model(agent, normalizer, deterministic=deterministic, batch=batch)
+    if callable(agent):
+        return _from_callable(agent, normalizer, batch=batch)
+    raise AgentError(f"cannot load an agent from {shown(agent)} (a {type(agent).__name__})")
+
+
+# -- a model in memory, a callable ---------------------------------------------------------------------------
+
+
+def _from_model(model: Any, normalizer: Any, *, deterministic: bool, batch: bool) -> Agent:
+    from stable_baselines3.common.base_class import BaseAlgorithm
+
+    name = type(model).__name__
+    observation_space = getattr(model, "observation_space", None)
+    norm = normalizer_of(model, _statistics(f"agent {name!r}", normalizer, observation_space))
+    sb3 = isinstance(model, BaseAlgorithm)
+    return Agent(
+        Policy(model, norm, deterministic=deterministic, batch=batch),
+        name=name,
+        identity=lambda: _digest([("model", _parameters(model, name)), ("normalizer", _norm_digest(norm))]),
+        observation_space=observation_space,
+        action_space=getattr(model, "action_space", None),
+        normalizer=norm,
+        batch=batch,
+        check_actions=not sb3,  # an SB3 model's actions are its action space's
+        model=model,
+        algorithm=type(model) if sb3 else None,
+    )
+
+
+def _from_callable(fn: Callable[[Any], Any], normalizer: Any, *, batch: bool) -> Agent:
+    name = function_text(fn)
+    norm = _statistics(f"agent {name!r}", normalizer, None)
+    return Agent(
+        fn,
+        name=name,
+        identity=lambda: _digest([("callable", _parameters(fn, name)), ("normalizer", _norm_digest(norm))]),
+        normalizer=norm,
+        batch=batch,
+    )
+
+
+def _parameters(obj: Any, name: str) -> str:
+    """A digest of what ``obj`` computes: a torch module's code and parameters (an SB3 model's policy's), else its
+    canonical form (a function's code, as a spec's functions are fingerprinted)."""
+    import torch
+
+    module = getattr(obj, "policy", obj)
+    if not isinstance(module, torch.nn.Module):
+        return digest(obj, f"agent {name!r}")
+    h = hashlib.sha256(digest(type(obj), f"agent {name!r}").encode())
+    for key, tensor in module.state_dict().items():
+        flat = tensor.detach().cpu().reshape(-1)
+        h.update(f"{key}:{flat.dtype}:{tuple(tensor.shape)}".encode())
+        h.update(flat.view(torch.uint8).numpy().tobytes())
+    return h.hexdigest()
+
+
+def _norm_digest(norm: Any) -> str | None:
+    if norm is None:
+        return None
+    rms = norm.obs_rms
+    parts = rms.items() if isinstance(rms, Mapping) else [("", rms)]
+    stats = [(key, part.mean, part.var, float(part.count)) for key, part in parts]
+    return digest([stats, norm.norm_obs, float(norm.clip_obs), float(norm.epsilon)], "the agent's VecNormalize")
+
+
+def _digest(parts: Iterable[tuple[str, Any]]) -> str:
+    return hashlib.sha256(json.dumps(list(parts)).encode()).hexdigest()
+
+
+# -- VecNormalize statistics ---------------------------------------------------------------------------------------
+
+
+def _statistics(where: str, source: Any, observation_space: Any) -> Any:
+    """The ``VecNormalize`` statistics ``source`` is or holds (a path to their pickle), checked against the
+    observations the agent reads; ``None``: none."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    if source is None:
+        return None
+    norm = source
+    if isinstance(source, (str, os.PathLike)):
+        where = repr(str(source))
+        try:
+            with Path(source).open("rb") as f:
+                norm = pickle.load(f)  # VecNormalize.save pickles itself (its venv left out)
+        except Exception as e:
+            raise AgentError(f"{where}: cannot read VecNormalize statistics: {_why(e)}") from e
+    if not isinstance(norm, VecNormalize):
+        raise AgentError(f"{where}: expected VecNormalize statistics, got {shown(norm)} (a {type(norm).__name__})")
+    if observation_space is not None and observation_kind(norm.observation_space) != observation_kind(
+        observation_space
+    ):
+        raise AgentError(
+            f"{where}: VecNormalize statistics of observations {norm.observation_space}, and the model reads "
+            f"{observation_space}",
+            hint="use the vecnormalize.pkl saved with this model (rl-zoo3: <env_id>/vecnormalize.pkl)",
+        )
+    norm.training, norm.norm_reward = False, False  # as rl_zoo3.enjoy: the statistics stay as they were saved
+    return norm
+
+
+def _why(e: BaseException) -> str:
+    text = str(e).strip()
+    return f"{type(e).__name__}: {elide(text.splitlines()[0], MAX_SHOWN)}" if text else type(e).__name__
+
+
+# -- a path: a zip or a folder ---------------------------------------------------------------------------------
+
+
+def _from_path(path: Path, algorithm: Any, normalizer: Any, *, deterministic: bool, batch: bool) -> Agent:
+    if not path.exists():
+        raise AgentError(f"{str(path)!r}: no such file or folder")
+    model_zip = _model_zip(path) if path.is_dir() else path
+    folder = model_zip.parent
+    data = _data(model_zip)
+    settings = _settings_folder(folder)
+    config = _yaml_mapping(settings / "config.yml")
+    args = _yaml_mapping(settings / "args.yml")
+    cls = _algorithm(model_zip, data, algorithm, hints=[str(args.get("algo", "")), *_path_words(model_zip)])
+    stats = normalizer
+    if stats is None:
+        stats = next((p for d in (settings, folder) for p in (d / n for n in STATISTICS) if p.is_file()), None)
+    norm = _statistics(repr(str(model_zip)), stats, data["observation_space"])
+    try:
+        model = cls.load(model_zip, device="cpu", custom_objects=_CUSTOM_OBJECTS)
+    except Exception as e:
+        raise AgentError(f"{str(model_zip)!r}: {cls.__name__} cannot load it: {_why(e)}") from e
+    stats_file = Path(stats) if isinstance(stats, (str, os.PathLike)) else None
+    return Agent(
+        Policy(model, norm, deterministic=deterministic, batch=batch),
+        name=f"{cls.__name__} ({model_zip.name})",
+        identity=lambda: _digest(
+            [
+                ("zip", file_sha256(model_zip)),
+                ("normalizer", file_sha256(stats_file) if stats_file is not None else _norm_digest(norm)),
+                ("deterministic", deterministic),
+            ]
+        ),
+        observation_space=model.observation_space,
+        action_space=model.action_space,
+        normalizer=norm,
+        batch=batch,
+        check_actions=False,
+        model=model,
+        algorithm=cls,
+        path=model_zip,
+        env_kwargs=_env_kwargs(settings, config, args),
+        config=config,
+    )
+
+
+def _is_model(path: Path) -> bool:
+    """``path`` is a zip that holds SB3's ``data`` (a model; rl-zoo3's ``train_eval_metrics.zip`` is not)."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            return "data" in z.namelist()
+    except (zipfile.BadZipFile, OSError):
+        return False
+
+
+def _model_zip(folder: Path) -> Path:
+    """The one model zip of ``folder``: rl-zoo3's final model ``<env_id>.zip`` beside its ``<env_id>/`` settings,
+    else the only one."""
+    zips = [p for p in sorted(folder.glob("*.zip")) if _is_model(p)]
+    settings = _settings_folder(folder)
+    final = folder / f"{settings.name}.zip"
+    if settings != folder and final in zips:
+        return final
+    if len(zips) == 1:
+        return zips[0]
+    if zips:
+        names = ", ".join(p.name for p in zips)
+        raise AgentError(
+            f"{str(folder)!r} holds {len(zips)} models ({names}): which is to be judged?",
+            hint="give the path of the model's zip",
+        )
+    below = [*sorted(folder.glob("*/*.zip")), *sorted(folder.glob("*/*/*.zip"))]  # a Hub folder's, rl-zoo3's
+    found = [str(p.relative_to(folder)) for p in below if _is_model(p)][:3]
+    raise AgentError(
+        f"{str(folder)!r} holds no stable-baselines3 model (a .zip holding 'data')",
+        hint=f"its subfolders hold {', '.join(found)}: give one's path" if found else None,
+    )
+
+
+def _data(model_zip: Path) -> dict[str, Any]:
+    """The model's ``data`` (its class parameters, as SB3's ``load`` reads them): refused unless it is a model's."""
+    from stable_baselines3.common.save_util import json_to_data
+
+    where = repr(str(model_zip))
+    try:
+        with zipfile.ZipFile(model_zip) as z:
+            text = z.read("data").decode()
+        data = json_to_data(text, custom_objects=_CUSTOM_OBJECTS)
+    except (zipfile.BadZipFile, KeyError, OSError, ValueError, UnicodeDecodeError) as e:
+        raise AgentError(f"{where}: not a stable-baselines3 model ({_why(e)})") from None
+    missing = [k for k in ("policy_class", "observation_space", "action_space") if k not in data]
+    if missing or not isinstance(data["policy_class"], type):
+        what = f"its data has no {', '.join(missing)}" if missing else "its policy class cannot be read here"
+        raise AgentError(f"{where}: not a stable-baselines3 model ({what})")
+    return data  # type: ignore[no-any-return]
+
+
+def _settings_folder(folder: Path) -> Path:
+    """Where a run's settings lie: rl-zoo3's one ``<env_id>/`` subfolder with ``config.yml`` or ``args.yml``, else
+    the folder itself (the Hub's layout)."""
+    named = [
+        d
+        for d in sorted(folder.iterdir())
+        if d.is_dir() and ((d / "config.yml").is_file() or (d / "args.yml").is_file())
+    ]
+    return named[0] if len(named) == 1 else folder
+
+
+def _yaml_mapping(path: Path) -> dict[str, Any]:
+    if not path.is_file():
+        return {}
+    try:
+        value = read_zoo_file(str(path), path)
+    except InvalidSpec as e:
+        raise AgentError(e.message, hint=e.hint) from None
+    if value is None:
+        return {}
+    if not isinstance(value, Mapping):
+        raise AgentError(f"{str(path)!r}: expected a mapping of names to values, got {shown(value)}")
+    return dict(value)
+
+
+def _env_kwargs(settings: Path, config: Mapping[str, Any], args: Mapping[str, Any]) -> dict[str, Any]:
+    """What the env was made with: ``env_kwargs.yml`` (the Hub's), else ``args.yml``'s (rl-zoo3's command line),
+    else ``config.yml``'s, as ``rl_zoo3.enjoy`` reads them."""
+    if (settings / "env_kwargs.yml").is_file():
+        return _yaml_mapping(settings / "env_kwargs.yml")
+    for said in (args.get("env_kwargs"), config.get("env_kwargs")):
+        if isinstance(said, Mapping):
+            return dict(said)
+    return {}
+
+
+def _path_words(model_zip: Path) -> list[str]:
+    """The words of a zip's path that may name its algorithm: the Hub's ``<algo>-<env_id>.zip``, rl-zoo3's
+    ``<algo>/<env_id>_<n>/``."""
+    return [model_zip.stem.split("-", 1)[0], model_zip.parent.parent.name, model_zip.parent.name]
+
+
+# -- the algorithm of a zip -----------------------------------------------------------------------------------------
+
+
+def _named_classes() -> dict[str, type]:
+    """The named algorithms installed here, by name."""
+    out = {}
+    for name in (*SB3, *CONTRIB):
+        try:
+            out[name] = algorithm_class(name)
+        except SpecError:  # sb3-contrib not installed
+            break
+    return out
+
+
+def _algorithm(model_zip: Path, data: Mapping[str, Any], algorithm: Any, hints: list[str]) -> Any:
+    """The algorithm class that saved ``model_zip``: ``algorithm`` if it fits, else the one its policy class, its
+    path's words and its stored hyperparameters name.
+
+    The candidates are the algorithms whose policy classes hold the zip's (PPO, A2C and TRPO share one). A zip stores
+    almost every hyperparameter of the algorithm that saved it, so of the candidates it is one of those with the
+    fewest hyperparameters the zip does not store (on an A2C zip: A2C misses 3, PPO 6), and of those the one that
+    takes the most it does store (TD3 before DDPG, which fixes three of TD3's); a word of its path that names a
+    candidate (the Hub's ``ppo-CartPole-v1.zip``, rl-zoo3's ``ppo/`` or ``args.yml``) decides first.
+    """
+    where = repr(str(model_zip))
+    policy = data["policy_class"]
+    named = _named_classes()
+
+    def policies(cls: type) -> tuple[type, ...]:
+        return tuple(getattr(cls, "policy_aliases", {}).values())
+
+    candidates = {n: c for n, c in named.items() if policy in policies(c)}
+    candidates = candidates or {n: c for n, c in named.items() if policies(c) and issubclass(policy, policies(c))}
+    stored = set(data)
+    takes = {n: set(hyperparameter_names(c) or ()) for n, c in candidates.items()}
+    missing = {n: len(takes[n] - stored) for n in candidates}
+    fewest = min(missing.values(), default=0)
+    best = sorted((n for n in candidates if missing[n] == fewest), key=lambda n: -len(takes[n] & stored))
+    if algorithm is not None:
+        try:
+            cls = algorithm_class(_resolve(where, algorithm))
+        except InvalidSpec as e:
+            raise AgentError(f"{e.where}: {e.message}", hint=e.hint) from None
+        own = policies(cls)
+        name = next((n for n, c in named.items() if c is cls), None)
+        if (own and not issubclass(policy, own)) or (name is not None and name not in best):
+            saved = " or ".join(best) or f"an algorithm of the policy {policy.__qualname__}"
+            raise AgentError(f"{where}: saved by {saved}, not by {cls.__name__} (algorithm={shown(algorithm)})")
+        return cls
+    lowered = {n.lower(): n for n in ALGORITHMS} | _ZOO_NAMES
+    said = [lowered[w.lower()] for w in hints if w.lower() in lowered and lowered[w.lower()] in candidates]
+    if said:
+        return candidates[said[0]]
+    if len(best) == 1 or (best and len(takes[best[0]] & stored) > len(takes[best[1]] & stored)):
+        return candidates[best[0]]
+    which = " or ".join(best) if best else "none of the algorithms installed here"
+    raise AgentError(
+        f"{where}: cannot tell which algorithm saved it (its policy {policy.__qualname__} fits {which})",
+        hint="name it: load_agent(path, algorithm='PPO')",
+    )
