@@ -119,7 +119,7 @@ class Agent:
 
         act = self._source
         if self._policy is not None:
-            act = Policy(self._policy.model, self._policy._norm, deterministic=self._policy.deterministic, batch=batch)
+            act = Policy(self._policy.model, self.normalizer, deterministic=self._policy.deterministic, batch=batch)
         twin = Agent(
             act,
             name=self.name,
