@@ -134,8 +134,13 @@ DOCTESTS_OFF_THE_CHECKOUT = """
 import doctest, importlib, importlib.util, pkgutil, sys
 from pathlib import Path
 
+from hypothesis import HealthCheck, settings
+
 import specguard
 
+# As tests/conftest.py's profiles: on a busy machine a slow draw is no failure of the example.
+settings.register_profile("doctests", deadline=None, suppress_health_check=[HealthCheck.too_slow])
+settings.load_profile("doctests")
 root = Path(specguard.__file__).resolve().parents[1]
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != root]
 if importlib.util.find_spec("example_specs") is not None:
