@@ -35,6 +35,8 @@ _EXPORTS = {
     "All": "specguard.tree.nodes",
     "Always": "specguard.tree.nodes",
     "Annotation": "specguard.extend",
+    "AgentError": "specguard.error",
+    "AgentMismatch": "specguard.error",
     "Budget": "specguard.spec.budget",
     "Cache": "specguard.cache.store",
     "CacheWarning": "specguard.error",
@@ -62,6 +64,7 @@ _EXPORTS = {
     "UnknownFeature": "specguard.error",
     "UnreachableGoal": "specguard.error",
     "VersionMismatch": "specguard.error",
+    "check_agent": "specguard.engine.check_agent",
     "check_spec": "specguard.spec.spec",
     "falsify_runs": "specguard.engine.falsify_run",
     "load_model": "specguard.engine.trained",
@@ -72,6 +75,7 @@ _EXPORTS = {
     "formula": "specguard.tree.formula",
     "goal_spec": "specguard.pytest_plugin.declare",
     "goal_specs": "specguard.pytest_plugin.declare",
+    "load_agent": "specguard.agents.sources",
     "make_baseline_env": "specguard.construction.env",
     "make_env": "specguard.construction.env",
     "run_spec": "specguard.engine.run_spec",
@@ -103,6 +107,7 @@ def __dir__() -> list[str]:
 
 
 if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
+    from specguard.agents.sources import load_agent as load_agent
     from specguard.cache.store import Cache as Cache
     from specguard.construction.compiled import CompiledTree as CompiledTree
     from specguard.construction.compiled import compile_tree as compile_tree
@@ -111,6 +116,7 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.construction.env import make_baseline_env as make_baseline_env
     from specguard.construction.env import make_env as make_env
     from specguard.construction.initial_env import InitialEnv as InitialEnv
+    from specguard.engine.check_agent import check_agent as check_agent
     from specguard.engine.falsify_run import falsify_runs as falsify_runs
     from specguard.engine.run_spec import run_spec as run_spec
     from specguard.engine.spec_result import GoalVerdict as GoalVerdict
@@ -118,6 +124,8 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.engine.trained import load_model as load_model
     from specguard.engine.trained import load_normalizer as load_normalizer
     from specguard.engine.trained import rollout as rollout
+    from specguard.error import AgentError as AgentError
+    from specguard.error import AgentMismatch as AgentMismatch
     from specguard.error import CacheWarning as CacheWarning
     from specguard.error import EvaluationError as EvaluationError
     from specguard.error import FingerprintError as FingerprintError

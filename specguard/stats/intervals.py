@@ -37,6 +37,7 @@ from specguard.stats.verdicts import QuorumVerdict, RunVerdict
 from specguard.validation import check_open_fraction
 
 __all__ = [
+    "failure_upper_bound",
     "quorum_verdict",
     "run_verdict",
     "success_interval",
@@ -65,6 +66,25 @@ def success_interval(successes: int, episodes: int, confidence: float = 0.95) ->
 
     ci = binomtest(int(successes), int(episodes)).proportion_ci(confidence_level=confidence, method="exact")
     return float(ci.low), float(ci.high)
+
+
+def failure_upper_bound(episodes: int, confidence: float = 0.95) -> float:
+    """The most a failure rate can be, at ``confidence``, after ``episodes`` episodes without a failure.
+
+    The one-sided exact binomial bound ``1 - (1 - confidence) ** (1 / episodes)``: the largest rate at which no failure
+    in ``episodes`` episodes still has probability ``1 - confidence`` (about ``3 / episodes`` at 95%, the "rule of
+    three"). What a result says of a goal that never failed, instead of a bare 100%.
+
+    Raises:
+        ValueError: ``episodes`` below 1, or ``confidence`` outside (0, 1).
+
+    Example:
+        >>> round(failure_upper_bound(30), 4), round(failure_upper_bound(300), 4)
+        (0.095, 0.0099)
+    """
+    _check_counts(0, episodes)
+    check_open_fraction("failure_upper_bound", "confidence", confidence)
+    return float(1.0 - (1.0 - confidence) ** (1.0 / episodes))
 
 
 def run_verdict(successes: int, episodes: int, threshold: float, confidence: float = 0.95) -> RunVerdict:
