@@ -1,0 +1,212 @@
+"""Judging an agent trained elsewhere (specguard/engine/check_agent.py): each verdict checked by replaying the agent on
+the raw env with the same seeds, and computing the goal by hand."""
+
+from __future__ import annotations
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import specguard as sg
+from specguard.engine import check_agent as check_agent_module
+from specguard.engine.check_agent import check_agent
+from specguard.error import AgentError, AgentMismatch
+from specguard.stats.intervals import success_interval
+from specguard.stats.verdicts import Word
+from specguard.training.train import EVAL_SEED_BASE, EVAL_SEED_STRIDE
+
+sb3 = pytest.importorskip("stable_baselines3")
+
+CARTPOLE = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+EDGE = 2.0  # the cart's edges, inside the env's own 2.4
+
+
+def off_the_edges(s, a):  # type: ignore[no-untyped-def]
+    return abs(s.x) > EDGE
+
+
+# "Keep the pole up until the end", and the cart off the edges (a safety rate), as the CartPole case study's Avoids.
+BALANCE = sg.Always(sg.Goal("upright", theta=(-0.2, 0.2)), name="balance").annotate(
+    sg.Constraint(off_the_edges, name="edges")
+)
+KEEP = sg.Spec(CARTPOLE, BALANCE, budget=sg.Budget(timesteps=1), expect={"balance": 0.5, "edges": 0.8})
+# Where the pole falls: a reach goal whose last state decides, met by about half the starts of "push toward the lean".
+RIGHT = sg.Spec(CARTPOLE, sg.Goal("right", theta=(0.1, None)), budget=sg.Budget(timesteps=1), expect=0.5)
+
+
+def lean(obs):  # type: ignore[no-untyped-def]
+    """Push toward the lean: the pole falls within a few dozen steps, to one side or the other."""
+    return int(obs[2] > 0)
+
+
+def replay(act, episodes: int, seed: int = 0) -> dict[str, int]:
+    """The spec's counts, computed by hand: ``act`` on the raw ``gym.make("CartPole-v1")``, on the evaluation seeds."""
+    env = gym.make("CartPole-v1")
+    counts = {"balance": 0, "balance/upright": 0, "balance:edges": 0, "right": 0}
+    for i in range(episodes):
+        obs, _ = env.reset(seed=EVAL_SEED_BASE + seed * EVAL_SEED_STRIDE + i)
+        states, terminated, truncated = [obs], False, False
+        while not (terminated or truncated):
+            obs, _, terminated, truncated, _ = env.step(act(obs))
+            states.append(obs)
+        upright = [-0.2 <= float(s[2]) <= 0.2 for s in states]
+        counts["balance"] += all(upright) and not terminated  # held at every state, up to the horizon
+        counts["balance/upright"] += upright[-1]
+        counts["balance:edges"] += all(abs(float(s[0])) <= EDGE for s in states)
+        counts["right"] += float(states[-1][2]) >= 0.1
+    return counts
+
+
+def assert_replayed(result: sg.SpecResult, expected: dict[str, int]) -> None:
+    (run,) = result.runs
+    assert {k: expected[k] for k in run.successes} == run.successes
+    for path, goal in result.goals.items():
+        assert (goal.successes, goal.episodes) == (expected[path], run.episodes)
+        assert goal.interval == success_interval(expected[path], run.episodes, 0.95)
+
+
+@pytest.fixture(scope="module")
+def ppo_zip(tmp_path_factory):
+    """A PPO agent trained by plain stable-baselines3, outside specguard, saved as a zip."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # a small network: more threads only wait for each other on a busy machine
+    try:
+        model = sb3.PPO("MlpPolicy", "CartPole-v1", n_steps=256, batch_size=64, n_epochs=4, seed=0, device="cpu")
+        model.learn(2048)
+    finally:
+        torch.set_num_threads(threads)
+    path = tmp_path_factory.mktemp("agent") / "ppo-CartPole-v1.zip"
+    model.save(path)
+    return path
+
+
+# -- verdicts, replayed ------------------------------------------------------------------------------------------
+
+
+def test_push_toward_the_lean_is_judged_as_its_replay_on_the_raw_env():
+    result = check_agent(RIGHT, lean)
+    (run,) = result.runs
+    assert run.episodes == 120, "about half the starts: undecided at 30 and 60 episodes, so doubled up to 120"
+    expected = replay(lean, 120)
+    assert 0.3 < expected["right"] / 120 < 0.7
+    assert_replayed(result, expected)
+    assert result.outcome("right") == "undecided" and result.word("right") is Word.UNDECIDED
+    assert not result.passed  # an undecided goal counts as the spec's undecided says: fail
+
+
+def test_an_agent_that_drops_the_pole_fails_keep_it_up_while_the_safety_rate_passes():
+    result = check_agent(KEEP, lean)
+    assert_replayed(result, replay(lean, 30))
+    assert result.word("balance") is Word.FAILED and result.word("balance:edges") is Word.PASSED
+    assert not result.passed and result.status() == "FAILED"
+
+
+def test_a_random_policy_fails_keep_the_pole_up_until_the_end():
+    rng = np.random.default_rng(0)
+    result = check_agent(KEEP, lambda obs: int(rng.integers(2)))
+    goal = result.goals["balance"]
+    assert goal.successes == 0 and goal.episodes == 30 and result.word("balance") is Word.FAILED
+    assert not result.passed
+
+
+def test_an_sb3_zip_trained_outside_specguard_is_judged_as_its_replay(ppo_zip):
+    model = sb3.PPO.load(ppo_zip, device="cpu")
+    result = check_agent(KEEP, ppo_zip, episodes=20, max_episodes=20)
+    (run,) = result.runs
+    assert_replayed(result, replay(lambda obs: int(model.predict(obs, deterministic=True)[0]), run.episodes))
+    assert result.passed is all(result.counted(p) is Word.PASSED for p in result.goals)
+    assert "agent 'PPO (ppo-CartPole-v1.zip)'" in result.notes[0]
+
+
+def test_the_seed_picks_the_evaluation_episodes_as_a_runs_seed_does():
+    result = check_agent(RIGHT, lean, episodes=20, max_episodes=20, seed=3)
+    assert_replayed(result, replay(lean, 20, seed=3))
+    assert replay(lean, 20, seed=3) != replay(lean, 20), "the seeds would not show"
+    assert "env seeds 1300000..1300019" in result.notes[0]
+
+
+# -- what the agent sees ------------------------------------------------------------------------------------------
+
+
+def test_wrap_changes_what_the_agent_sees_and_not_what_the_goals_read():
+    def negate(env):  # type: ignore[no-untyped-def]
+        return gym.wrappers.TransformObservation(env, lambda obs: -obs, env.observation_space)
+
+    result = check_agent(RIGHT, lambda obs: int(-obs[2] > 0), wrap=negate)
+    assert_replayed(result, replay(lean, result.runs[0].episodes))
+    assert "through negate" in result.notes[0]
+
+
+def test_observation_spec_gives_the_constructed_envs_observation():
+    seen = []
+
+    def agent(obs):  # type: ignore[no-untyped-def]
+        seen.append(np.shape(obs))
+        return lean(obs)
+
+    check_agent(KEEP, agent, episodes=2, max_episodes=2, observation="spec")
+    shape = sg.make_env(CARTPOLE, BALANCE).observation_space.shape
+    assert set(seen) == {shape} and shape == (6,)  # the features, then the held slot and the edges' counter
+
+
+# -- refused before any episode ----------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def no_episode(monkeypatch):
+    """Fails the test at the first evaluation episode."""
+
+    def evaluate(*args, **kwargs):  # type: ignore[no-untyped-def]
+        raise AssertionError("an episode ran")
+
+    monkeypatch.setattr(check_agent_module, "evaluate", evaluate)
+
+
+def test_an_agent_of_another_env_is_refused_in_one_line_before_any_episode(tmp_path, no_episode):
+    path = tmp_path / "pendulum.zip"
+    sb3.PPO("MlpPolicy", "Pendulum-v1", seed=0, device="cpu").save(path)
+    with pytest.raises(AgentMismatch) as e:
+        check_agent(KEEP, path)
+    line = e.value.message
+    assert "\n" not in line and "(3,)" in line and "(4,)" in line, line
+
+
+def test_an_action_of_the_wrong_type_is_an_agent_error():
+    with pytest.raises(AgentError, match=r"gave the action 0\.5 \(a float64, not an integer\)"):
+        check_agent(KEEP, lambda obs: 0.5, episodes=1, max_episodes=1)
+
+
+def test_a_wrap_that_returns_no_env_is_refused(no_episode):
+    with pytest.raises(AgentError, match=r"wrap=<lambda> returned None, not a gymnasium\.Env"):
+        check_agent(KEEP, lean, wrap=lambda env: None)
+
+
+def test_arguments_out_of_range_are_refused(no_episode):
+    with pytest.raises(sg.InvalidSpec, match="expected max_episodes >= episodes, got 10 < 20"):
+        check_agent(KEEP, lean, episodes=20, max_episodes=10)
+    with pytest.raises(sg.InvalidSpec, match="observation"):
+        check_agent(KEEP, lean, observation="pixels")
+
+
+# -- the result ----------------------------------------------------------------------------------------------------
+
+
+def test_a_result_round_trips_through_json():
+    result = check_agent(KEEP, lean, episodes=10, max_episodes=10)
+    data = json.loads(json.dumps(result.to_dict()))
+    assert sg.SpecResult.from_dict(data) == result
+    assert data["passed"] is False and data["goals"]["balance"]["word"] == "failed"
+
+
+def test_a_goal_that_never_failed_shows_an_upper_bound_on_its_failure_rate():
+    result = check_agent(KEEP, lean)
+    assert result.goals["balance:edges"].successes == 30
+    bound = 1 - 0.05 ** (1 / 30)  # about 3/30
+    note = f"never failed in 30 episodes: balance:edges (safe); a failure rate of at most {bound:.1%} each"
+    assert any(line.startswith(note) for line in result.notes), result.notes
+    assert note in sg.table(result)
+    assert not any("never failed" in line and "balance " in line for line in result.notes)  # the root failed
