@@ -210,3 +210,58 @@ def test_a_goal_that_never_failed_shows_an_upper_bound_on_its_failure_rate():
     assert any(line.startswith(note) for line in result.notes), result.notes
     assert note in sg.table(result)
     assert not any("never failed" in line and "balance " in line for line in result.notes)  # the root failed
+
+
+# -- the command line ------------------------------------------------------------------------------------------------
+
+SPEC_FILE = """
+import specguard as sg
+
+cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+balance = sg.Always(sg.Goal("upright", theta=(-0.2, 0.2)), name="balance")
+budget = sg.Budget(timesteps=1, eval_episodes=10)
+specs = {
+    "easy": sg.Spec(cartpole, balance, budget=budget, expect={"upright": 0.0}),
+    "hard": sg.Spec(cartpole, balance, budget=budget, expect={"balance": 0.99}),
+}
+"""
+
+
+@pytest.fixture
+def spec_file(tmp_path):
+    path = tmp_path / "cartpole_specs.py"
+    path.write_text(SPEC_FILE)
+    return path
+
+
+def test_check_exits_0_when_the_agent_passes_and_1_when_it_fails(spec_file, ppo_zip, tmp_path, capsys):
+    from specguard.cli.main import main
+
+    args = ["--agent", str(ppo_zip), "--episodes", "10", "--max-episodes", "10"]
+    assert main(["check", f"{spec_file}::easy", *args]) == 0
+    out = capsys.readouterr().out
+    assert "== easy: passed" in out and "agent 'PPO (ppo-CartPole-v1.zip)': 10 evaluation episodes" in out
+    report = tmp_path / "out.json"
+    assert main(["check", f"{spec_file}::hard", *args, "--json", str(report)]) == 1
+    assert "== hard: FAILED" in capsys.readouterr().out
+    data = json.loads(report.read_text())["hard"]
+    model = sb3.PPO.load(ppo_zip, device="cpu")
+    kept = replay(lambda obs: int(model.predict(obs, deterministic=True)[0]), 10)["balance"]
+    assert data["goals"]["balance"]["successes"] == kept and data["goals"]["balance"]["episodes"] == 10
+
+
+def test_check_refuses_bad_input_in_one_line_with_exit_2(spec_file, tmp_path, capsys):
+    from specguard.cli.main import main
+
+    pendulum = tmp_path / "pendulum.zip"
+    sb3.PPO("MlpPolicy", "Pendulum-v1", seed=0, device="cpu").save(pendulum)
+    not_a_model = tmp_path / "notes.zip"
+    not_a_model.write_bytes(b"not a zip")
+    for agent, culprit in [(pendulum, "(3,)"), (not_a_model, "notes.zip"), (tmp_path / "absent.zip", "absent.zip")]:
+        assert main(["check", f"{spec_file}::easy", "--agent", str(agent)]) == 2
+        err = capsys.readouterr().err
+        first = err.splitlines()[0]
+        assert first.startswith("specguard: error: ") and culprit in first, err
+        assert len(err.splitlines()) <= 2, err  # the line, and its hint
+    assert main(["check", f"{spec_file}::easy", "--agent", str(pendulum), "--algorithm", "DQN"]) == 2
+    assert "not by DQN" in capsys.readouterr().err

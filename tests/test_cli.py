@@ -252,7 +252,7 @@ def test_falsify_refuses_a_bad_start_space_before_training(spec_file, tmp_path, 
 
 # -- first touch: help, version, bad input ----------------------------------------------------------
 
-SUBCOMMANDS = ("show", "plan", "run", "reproduce", "falsify")
+SUBCOMMANDS = ("show", "plan", "run", "reproduce", "falsify", "check")
 
 
 def _python(*args: str, cwd=None, env=None):

@@ -14,6 +14,11 @@ module-level dicts of specs (named by key); ``show`` also lists goal trees.
 ``specguard falsify PATH[::NAME]`` searches each trained run's start space for
 starts from which it misses the spec.
 
+``specguard check PATH[::NAME] --agent AGENT`` judges an agent trained elsewhere (a saved SB3 or sb3-contrib zip, an
+rl-zoo3 or Hub folder) against each spec, training nothing (:func:`specguard.engine.check_agent.check_agent`), and
+prints the same table as ``run``; its exit status is ``run``'s: 0 when every spec passed, 1 when one failed, 2 for bad
+input (an agent that cannot be loaded, or whose spaces do not fit the env, is one line naming it).
+
 ``run`` says pytest's words for the same run, per goal and per spec
 (:func:`specguard.stats.verdicts.verdict_word`): ``passed``, ``failed``
 (``FAILED`` on the spec's line), ``xfailed`` (a goal the spec declares in
@@ -237,7 +242,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="specguard",
         description="Goal-tree specifications for RL: show a spec, plan what its gate can see, run (train and "
-        "judge) it, reproduce the case studies, falsify a trained spec.",
+        "judge) it, reproduce the case studies, falsify a trained spec, check an agent trained elsewhere.",
     )
     parser.add_argument("--version", action="version", version=f"specguard {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -345,7 +350,54 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--out", default="docs/reproduction.md", help="the Markdown file; plots go to images/ beside it")
     rep.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     _add_falsify(sub)
+    _add_check(sub)
     return parser
+
+
+def _add_check(sub: Any) -> None:
+    from specguard.engine.check_agent import AGENT_OBSERVATIONS
+
+    ck = sub.add_parser(
+        "check",
+        help="judge an agent trained elsewhere (a saved model, an rl-zoo3 or Hub folder) against specs, "
+        "training nothing",
+    )
+    ck.add_argument("target", metavar="PATH[::NAME]")
+    ck.add_argument(
+        "--agent", required=True, help="the agent: an SB3 or sb3-contrib .zip, or an rl-zoo3 or Hugging Face Hub folder"
+    )
+    ck.add_argument("--algorithm", default=None, help="the zip's algorithm, e.g. PPO (default: read from the file)")
+    ck.add_argument(
+        "--episodes",
+        type=_positive,
+        default=None,
+        metavar="N",
+        help="evaluation episodes of the first stage (default: the spec's Budget.eval_episodes)",
+    )
+    ck.add_argument(
+        "--max-episodes",
+        type=_positive,
+        default=None,
+        metavar="N",
+        help="the most evaluation episodes, doubled up to while a goal is undecided "
+        "(default: the spec's Budget.max_eval_episodes)",
+    )
+    ck.add_argument(
+        "--observation",
+        choices=AGENT_OBSERVATIONS,
+        default="env",
+        help="what the agent sees: env, the initial env's own observation (default), or spec, the constructed env's",
+    )
+    ck.add_argument(
+        "--seed", type=_natural("the evaluation seeds' run"), default=0, help="which evaluation seeds (default: 0)"
+    )
+    ck.add_argument(
+        "--undecided",
+        type=_undecided,
+        default=None,
+        help="what a goal still undecided counts as: fail, xfail or pass (default: the spec's own Spec.undecided)",
+    )
+    ck.add_argument("--json", metavar="FILE", help="also write the results as JSON (missing directories are created)")
 
 
 def _add_falsify(sub: Any) -> None:
@@ -409,6 +461,37 @@ def _falsify(args: argparse.Namespace) -> int:
     return 1 if found_any else 0
 
 
+def _check(args: argparse.Namespace) -> int:
+    """Judge the agent against each spec, training nothing; 1 when a spec failed."""
+    from specguard.engine.check_agent import check_agent
+    from specguard.report.table import table
+
+    specs = load_objects(args.target)
+    for name, spec in specs.items():  # before any episode: a spec with nothing to assert has no verdict
+        require_thresholds(f"{args.target.partition('::')[0]}::{name}", spec.thresholds)
+    json_path = _prepare_json(args.json) if args.json else None
+    results = {}
+    failed = False
+    for name, spec in specs.items():
+        result = check_agent(
+            spec.as_run(undecided=args.undecided),
+            args.agent,
+            episodes=args.episodes,
+            max_episodes=args.max_episodes,
+            observation=args.observation,
+            seed=args.seed,
+            algorithm=args.algorithm,
+        )
+        results[name] = result.to_dict()
+        print(f"== {name}: {result.status()} ({result.seconds:.1f}s)")
+        print(table(result))
+        print()
+        failed = failed or not result.as_expected
+    if json_path is not None:
+        _write_results(json_path, json.dumps(results, indent=1))
+    return 1 if failed else 0
+
+
 def _reproduce(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from specguard.engine.reproduce import load_case, reproduce
     from specguard.parallel.workers import resolve_workers
@@ -453,6 +536,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _falsify(args)
         if args.command == "plan":
             return _plan(args)
+        if args.command == "check":
+            return _check(args)
         return _run(args)
     except SpecError as e:
         print(f"specguard: error: {e}", file=sys.stderr)
