@@ -35,6 +35,7 @@ _EXPORTS = {
     "All": "specguard.tree.nodes",
     "Always": "specguard.tree.nodes",
     "Annotation": "specguard.extend",
+    "AgentCheck": "specguard.engine.check_agent",
     "AgentError": "specguard.error",
     "AgentMismatch": "specguard.error",
     "Budget": "specguard.spec.budget",
@@ -116,6 +117,7 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.construction.env import make_baseline_env as make_baseline_env
     from specguard.construction.env import make_env as make_env
     from specguard.construction.initial_env import InitialEnv as InitialEnv
+    from specguard.engine.check_agent import AgentCheck as AgentCheck
     from specguard.engine.check_agent import check_agent as check_agent
     from specguard.engine.falsify_run import falsify_runs as falsify_runs
     from specguard.engine.run_spec import run_spec as run_spec

@@ -265,3 +265,18 @@ def test_check_refuses_bad_input_in_one_line_with_exit_2(spec_file, tmp_path, ca
         assert len(err.splitlines()) <= 2, err  # the line, and its hint
     assert main(["check", f"{spec_file}::easy", "--agent", str(pendulum), "--algorithm", "DQN"]) == 2
     assert "not by DQN" in capsys.readouterr().err
+
+
+def test_an_agent_check_runs_check_agent_with_its_settings_and_refuses_bad_ones_when_made():
+    check = sg.AgentCheck(KEEP, lean, episodes=10, max_episodes=10, seed=3)
+    assert_replayed(check.run(), replay(lean, 10, seed=3))
+    with pytest.raises(
+        sg.InvalidSpec, match=r"^AgentCheck\('balance'\): expected max_episodes >= episodes, got 5 < 10"
+    ):
+        sg.AgentCheck(KEEP, lean, episodes=10, max_episodes=5)
+    with pytest.raises(sg.InvalidSpec, match=r"^AgentCheck\('balance'\): expected wrap to be a function env -> env"):
+        sg.AgentCheck(KEEP, lean, wrap=3)
+    with pytest.raises(sg.InvalidSpec, match=r"^AgentCheck\('balance'\): expected algorithm to be a name"):
+        sg.AgentCheck(KEEP, lean, algorithm=3)
+    with pytest.raises(sg.InvalidSpec, match=r"^AgentCheck: expected a Spec, got 'keep'"):
+        sg.AgentCheck("keep", lean)

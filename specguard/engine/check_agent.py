@@ -53,7 +53,7 @@ from specguard.tree.keys import label
 from specguard.utils.text import MAX_SHOWN, elide, function_text, shown
 from specguard.validation import check_choice, check_count, check_natural
 
-__all__ = ["AGENT_OBSERVATIONS", "check_agent"]
+__all__ = ["AGENT_OBSERVATIONS", "AgentCheck", "check_agent"]
 
 AGENT_OBSERVATIONS = ("env", "spec")
 """What an agent may see: the initial env's own observation (``"env"``), or the constructed env's (``"spec"``)."""
@@ -97,17 +97,7 @@ def check_agent(
     """
     started = time.perf_counter()
     where = f"check_agent({spec.label!r})" if isinstance(spec, Spec) else "check_agent"
-    if not isinstance(spec, Spec):
-        raise InvalidSpec(where, f"expected a Spec, got {shown(spec)}", hint="check_agent(spec, agent)")
-    budget = spec.budget
-    first = check_count(where, "episodes", budget.eval_episodes if episodes is None else episodes)
-    assert budget.max_eval_episodes is not None
-    most_default = max(first, budget.max_eval_episodes)
-    most = check_count(where, "max_episodes", most_default if max_episodes is None else max_episodes)
-    if most < first:
-        raise InvalidSpec(where, f"expected max_episodes >= episodes, got {most} < {first}")
-    check_choice(where, "observation", observation, AGENT_OBSERVATIONS)
-    seed = check_natural(where, "seed", seed, "the evaluation seeds' run")
+    first, most, seed = _check_settings(where, spec, episodes, max_episodes, observation, seed)
     if not isinstance(agent, Agent):
         agent = load_agent(agent, algorithm=algorithm, deterministic=spec.deterministic)
     elif agent.batch:
@@ -169,6 +159,79 @@ def check_agent(
     result.trained = None  # no model behind it
     result.seconds = time.perf_counter() - started
     return result
+
+
+def _check_settings(
+    where: str, spec: object, episodes: object, max_episodes: object, observation: object, seed: object
+) -> tuple[int, int, int]:
+    """check_agent's settings checked: the first stage's episodes, the most episodes, and the seed.
+
+    Raises:
+        InvalidSpec: naming ``where``, the argument and the value given.
+    """
+    if not isinstance(spec, Spec):
+        raise InvalidSpec(where, f"expected a Spec, got {shown(spec)}", hint="check_agent(spec, agent)")
+    budget = spec.budget
+    first = check_count(where, "episodes", budget.eval_episodes if episodes is None else episodes)
+    assert budget.max_eval_episodes is not None
+    most_default = max(first, budget.max_eval_episodes)
+    most = check_count(where, "max_episodes", most_default if max_episodes is None else max_episodes)
+    if most < first:
+        raise InvalidSpec(where, f"expected max_episodes >= episodes, got {most} < {first}")
+    check_choice(where, "observation", observation, AGENT_OBSERVATIONS)
+    return first, most, check_natural(where, "seed", seed, "the evaluation seeds' run")
+
+
+@dataclasses.dataclass(frozen=True)
+class AgentCheck:
+    """A spec and an agent to judge against it, with :func:`check_agent`'s settings: what a goal spec returns to
+    have ``pytest --goal-specs`` judge an agent trained elsewhere instead of training one.
+
+    The arguments are :func:`check_agent`'s, checked here; the agent is loaded when the check runs.
+
+    Example:
+        >>> import specguard as sg
+        >>> cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+        >>> spec = sg.Spec(cartpole, sg.Goal("right", theta=(0.1, None)), budget=sg.Budget(timesteps=1), expect=0.3)
+        >>> check = sg.AgentCheck(spec, lambda obs: int(obs[2] > 0), episodes=10, max_episodes=10)
+        >>> check.run().goals["right"].episodes
+        10
+        >>> sg.AgentCheck(spec, "agent.zip", observation="pixels")
+        Traceback (most recent call last):
+        ...
+        specguard.error.InvalidSpec: AgentCheck('right'): expected observation to be one of env, spec, got 'pixels'...
+    """
+
+    spec: Spec
+    agent: Any
+    _: dataclasses.KW_ONLY
+    episodes: int | None = None
+    max_episodes: int | None = None
+    observation: str = "env"
+    wrap: Callable[[Any], Any] | None = None
+    seed: int = 0
+    algorithm: str | type | None = None
+
+    def __post_init__(self) -> None:
+        where = f"AgentCheck({self.spec.label!r})" if isinstance(self.spec, Spec) else "AgentCheck"
+        _check_settings(where, self.spec, self.episodes, self.max_episodes, self.observation, self.seed)
+        if self.wrap is not None and not callable(self.wrap):
+            raise InvalidSpec(where, f"expected wrap to be a function env -> env or None, got {shown(self.wrap)}")
+        if self.algorithm is not None and not isinstance(self.algorithm, (str, type)):
+            raise InvalidSpec(where, f"expected algorithm to be a name, a class or None, got {shown(self.algorithm)}")
+
+    def run(self) -> SpecResult:
+        """The agent judged against the spec: :func:`check_agent` with these settings."""
+        return check_agent(
+            self.spec,
+            self.agent,
+            episodes=self.episodes,
+            max_episodes=self.max_episodes,
+            observation=self.observation,
+            wrap=self.wrap,
+            seed=self.seed,
+            algorithm=self.algorithm,
+        )
 
 
 def _agent_env(spec: Spec, observation: str, wrap: Callable[[Any], Any] | None) -> Any:

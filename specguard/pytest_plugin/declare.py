@@ -16,6 +16,7 @@ Example:
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeVar
@@ -36,7 +37,7 @@ def goal_spec(
     xfail: Mapping[str, str] | Sequence[str] | None = None,
     falsify: Any = None,
 ) -> Callable[[F], F]:
-    """Mark a test function returning a ``Spec`` as a goal spec.
+    """Mark a test function returning a ``Spec`` (or an ``AgentCheck``: an agent to judge against it) as a goal spec.
 
     Args:
         expect: ``{goal name or path: min success}``, or one number for the
@@ -136,7 +137,8 @@ def goal_specs(
     ``specguard reproduce`` find them too.
 
     Args:
-        specs: ``{key: Spec}``; items are named ``test_x[key-goal/path]``.
+        specs: ``{key: Spec or AgentCheck}``; items are named ``test_x[key-goal/path]``. An
+            :class:`~specguard.engine.check_agent.AgentCheck`'s agent is judged against its spec, not trained.
         marks: ``{key: mark or list of marks}`` for some specs' items, e.g. an
             opt-in marker for specs that need their whole budget.
         falsify: ``{key: falsify}`` for some specs: one more item ``test_x[key-falsify]``
@@ -154,11 +156,14 @@ def goal_specs(
 
     from specguard.spec.spec import Spec
 
+    # an AgentCheck's module is loaded where one was made; not importing it keeps collection light
+    agent_check = getattr(sys.modules.get("specguard.engine.check_agent"), "AgentCheck", ())
     cases: list[Any] = []
-    for key, spec in specs.items():
+    for key, value in specs.items():
         where = f"goal_specs[{key!r}]"
+        spec = value.spec if isinstance(value, agent_check) else value
         if not isinstance(spec, Spec):
-            raise InvalidSpec(where, f"expected a specguard.Spec, got {type(spec).__name__}")
+            raise InvalidSpec(where, f"expected a specguard.Spec or a specguard.AgentCheck, got {type(value).__name__}")
         require_thresholds(where, spec.thresholds)
         extra = (marks or {}).get(key, ())
         extra = list(extra) if isinstance(extra, (list, tuple)) else [extra]

@@ -18,7 +18,7 @@ from typing import Any
 
 import pytest
 
-from specguard.pytest_plugin.items import GoalMissed, group_of, one_line_errors, spec_of
+from specguard.pytest_plugin.items import GoalMissed, group_of, one_line_errors, spec_of, where
 from specguard.pytest_plugin.session import Session, run, scaled, terminal_lines
 
 __all__ = ["COUNTEREXAMPLES", "run_falsify_item"]
@@ -34,7 +34,13 @@ def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: 
     from specguard.stats.verdicts import UNDECIDED_AS, RunVerdict, Word
 
     with one_line_errors(item):
-        spec, _ = spec_of(item, expect)
+        spec, _, agent = spec_of(item, expect)
+        if agent is not None:
+            pytest.fail(
+                f"{where(item)}: falsify= is not supported yet for an AgentCheck (an agent trained elsewhere); "
+                "falsify a spec that specguard trains",
+                pytrace=False,
+            )
         trained = scaled(state, spec)
         space = start_space(trained, check.starts)
         space.resolve(trained.initial_env.make())  # names and bounds checked before anything trains

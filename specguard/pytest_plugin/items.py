@@ -2,8 +2,9 @@
 
 The one sequence every goal item runs (a training item, and one under
 ``--goal-specs-show``): call the test function with its fixtures, check that
-it returned a ``Spec``, apply the item's thresholds; a ``SpecError`` on the
-way fails the item with one line.
+it returned a ``Spec`` (or an ``AgentCheck``, an agent trained elsewhere to judge
+against its spec), apply the item's thresholds; a ``SpecError`` on the way fails
+the item with one line.
 """
 
 from __future__ import annotations
@@ -87,21 +88,29 @@ def one_line_errors(item: pytest.Item) -> Iterator[None]:
         raise pytest.fail.Exception(error, pytrace=False) from None
 
 
-def spec_of(item: pytest.Function, expect: Any) -> tuple[Any, list[str]]:
-    """Call the item's function with its fixtures and apply its thresholds: the ``Spec`` and the goals it asserts.
+def spec_of(item: pytest.Function, expect: Any) -> tuple[Any, list[str], Any]:
+    """Call the item's function with its fixtures and apply its thresholds: the ``Spec``, the goals it asserts, and
+    the :class:`~specguard.engine.check_agent.AgentCheck` (with those thresholds) when it returned one, else None.
 
-    Fails the item when the function does not return a ``Spec``; call it inside
+    Fails the item when the function returns neither; call it inside
     :func:`one_line_errors`, which turns a ``SpecError`` into the item's one line.
     """
+    import dataclasses
+
+    from specguard.engine.check_agent import AgentCheck
     from specguard.pytest_plugin.judge import with_thresholds
     from specguard.spec.spec import Spec
 
-    spec = item.obj(**{name: item.funcargs[name] for name in item._fixtureinfo.argnames})
-    if not isinstance(spec, Spec):
+    returned = item.obj(**{name: item.funcargs[name] for name in item._fixtureinfo.argnames})
+    agent = returned if isinstance(returned, AgentCheck) else None
+    if agent is None and not isinstance(returned, Spec):
         pytest.fail(
-            f"{where(item)}: a goal spec must return a specguard.Spec, got {type(spec).__name__}", pytrace=False
+            f"{where(item)}: a goal spec must return a specguard.Spec or a specguard.AgentCheck, got "
+            f"{type(returned).__name__}",
+            pytrace=False,
         )
-    return with_thresholds(spec, expect, goal_of(item))
+    spec, paths = with_thresholds(agent.spec if agent is not None else returned, expect, goal_of(item))
+    return spec, paths, dataclasses.replace(agent, spec=spec) if agent is not None else None
 
 
 def raise_outcome(item: pytest.Function, checks: Sequence[Any], undecided_as: str, result: Any) -> None:

@@ -25,7 +25,16 @@ from specguard.pytest_plugin.declare import FALSIFY, GOAL_FIXTURE, SpecItem
 from specguard.pytest_plugin.items import GoalMissed, falsify_check, group_of, one_line_errors, raise_outcome, spec_of
 from specguard.pytest_plugin.options import add_options, baseline_path, parse_options
 from specguard.pytest_plugin.recorder import PROPERTY, Recorder
-from specguard.pytest_plugin.session import Session, gate_of, run, saved_runs, scaled, terminal_progress
+from specguard.pytest_plugin.session import (
+    NOT_IN_BASELINES,
+    Session,
+    gate_of,
+    judge_agent,
+    run,
+    saved_runs,
+    scaled,
+    terminal_progress,
+)
 
 __all__ = ["GoalMissed"]
 
@@ -50,7 +59,7 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line(
         "markers",
         f"{MARKER}(expect=None, xfail=None): a test returning a specguard.Spec, trained and checked by "
-        "`pytest --goal-specs` (declare it with @specguard.goal_spec)",
+        "`pytest --goal-specs`, or a specguard.AgentCheck, its agent judged (declare it with @specguard.goal_spec)",
     )
     options = parse_options(config)
     state = Session(options)
@@ -157,14 +166,22 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
         run_falsify_item(pyfuncitem, state, check, marker.kwargs.get("expect"))
         return True
     with one_line_errors(pyfuncitem):
-        spec, paths = spec_of(pyfuncitem, marker.kwargs.get("expect"))
-        trained = scaled(state, spec)
-        result = run(state, trained, pyfuncitem)
-        gate = gate_of(state, trained, result, group)
-        stored = saved_runs(state, trained, result, gate) if state.options.save else None
-    baseline = (state.baseline, state.options.compare or "latest") if state.baseline is not None else None
+        spec, paths, agent = spec_of(pyfuncitem, marker.kwargs.get("expect"))
+        if agent is not None:  # an agent trained elsewhere: judged, not trained; no baseline yet
+            agent, result = judge_agent(state, agent, pyfuncitem, group)
+            trained, gate, stored = agent.spec, None, None
+        else:
+            trained = scaled(state, spec)
+            result = run(state, trained, pyfuncitem)
+            gate = gate_of(state, trained, result, group)
+            stored = saved_runs(state, trained, result, gate) if state.options.save else None
+    baseline = (
+        (state.baseline, state.options.compare or "latest") if state.baseline is not None and agent is None else None
+    )
     checks = check_item(result, spec, paths, group, baseline=baseline, gate=gate)
     for check in checks:
+        if agent is not None and (state.baseline is not None or state.options.save):
+            check.comparison = NOT_IN_BASELINES
         if stored is not None:
             check.baseline_runs = [[r.seed, r.successes[check.goal], r.episodes] for r in stored.runs]
         row = check.to_row()
@@ -206,10 +223,12 @@ def pytest_runtest_call(item: pytest.Item) -> None:
     if group in shown:  # one rendering (and one budget warning) per spec, not per goal item
         pytest.skip(SHOWN)
     with one_line_errors(item):
-        spec, _ = spec_of(item, marker.kwargs.get("expect"))
-        trained = scaled(state, spec)
+        spec, _, agent = spec_of(item, marker.kwargs.get("expect"))
+        trained = scaled(state, spec) if agent is None else spec
         texts = [render_spec(trained, group)] if show else []
-        if plan:
+        if plan and agent is not None:
+            texts.append(f"{group}: an agent trained elsewhere (AgentCheck), judged by check_agent: nothing to train")
+        elif plan:
             # without a baseline: the session's goal items, and at least this spec's own thresholds (an item
             # asserting a spec's own thresholds is one item for several comparisons)
             family = len(state.baseline.runs) if state.baseline is not None else state.goal_items

@@ -13,6 +13,7 @@ import pytest
 from specguard.pytest_plugin.options import Options
 
 if TYPE_CHECKING:
+    from specguard.engine.check_agent import AgentCheck
     from specguard.engine.run_spec import RunOptions
     from specguard.engine.spec_result import SpecResult
     from specguard.gate.baseline import Baseline
@@ -21,7 +22,21 @@ if TYPE_CHECKING:
     from specguard.spec.spec import Spec
     from specguard.training.progress import ProgressEvent
 
-__all__ = ["Session", "gate_of", "run", "run_options", "saved_runs", "scaled", "terminal_lines", "terminal_progress"]
+__all__ = [
+    "NOT_IN_BASELINES",
+    "Session",
+    "gate_of",
+    "judge_agent",
+    "run",
+    "run_options",
+    "saved_runs",
+    "scaled",
+    "terminal_lines",
+    "terminal_progress",
+]
+
+NOT_IN_BASELINES = "not compared or saved: an agent judged by check_agent is left out of baselines for now"
+"""An :class:`~specguard.engine.check_agent.AgentCheck` item's comparison under ``--goal-specs-save/-compare``."""
 
 
 @dataclasses.dataclass
@@ -32,6 +47,7 @@ class Session:
     baseline: Baseline | None = None
     executor: Executor | None = None  # made once per session
     memo: dict[str, SpecResult] = dataclasses.field(default_factory=dict)
+    agents: dict[str, SpecResult] = dataclasses.field(default_factory=dict)  # group -> its AgentCheck's result
     rows: list[dict[str, Any]] = dataclasses.field(default_factory=list)
     counterexamples: list[dict[str, Any]] = dataclasses.field(default_factory=list)  # falsify items' runs
     specs: dict[str, Spec] = dataclasses.field(default_factory=dict)  # group -> its trained Spec, for report GIFs
@@ -132,6 +148,17 @@ def run(state: Session, spec: Spec, item: pytest.Item) -> SpecResult:
         state.memo[key] = result
         item.config.hook.pytest_goal_spec_result(item=item, spec=spec, result=result)
     return state.memo[key]
+
+
+def judge_agent(state: Session, check: AgentCheck, item: pytest.Item, group: str) -> tuple[AgentCheck, SpecResult]:
+    """The agent check as this session judges it (its ``--goal-specs-undecided``; there is no budget to scale, nothing
+    is trained) and its result: judged once per test, shared by all its goal items; other plugins hear of it as of a
+    trained spec's (``pytest_goal_spec_result``)."""
+    check = dataclasses.replace(check, spec=check.spec.as_run(undecided=state.options.undecided))
+    if group not in state.agents:
+        result = state.agents[group] = check.run()
+        item.config.hook.pytest_goal_spec_result(item=item, spec=check.spec, result=result)
+    return check, state.agents[group]
 
 
 def _train(state: Session, spec: Spec) -> Callable[[list[int]], SpecResult]:
