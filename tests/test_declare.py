@@ -90,7 +90,7 @@ def test_goal_specs_has_one_case_per_spec_and_goal_with_the_specs_xfail_and_mark
 @pytest.mark.parametrize(
     ("specs", "marks", "message"),
     [
-        ({"x": 3}, None, r"goal_specs\['x'\]: expected a specguard.Spec, got int"),
+        ({"x": 3}, None, r"goal_specs\['x'\]: expected a specguard.Spec or a specguard.AgentCheck, got int"),
         ({}, {"y": pytest.mark.filterwarnings("ignore")}, r"names specs \['y'\] that are not among \[\]"),
     ],
 )

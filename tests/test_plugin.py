@@ -353,7 +353,8 @@ def test_bad_input_gives_one_clear_error_and_other_specs_still_run(pytester):
     result.assert_outcomes(passed=1, failed=2, errors=1)
     result.stdout.fnmatch_lines(
         [
-            "*test_specs.py::test_wrong_type[[]stabilization[]]: a goal spec must return a specguard.Spec, got int",
+            "*test_specs.py::test_wrong_type[[]stabilization[]]: a goal spec must return a specguard.Spec or a "
+            "specguard.AgentCheck, got int",
             "*test_specs.py::test_missing_goal[[]altitude[]]: Spec 'pendulum': no node is named 'altitude'; "
             "the tree's goals are pendulum, pendulum/position, pendulum/stabilization",
         ]
