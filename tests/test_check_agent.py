@@ -67,6 +67,12 @@ def assert_replayed(result: sg.SpecResult, expected: dict[str, int]) -> None:
         assert goal.interval == success_interval(expected[path], run.episodes, 0.95)
 
 
+@pytest.fixture(autouse=True)
+def _cache_in_tmp(tmp_path, monkeypatch):
+    """The default cache (``.specguard/cache``, relative) in the test's own folder, not the checkout."""
+    monkeypatch.chdir(tmp_path)
+
+
 @pytest.fixture(scope="module")
 def ppo_zip(tmp_path_factory):
     """A PPO agent trained by plain stable-baselines3, outside specguard, saved as a zip."""
@@ -265,3 +271,46 @@ def test_check_refuses_bad_input_in_one_line_with_exit_2(spec_file, tmp_path, ca
         assert len(err.splitlines()) <= 2, err  # the line, and its hint
     assert main(["check", f"{spec_file}::easy", "--agent", str(pendulum), "--algorithm", "DQN"]) == 2
     assert "not by DQN" in capsys.readouterr().err
+
+
+# -- the cache -------------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.filterwarnings("error")
+def test_an_evaluation_is_cached_by_agent_spec_and_settings(tmp_path, monkeypatch):
+    calls = []
+    evaluate = check_agent_module._evaluate
+
+    def counted(*args, **kwargs):  # type: ignore[no-untyped-def]
+        calls.append(1)
+        return evaluate(*args, **kwargs)
+
+    monkeypatch.setattr(check_agent_module, "_evaluate", counted)
+    first = check_agent(KEEP, lean, episodes=10, max_episodes=10, cache_dir=tmp_path)
+    again = check_agent(KEEP, lean, episodes=10, max_episodes=10, cache_dir=tmp_path)
+    assert len(calls) == 1 and first.cached == {0: False} and again.cached == {0: True}
+    assert again.runs == first.runs and again.goals == first.goals and again.notes == first.notes
+    # Another agent, spec or setting: evaluated once more, then found.
+    variants = [
+        (KEEP, lambda obs: int(obs[2] < 0), {}),
+        (RIGHT, lean, {}),
+        (KEEP, lean, {"observation": "spec"}),
+        (KEEP, lean, {"episodes": 5}),
+        (KEEP, lean, {"wrap": gym.wrappers.RecordEpisodeStatistics}),
+    ]
+    for spec, agent, settings in variants:
+        settings = {"episodes": 10, "max_episodes": 10, **settings}
+        assert check_agent(spec, agent, cache_dir=tmp_path, **settings).cached == {0: False}, settings
+        assert check_agent(spec, agent, cache_dir=tmp_path, **settings).cached == {0: True}, settings
+    assert len(calls) == 1 + len(variants)
+    assert check_agent(KEEP, lean, episodes=10, max_episodes=10, cache_dir=None).cached == {0: False}
+    assert len(calls) == 2 + len(variants)
+
+
+def test_a_damaged_evaluation_entry_is_discarded_with_a_warning(tmp_path):
+    first = check_agent(KEEP, lean, episodes=10, max_episodes=10, cache_dir=tmp_path)
+    (entry,) = tmp_path.glob("*/*/result.json")
+    entry.write_text(entry.read_text().replace('"episodes": 10', '"episodes": 11'))
+    with pytest.warns(UserWarning, match="discarded entry"):
+        again = check_agent(KEEP, lean, episodes=10, max_episodes=10, cache_dir=tmp_path)
+    assert again.cached == {0: False} and again.runs == first.runs

@@ -397,6 +397,8 @@ def _add_check(sub: Any) -> None:
         default=None,
         help="what a goal still undecided counts as: fail, xfail or pass (default: the spec's own Spec.undecided)",
     )
+    ck.add_argument("--cache-dir", default=DEFAULT_CACHE_DIR, help=f"evaluation cache (default: {DEFAULT_CACHE_DIR})")
+    ck.add_argument("--no-cache", action="store_true", help="neither read nor write the cache")
     ck.add_argument("--json", metavar="FILE", help="also write the results as JSON (missing directories are created)")
 
 
@@ -481,6 +483,7 @@ def _check(args: argparse.Namespace) -> int:
             observation=args.observation,
             seed=args.seed,
             algorithm=args.algorithm,
+            cache_dir=None if args.no_cache else args.cache_dir,
         )
         results[name] = result.to_dict()
         print(f"== {name}: {result.status()} ({result.seconds:.1f}s)")

@@ -33,15 +33,20 @@ import contextlib
 import dataclasses
 import sys
 import time
+import warnings
 from collections.abc import Callable, Iterator, Mapping
+from pathlib import Path
 from typing import Any
 
 from specguard.agents.agent import Agent, check_fits
 from specguard.agents.sources import load_agent
+from specguard.cache.canonical import digest
+from specguard.cache.fingerprint import fingerprint_spec
+from specguard.cache.store import Cache
 from specguard.construction.env import EnvFactory
 from specguard.engine.judging import judged
 from specguard.engine.spec_result import SpecResult
-from specguard.error import AgentError, EvaluationError, InvalidSpec, SpecError
+from specguard.error import AgentError, EvaluationError, FingerprintError, InvalidSpec, SpecError
 from specguard.spec.budget import Budget
 from specguard.spec.spec import Spec
 from specguard.stats.anytime import evaluation_stages, final_evaluation
@@ -49,7 +54,8 @@ from specguard.stats.intervals import failure_upper_bound
 from specguard.training.policy import one_torch_thread
 from specguard.training.result import RunResult
 from specguard.training.train import EVAL_SEED_BASE, EVAL_SEED_STRIDE, evaluate
-from specguard.tree.keys import label
+from specguard.tree.keys import label, result_keys
+from specguard.utils.atomic import DEFAULT_CACHE_DIR
 from specguard.utils.text import MAX_SHOWN, elide, function_text, shown
 from specguard.validation import check_choice, check_count, check_natural
 
@@ -69,6 +75,7 @@ def check_agent(
     wrap: Callable[[Any], Any] | None = None,
     seed: int = 0,
     algorithm: str | type | None = None,
+    cache_dir: str | Path | None = DEFAULT_CACHE_DIR,
 ) -> SpecResult:
     """Judge ``agent`` against ``spec`` on evaluation episodes, training nothing.
 
@@ -85,6 +92,8 @@ def check_agent(
         wrap: ``wrap(env) -> env``, the observation wrappers the agent was trained with, around the env it sees.
         seed: which evaluation seeds the episodes take, as a trained run's seed (see the module).
         algorithm: a zip's algorithm, as for :func:`~specguard.agents.sources.load_agent`.
+        cache_dir: where evaluations are kept and looked up, keyed by the agent's identity (its files' bytes, or a
+            callable's code), the spec's key and these settings; ``None`` disables the cache.
 
     Returns:
         The result, with the agent's episodes as one run (seed ``seed``, no training).
@@ -122,6 +131,47 @@ def check_agent(
         ),
         quorum=None,
     )
+    settings = {"first": first, "most": most, "observation": observation, "seed": seed}
+    cache, key = _cache_entry(spec, agent, wrap, settings, cache_dir)
+    run = cache.load_key(key, seed=seed, paths=result_keys(spec.tree), model=False) if cache is not None else None
+    hit = run is not None
+    if run is None:
+        run = _evaluate(where, spec, one, agent, observation, wrap, seed, stages)
+        if cache is not None:
+            try:
+                cache.store_evaluation(key, run)
+            except OSError as e:  # fail loudly, lose nothing: the result stands, uncached
+                warnings.warn(f"specguard cache: {where}'s evaluation kept, not cached: {e}", stacklevel=2)
+    n = run.episodes
+    base = EVAL_SEED_BASE + seed * EVAL_SEED_STRIDE
+    counts = run.successes
+    result = judged(one, [run])
+    seen = "the constructed env's" if observation == "spec" else "the initial env's own"
+    wrapped = f", through {function_text(wrap)}" if wrap is not None else ""
+    result.notes[:0] = [
+        f"agent {agent.name!r}: {n} evaluation episodes (env seeds {base}..{base + n - 1}), seeing {seen} "
+        f"observation{wrapped}",
+        *_never_failed(counts, n, spec.confidence),
+    ]
+    result.trained = None  # no model behind it
+    result.cached = {seed: hit}
+    result.spec_key = key
+    result.cache_dir = cache.root if cache is not None else None
+    result.seconds = time.perf_counter() - started
+    return result
+
+
+def _evaluate(
+    where: str,
+    spec: Spec,
+    one: Spec,
+    agent: Agent,
+    observation: str,
+    wrap: Callable[[Any], Any] | None,
+    seed: int,
+    stages: list[int],
+) -> RunResult:
+    """The agent's evaluation episodes, drawn in ``stages`` until every asserted goal is decided: one run."""
     env = _agent_env(spec, observation, wrap)
     try:
         check_fits(agent, env.observation_space, env.action_space)  # before any episode
@@ -147,7 +197,7 @@ def check_agent(
             counts, n = final_evaluation(episodes_of, stages, spec.thresholds, one.verdict_confidence)
     finally:
         env.close()
-    run = RunResult(
+    return RunResult(
         spec=spec.label,
         seed=seed,
         timesteps=0,
@@ -158,17 +208,36 @@ def check_agent(
         terminated=sum(terminated),
         capped=sum(capped),
     )
-    result = judged(one, [run])
-    seen = "the constructed env's" if observation == "spec" else "the initial env's own"
-    wrapped = f", through {function_text(wrap)}" if wrap is not None else ""
-    result.notes[:0] = [
-        f"agent {agent.name!r}: {n} evaluation episodes (env seeds {base}..{base + n - 1}), seeing {seen} "
-        f"observation{wrapped}",
-        *_never_failed(counts, n, spec.confidence),
-    ]
-    result.trained = None  # no model behind it
-    result.seconds = time.perf_counter() - started
-    return result
+
+
+def _cache_entry(
+    spec: Spec,
+    agent: Agent,
+    wrap: Callable[[Any], Any] | None,
+    settings: dict[str, Any],
+    cache_dir: str | Path | None,
+) -> tuple[Cache | None, str]:
+    """The cache and the key of this evaluation: the agent's identity, the spec's key and the evaluation's settings.
+
+    ``(None, "")`` where nothing is cached: ``cache_dir=None``, an env that does not repeat a fixed-seed rollout, or
+    an agent or ``wrap`` that cannot be fingerprinted exactly (said in a warning: its verdict stands, uncached).
+    """
+    if cache_dir is None:
+        return None, ""
+    try:
+        fingerprint = fingerprint_spec(spec)
+        parts = {
+            "agent": agent.identity,
+            "spec": fingerprint.spec_key,
+            "wrap": None if wrap is None else digest(wrap, "wrap"),
+            "evaluation": settings,
+        }
+    except (FingerprintError, AgentError) as e:
+        warnings.warn(f"specguard cache: agent {agent.name!r} evaluated, not cached: {e}", stacklevel=3)
+        return None, ""
+    if not fingerprint.reproducible:
+        return None, ""
+    return Cache(Path(cache_dir)), digest(parts, "evaluation")
 
 
 def _agent_env(spec: Spec, observation: str, wrap: Callable[[Any], Any] | None) -> Any:
