@@ -4,6 +4,7 @@ the raw env with the same seeds, and computing the goal by hand."""
 from __future__ import annotations
 
 import json
+import warnings
 
 import gymnasium as gym
 import numpy as np
@@ -314,3 +315,22 @@ def test_a_damaged_evaluation_entry_is_discarded_with_a_warning(tmp_path):
     with pytest.warns(UserWarning, match="discarded entry"):
         again = check_agent(KEEP, lean, episodes=10, max_episodes=10, cache_dir=tmp_path)
     assert again.cached == {0: False} and again.runs == first.runs
+
+
+def test_an_agent_trained_on_an_env_made_otherwise_is_judged_with_a_loud_note():
+    from specguard.agents.agent import Agent
+
+    agent = Agent(lean, name="zoo lean", env_kwargs={"sutton_barto_reward": True, "render_mode": None})
+    with pytest.warns(sg.SpecWarning, match=r"made with \{'sutton_barto_reward': True\}"):
+        result = check_agent(KEEP, agent, episodes=10, max_episodes=10, cache_dir=None)
+    assert "sutton_barto_reward" in result.notes[0] and "sutton_barto_reward" in sg.table(result)
+    same = sg.Spec(
+        sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"), sutton_barto_reward=True),
+        BALANCE,
+        budget=sg.Budget(timesteps=1),
+        expect=0.5,
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", sg.SpecWarning)
+        result = check_agent(same, agent, episodes=10, max_episodes=10, cache_dir=None)
+    assert not any("made with" in note for note in result.notes)

@@ -46,7 +46,7 @@ from specguard.cache.store import Cache
 from specguard.construction.env import EnvFactory
 from specguard.engine.judging import judged
 from specguard.engine.spec_result import SpecResult
-from specguard.error import AgentError, EvaluationError, FingerprintError, InvalidSpec, SpecError
+from specguard.error import AgentError, EvaluationError, FingerprintError, InvalidSpec, SpecError, SpecWarning
 from specguard.spec.budget import Budget
 from specguard.spec.spec import Spec
 from specguard.stats.anytime import evaluation_stages, final_evaluation
@@ -149,6 +149,7 @@ def check_agent(
     seen = "the constructed env's" if observation == "spec" else "the initial env's own"
     wrapped = f", through {function_text(wrap)}" if wrap is not None else ""
     result.notes[:0] = [
+        *_other_env_kwargs(spec, agent),
         f"agent {agent.name!r}: {n} evaluation episodes (env seeds {base}..{base + n - 1}), seeing {seen} "
         f"observation{wrapped}",
         *_never_failed(counts, n, spec.confidence),
@@ -272,6 +273,21 @@ def _agent_env(spec: Spec, observation: str, wrap: Callable[[Any], Any] | None) 
             hint="a wrapper must pass the info of the env it wraps on",
         )
     return wrapped
+
+
+def _other_env_kwargs(spec: Spec, agent: Agent) -> list[str]:
+    """A loud note (and warning) where the agent's own files say its env was made otherwise than the spec's."""
+    ours = spec.initial_env.make_kwargs
+    other = {k: v for k, v in agent.env_kwargs.items() if k != "render_mode" and (k not in ours or ours[k] != v)}
+    if not other:
+        return []
+    text = (
+        f"agent {agent.name!r} was trained on an env made with {other}, which the spec's initial env is not "
+        f"(its kwargs: {dict(ours)}): the verdicts are about the spec's env; give InitialEnv those kwargs to judge "
+        "the agent in the env it was trained in"
+    )
+    warnings.warn(text, SpecWarning, stacklevel=3)
+    return [text]
 
 
 def _never_failed(counts: Mapping[str, int], episodes: int, confidence: float) -> list[str]:
