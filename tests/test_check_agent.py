@@ -334,3 +334,15 @@ def test_an_agent_trained_on_an_env_made_otherwise_is_judged_with_a_loud_note():
         warnings.simplefilter("error", sg.SpecWarning)
         result = check_agent(same, agent, episodes=10, max_episodes=10, cache_dir=None)
     assert not any("made with" in note for note in result.notes)
+
+
+def test_check_takes_a_policy_defined_in_a_python_file(spec_file, tmp_path, capsys):
+    from specguard.cli.main import main
+
+    policies = tmp_path / "policies.py"
+    policies.write_text("def lean(obs):\n    return int(obs[2] > 0)\n")
+    assert main(["check", f"{spec_file}::hard", "--agent", f"{policies}::lean", "--max-episodes", "10"]) == 1
+    out = capsys.readouterr().out
+    assert "== hard: FAILED" in out and "agent 'lean': 10 evaluation episodes" in out
+    assert main(["check", f"{spec_file}::hard", "--agent", f"{policies}::leen"]) == 2
+    assert "defines nothing named 'leen'; its callables: lean" in capsys.readouterr().err

@@ -364,7 +364,10 @@ def _add_check(sub: Any) -> None:
     )
     ck.add_argument("target", metavar="PATH[::NAME]")
     ck.add_argument(
-        "--agent", required=True, help="the agent: an SB3 or sb3-contrib .zip, or an rl-zoo3 or Hugging Face Hub folder"
+        "--agent",
+        required=True,
+        help="the agent: an SB3 or sb3-contrib .zip, an rl-zoo3 or Hugging Face Hub folder, or FILE.py::NAME, a policy "
+        "(a callable obs -> action, or an object with predict) defined in a Python file",
     )
     ck.add_argument("--algorithm", default=None, help="the zip's algorithm, e.g. PPO (default: read from the file)")
     ck.add_argument(
