@@ -346,3 +346,10 @@ def test_check_takes_a_policy_defined_in_a_python_file(spec_file, tmp_path, caps
     assert "== hard: FAILED" in out and "agent 'lean': 10 evaluation episodes" in out
     assert main(["check", f"{spec_file}::hard", "--agent", f"{policies}::leen"]) == 2
     assert "defines nothing named 'leen'; its callables: lean" in capsys.readouterr().err
+
+
+def test_the_table_of_an_agent_counts_no_runs():
+    result = check_agent(KEEP, lean, episodes=10, max_episodes=10)
+    assert result.agent == "lean"
+    header = sg.table(result).splitlines()[0].split()
+    assert header == ["goal", "success", "95%", "interval", "threshold", "verdict"]

@@ -154,6 +154,7 @@ def check_agent(
         f"observation{wrapped}",
         *_never_failed(counts, n, spec.confidence),
     ]
+    result.agent = agent.name
     result.trained = None  # no model behind it
     result.cached = {seed: hit}
     result.spec_key = key
