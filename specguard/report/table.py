@@ -39,9 +39,16 @@ def table(result: SpecResult) -> str:
     """
     paths = [p for r in result.runs[:1] for p in r.successes] or list(result.goals)
     paths.sort(key=lambda p: kind(p) != GOAL)  # stable: each kind keeps its order
-    header = ("goal", "success", f"{result.confidence:.0%} interval", "threshold", "runs met", "verdict")
+    header: tuple[str, ...] = (
+        "goal",
+        "success",
+        f"{result.confidence:.0%} interval",
+        "threshold",
+        "runs met",
+        "verdict",
+    )
     agent = result.agent is not None  # one agent's episodes: no runs to count
-    rows = []
+    rows: list[tuple[str, ...]] = []
     for p in paths:
         g = result.goals.get(p)
         k, n = result.success(p) if result.runs else (g.successes, g.episodes) if g is not None else (0, 0)
