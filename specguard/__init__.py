@@ -66,6 +66,7 @@ _EXPORTS = {
     "VersionMismatch": "specguard.error",
     "check_agent": "specguard.engine.check_agent",
     "check_spec": "specguard.spec.spec",
+    "compare_agents": "specguard.gate.agent_gate",
     "falsify_runs": "specguard.engine.falsify_run",
     "load_model": "specguard.engine.trained",
     "load_normalizer": "specguard.engine.trained",
@@ -141,6 +142,7 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.extend import Annotation as Annotation
     from specguard.extend import Node as Node
     from specguard.falsify.assertion import Falsify as Falsify
+    from specguard.gate.agent_gate import compare_agents as compare_agents
     from specguard.pytest_plugin.declare import goal_spec as goal_spec
     from specguard.pytest_plugin.declare import goal_specs as goal_specs
     from specguard.report.table import table as table

@@ -369,6 +369,13 @@ def _add_check(sub: Any) -> None:
         help="the agent: an SB3 or sb3-contrib .zip, an rl-zoo3 or Hugging Face Hub folder, or FILE.py::NAME, a policy "
         "(a callable obs -> action, or an object with predict) defined in a Python file",
     )
+    ck.add_argument(
+        "--against",
+        default=None,
+        metavar="OLD",
+        help="gate the agent against the one it replaces, on the same episodes: exit 1 also when a goal or safety "
+        "rate dropped (exact one-sided McNemar test, Holm's procedure at family-wise 5%%)",
+    )
     ck.add_argument("--algorithm", default=None, help="the zip's algorithm, e.g. PPO (default: read from the file)")
     ck.add_argument(
         "--episodes",
@@ -469,6 +476,7 @@ def _falsify(args: argparse.Namespace) -> int:
 def _check(args: argparse.Namespace) -> int:
     """Judge the agent against each spec, training nothing; 1 when a spec failed."""
     from specguard.engine.check_agent import check_agent
+    from specguard.gate.agent_gate import compare_agents
     from specguard.report.table import table
 
     specs = load_objects(args.target)
@@ -478,24 +486,54 @@ def _check(args: argparse.Namespace) -> int:
     results = {}
     failed = False
     for name, spec in specs.items():
-        result = check_agent(
-            spec.as_run(undecided=args.undecided),
-            args.agent,
-            episodes=args.episodes,
-            max_episodes=args.max_episodes,
-            observation=args.observation,
-            seed=args.seed,
-            algorithm=args.algorithm,
-            cache_dir=None if args.no_cache else args.cache_dir,
-        )
-        results[name] = result.to_dict()
+        options = {
+            "episodes": args.episodes,
+            "max_episodes": args.max_episodes,
+            "observation": args.observation,
+            "seed": args.seed,
+            "algorithm": args.algorithm,
+        }
+        run = spec.as_run(undecided=args.undecided)
+        if args.against is None:
+            result = check_agent(run, args.agent, cache_dir=None if args.no_cache else args.cache_dir, **options)
+            results[name] = result.to_dict()
+        else:
+            comparison = compare_agents(run, args.agent, args.against, **options)
+            result = comparison.result
+            results[name] = {**result.to_dict(), "comparison": comparison.to_dict()}
         print(f"== {name}: {result.status()} ({result.seconds:.1f}s)")
         print(table(result))
+        if args.against is not None:
+            print(f"-- against {args.against}: {'passed' if comparison.passed else 'DROPPED'}")
+            print(_comparison_table(comparison))
+            print(comparison.summary())
+            failed = failed or not comparison.passed
         print()
         failed = failed or not result.as_expected
     if json_path is not None:
         _write_results(json_path, json.dumps(results, indent=1))
     return 1 if failed else 0
+
+
+def _comparison_table(comparison: Any) -> str:
+    """Per goal and safety rate: the old and new agents' successes, the drop's bound, the p-value, the state."""
+    from specguard.tree.keys import label
+
+    rows = [("goal", "old", "new", "lost/gained", "drop <=", "p", "state")]
+    for key, k in comparison.keys.items():
+        rows.append(
+            (
+                label(key),
+                f"{k.old}/{k.episodes}",
+                f"{k.new}/{k.episodes}",
+                f"{k.lost}/{k.gained}",
+                f"{k.bound:+.1%}",
+                f"{k.p_value:.3g}",
+                k.state.value,
+            )
+        )
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+    return "\n".join("  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows)
 
 
 def _reproduce(args: argparse.Namespace, argv: Sequence[str]) -> int:

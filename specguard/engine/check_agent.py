@@ -59,7 +59,7 @@ from specguard.utils.atomic import DEFAULT_CACHE_DIR
 from specguard.utils.text import MAX_SHOWN, elide, function_text, shown
 from specguard.validation import check_choice, check_count, check_natural
 
-__all__ = ["AGENT_OBSERVATIONS", "check_agent"]
+__all__ = ["AGENT_OBSERVATIONS", "agent_episodes", "agent_stages", "as_agent", "check_agent"]
 
 AGENT_OBSERVATIONS = ("env", "spec")
 """What an agent may see: the initial env's own observation (``"env"``), or the constructed env's (``"spec"``)."""
@@ -76,6 +76,7 @@ def check_agent(
     seed: int = 0,
     algorithm: str | type | None = None,
     cache_dir: str | Path | None = DEFAULT_CACHE_DIR,
+    outcomes: list[dict[str, int]] | None = None,
 ) -> SpecResult:
     """Judge ``agent`` against ``spec`` on evaluation episodes, training nothing.
 
@@ -94,6 +95,9 @@ def check_agent(
         algorithm: a zip's algorithm, as for :func:`~specguard.agents.sources.load_agent`.
         cache_dir: where evaluations are kept and looked up, keyed by the agent's identity (its files' bytes, or a
             callable's code), the spec's key and these settings; ``None`` disables the cache.
+        outcomes: if given, receives each episode's own counts in order (1 or 0 per goal and safety key), for a
+            paired comparison (:func:`specguard.gate.agent_gate.compare_agents`); the cache is then neither read nor
+            written (it keeps counts, not each episode's).
 
     Returns:
         The result, with the agent's episodes as one run (seed ``seed``, no training).
@@ -106,22 +110,11 @@ def check_agent(
     """
     started = time.perf_counter()
     where = f"check_agent({spec.label!r})" if isinstance(spec, Spec) else "check_agent"
-    if not isinstance(spec, Spec):
-        raise InvalidSpec(where, f"expected a Spec, got {shown(spec)}", hint="check_agent(spec, agent)")
-    budget = spec.budget
-    first = check_count(where, "episodes", budget.eval_episodes if episodes is None else episodes)
-    assert budget.max_eval_episodes is not None
-    most_default = max(first, budget.max_eval_episodes)
-    most = check_count(where, "max_episodes", most_default if max_episodes is None else max_episodes)
-    if most < first:
-        raise InvalidSpec(where, f"expected max_episodes >= episodes, got {most} < {first}")
+    stages = agent_stages(where, spec, episodes, max_episodes)
+    first, most = stages[0], stages[-1]
     check_choice(where, "observation", observation, AGENT_OBSERVATIONS)
     seed = check_natural(where, "seed", seed, "the evaluation seeds' run")
-    if not isinstance(agent, Agent):
-        agent = load_agent(agent, algorithm=algorithm, deterministic=spec.deterministic)
-    elif agent.batch:
-        agent = agent.batched(False)
-    stages = evaluation_stages(first, most)
+    agent = as_agent(spec, agent, algorithm)
     # The agent as one run: one seed, judged at the looks of its stages (no checkpoints), as a trained run's final
     # evaluation is judged; the quorum of one run is that run.
     one = dataclasses.replace(
@@ -132,11 +125,11 @@ def check_agent(
         quorum=None,
     )
     settings = {"first": first, "most": most, "observation": observation, "seed": seed}
-    cache, key = _cache_entry(spec, agent, wrap, settings, cache_dir)
+    cache, key = _cache_entry(spec, agent, wrap, settings, None if outcomes is not None else cache_dir)
     run = cache.load_key(key, seed=seed, paths=result_keys(spec.tree), model=False) if cache is not None else None
     hit = run is not None
     if run is None:
-        run = _evaluate(where, spec, one, agent, observation, wrap, seed, stages)
+        run = _evaluate(where, spec, one, agent, observation, wrap, seed, stages, outcomes)
         if cache is not None:
             try:
                 cache.store_evaluation(key, run)
@@ -172,6 +165,7 @@ def _evaluate(
     wrap: Callable[[Any], Any] | None,
     seed: int,
     stages: list[int],
+    outcomes: list[dict[str, int]] | None = None,
 ) -> RunResult:
     """The agent's evaluation episodes, drawn in ``stages`` until every asserted goal is decided: one run."""
     env = _agent_env(spec, observation, wrap)
@@ -183,17 +177,7 @@ def _evaluate(
         capped: list[bool] = []
 
         def episodes_of(start: int, count: int) -> dict[str, int]:
-            try:
-                return evaluate(
-                    agent, env, count, range(base + start, base + start + count), started_in, terminated, capped
-                )
-            except SpecError:
-                raise
-            except Exception as e:
-                raise EvaluationError(
-                    f"{where}, evaluation episodes {start}..{start + count - 1} of agent {agent.name!r}: the "
-                    f"environment raised {type(e).__name__}: {elide(str(e), MAX_SHOWN)}"
-                ) from e
+            return _episodes(where, agent, env, base, start, count, started_in, terminated, capped, outcomes)
 
         with _threads(agent):
             counts, n = final_evaluation(episodes_of, stages, spec.thresholds, one.verdict_confidence)
@@ -240,6 +224,73 @@ def _cache_entry(
     if not fingerprint.reproducible:
         return None, ""
     return Cache(Path(cache_dir)), digest(parts, "evaluation")
+
+
+def agent_stages(where: str, spec: Spec, episodes: int | None, max_episodes: int | None) -> list[int]:
+    """The episodes evaluated after each stage of an agent's evaluation: ``episodes`` (default: the spec's
+    ``budget.eval_episodes``), doubled up to ``max_episodes`` (default: ``budget.max_eval_episodes``).
+
+    Raises:
+        InvalidSpec: ``spec`` is not a Spec, or the counts are out of range.
+    """
+    if not isinstance(spec, Spec):
+        raise InvalidSpec(where, f"expected a Spec, got {shown(spec)}", hint="check_agent(spec, agent)")
+    budget = spec.budget
+    first = check_count(where, "episodes", budget.eval_episodes if episodes is None else episodes)
+    assert budget.max_eval_episodes is not None
+    most_default = max(first, budget.max_eval_episodes)
+    most = check_count(where, "max_episodes", most_default if max_episodes is None else max_episodes)
+    if most < first:
+        raise InvalidSpec(where, f"expected max_episodes >= episodes, got {most} < {first}")
+    return evaluation_stages(first, most)
+
+
+def as_agent(spec: Spec, agent: Any, algorithm: str | type | None) -> Agent:
+    """``agent`` as an unbatched :class:`~specguard.agents.agent.Agent`, loaded as the spec's ``deterministic`` says."""
+    if not isinstance(agent, Agent):
+        return load_agent(agent, algorithm=algorithm, deterministic=spec.deterministic)
+    return agent.batched(False) if agent.batch else agent
+
+
+def agent_episodes(
+    spec: Spec, agent: Agent, start: int, count: int, *, observation: str, wrap: Callable[[Any], Any] | None, seed: int
+) -> list[dict[str, int]]:
+    """Episodes ``start..start + count - 1`` of ``agent`` for seed ``seed``, as :func:`check_agent` plays them: each
+    episode's own counts, in order (for a paired comparison, beyond the episodes its verdicts needed)."""
+    where = f"agent_episodes({spec.label!r})"
+    env = _agent_env(spec, observation, wrap)
+    outcomes: list[dict[str, int]] = []
+    try:
+        check_fits(agent, env.observation_space, env.action_space)
+        with _threads(agent):
+            _episodes(
+                where, agent, env, EVAL_SEED_BASE + seed * EVAL_SEED_STRIDE, start, count, None, None, None, outcomes
+            )
+    finally:
+        env.close()
+    return outcomes
+
+
+def _episodes(
+    where: str,
+    agent: Agent,
+    env: Any,
+    base: int,
+    start: int,
+    count: int,
+    *lists: Any,
+) -> dict[str, int]:
+    """Episodes ``start..start + count - 1`` of ``agent`` on env seeds from ``base``; an env's failure as an
+    EvaluationError."""
+    try:
+        return evaluate(agent, env, count, range(base + start, base + start + count), *lists)
+    except SpecError:
+        raise
+    except Exception as e:
+        raise EvaluationError(
+            f"{where}, evaluation episodes {start}..{start + count - 1} of agent {agent.name!r}: the "
+            f"environment raised {type(e).__name__}: {elide(str(e), MAX_SHOWN)}"
+        ) from e
 
 
 def _agent_env(spec: Spec, observation: str, wrap: Callable[[Any], Any] | None) -> Any:

@@ -57,6 +57,7 @@ def evaluate(
     started: list[bool] | None = None,
     terminated: list[bool] | None = None,
     capped: list[bool] | None = None,
+    outcomes: list[dict[str, int]] | None = None,
 ) -> dict[str, int]:
     """Run ``episodes`` episodes of ``policy`` on ``env`` (which reports ``info["goals"]`` and ``info["safe"]``).
 
@@ -66,7 +67,8 @@ def evaluate(
     ``started``, if given, receives per episode whether its first state (at reset) was in the root goal
     (the first of ``info["goals"]``); ``terminated``, whether it ended by termination rather than
     truncation (a fall or a crash of the initial env, before its horizon); ``capped``, whether specguard's
-    step cap cut it (``info[CAPPED]``: the env declares no episode limit, :mod:`specguard.construction.cap`).
+    step cap cut it (``info[CAPPED]``: the env declares no episode limit, :mod:`specguard.construction.cap`);
+    ``outcomes``, the episode's own counts (1 or 0 per key, as returned), for paired comparisons.
 
     Returns:
         Per node path, the number of episodes whose last state lies in the
@@ -88,6 +90,10 @@ def evaluate(
         if capped is not None:
             capped.append(CAPPED in info)
         count_episode(counts, info)
+        if outcomes is not None:
+            episode: dict[str, int] = {}
+            count_episode(episode, info)
+            outcomes.append(episode)
     return counts
 
 
