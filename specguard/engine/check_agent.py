@@ -53,7 +53,7 @@ from specguard.tree.keys import label
 from specguard.utils.text import MAX_SHOWN, elide, function_text, shown
 from specguard.validation import check_choice, check_count, check_natural
 
-__all__ = ["AGENT_OBSERVATIONS", "check_agent"]
+__all__ = ["AGENT_OBSERVATIONS", "agent_envs", "check_agent", "spec_agent"]
 
 AGENT_OBSERVATIONS = ("env", "spec")
 """What an agent may see: the initial env's own observation (``"env"``), or the constructed env's (``"spec"``)."""
@@ -108,10 +108,7 @@ def check_agent(
         raise InvalidSpec(where, f"expected max_episodes >= episodes, got {most} < {first}")
     check_choice(where, "observation", observation, AGENT_OBSERVATIONS)
     seed = check_natural(where, "seed", seed, "the evaluation seeds' run")
-    if not isinstance(agent, Agent):
-        agent = load_agent(agent, algorithm=algorithm, deterministic=spec.deterministic)
-    elif agent.batch:
-        agent = agent.batched(False)
+    agent = spec_agent(spec, agent, algorithm=algorithm, batch=False)
     stages = evaluation_stages(first, most)
     # The agent as one run: one seed, judged at the looks of its stages (no checkpoints), as a trained run's final
     # evaluation is judged; the quorum of one run is that run.
@@ -122,7 +119,7 @@ def check_agent(
         ),
         quorum=None,
     )
-    env = _agent_env(spec, observation, wrap)
+    env = agent_envs(spec, observation, wrap)()
     try:
         check_fits(agent, env.observation_space, env.action_space)  # before any episode
         base = EVAL_SEED_BASE + seed * EVAL_SEED_STRIDE
@@ -171,18 +168,40 @@ def check_agent(
     return result
 
 
-def _agent_env(spec: Spec, observation: str, wrap: Callable[[Any], Any] | None) -> Any:
-    """The env the agent acts in: the baseline env (the initial env's observation) or the constructed env, wrapped
-    in ``wrap`` where given; its ``info`` reports the goals, read beneath any wrapper."""
-    import gymnasium as gym
+def spec_agent(spec: Spec, agent: Any, *, algorithm: str | type | None = None, batch: bool = False) -> Agent:
+    """``agent`` as an :class:`~specguard.agents.agent.Agent` acting as ``spec`` says (its ``deterministic``), taking
+    a batch of observations or one (``batch``): loaded by :func:`~specguard.agents.sources.load_agent` unless it is
+    one already."""
+    if not isinstance(agent, Agent):
+        return load_agent(agent, algorithm=algorithm, deterministic=spec.deterministic, batch=batch)
+    return agent if agent.batch == batch else agent.batched(batch)
 
+
+def agent_envs(spec: Spec, observation: str = "env", wrap: Callable[[Any], Any] | None = None) -> Callable[..., Any]:
+    """``make(*, starts=None)``: a new env the agent acts in, the baseline env (the initial env's observation) or the
+    constructed env, wrapped in ``wrap`` where given, in a start space's wrapper where ``starts`` is given
+    (:meth:`~specguard.construction.env.EnvFactory.__call__`); its ``info`` reports the goals, read beneath any
+    wrapper. One factory for all of them (its checks run once).
+
+    Raises:
+        AgentError: ``wrap`` raised, returned no ``gymnasium.Env``, or its env's reset gives no ``info['goals']``.
+    """
     if observation == "spec":
         factory = EnvFactory(spec.initial_env, spec.tree, observation=spec.observation)
     else:
         factory = EnvFactory(spec.initial_env, spec.tree, baseline=True)
-    env = factory()
-    if wrap is None:
-        return env
+
+    def make(*, starts: Any = None) -> Any:
+        env = factory(starts=starts)
+        return env if wrap is None else _wrapped(env, wrap)
+
+    return make
+
+
+def _wrapped(env: Any, wrap: Callable[[Any], Any]) -> Any:
+    """``wrap(env)``, checked: a ``gymnasium.Env`` whose reset still reports the goals."""
+    import gymnasium as gym
+
     name = function_text(wrap)
     try:
         wrapped = wrap(env)
