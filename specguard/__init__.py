@@ -67,6 +67,7 @@ _EXPORTS = {
     "check_agent": "specguard.engine.check_agent",
     "check_spec": "specguard.spec.spec",
     "compare_agents": "specguard.gate.agent_gate",
+    "falsify_agent": "specguard.engine.falsify_run",
     "falsify_runs": "specguard.engine.falsify_run",
     "load_model": "specguard.engine.trained",
     "load_normalizer": "specguard.engine.trained",
@@ -118,6 +119,7 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.construction.env import make_env as make_env
     from specguard.construction.initial_env import InitialEnv as InitialEnv
     from specguard.engine.check_agent import check_agent as check_agent
+    from specguard.engine.falsify_run import falsify_agent as falsify_agent
     from specguard.engine.falsify_run import falsify_runs as falsify_runs
     from specguard.engine.run_spec import run_spec as run_spec
     from specguard.engine.spec_result import GoalVerdict as GoalVerdict

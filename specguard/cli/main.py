@@ -12,7 +12,10 @@ module-level ``Spec`` objects (named by variable) and the values of its
 module-level dicts of specs (named by key); ``show`` also lists goal trees.
 
 ``specguard falsify PATH[::NAME]`` searches each trained run's start space for
-starts from which it misses the spec.
+starts from which it misses the spec; with ``--agent AGENT`` (and ``--algorithm``, ``--observation``, as ``check``
+takes them), an agent trained elsewhere instead, training nothing
+(:func:`specguard.engine.falsify_run.falsify_agent`). Its exit status: 0 when nothing was found, 1 when a
+counterexample was, 2 for bad input (an agent that cannot be loaded, or whose spaces do not fit the env, in one line).
 
 ``specguard check PATH[::NAME] --agent AGENT`` judges an agent trained elsewhere (a saved SB3 or sb3-contrib zip, an
 rl-zoo3 or Hub folder) against each spec, training nothing (:func:`specguard.engine.check_agent.check_agent`), and
@@ -354,21 +357,35 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _add_check(sub: Any) -> None:
+def _add_agent(parser: argparse.ArgumentParser, *, required: bool, instead: str = "") -> None:
+    """The options naming an agent trained elsewhere and what it sees: ``--agent``, ``--algorithm``,
+    ``--observation`` (``check``'s and ``falsify``'s)."""
     from specguard.engine.check_agent import AGENT_OBSERVATIONS
 
+    parser.add_argument(
+        "--agent",
+        required=required,
+        default=None,
+        help="the agent: an SB3 or sb3-contrib .zip, an rl-zoo3 or Hugging Face Hub folder, or FILE.py::NAME, a "
+        "policy (a callable obs -> action, or an object with predict) defined in a Python file" + instead,
+    )
+    parser.add_argument("--algorithm", default=None, help="the zip's algorithm, e.g. PPO (default: read from the file)")
+    parser.add_argument(
+        "--observation",
+        choices=AGENT_OBSERVATIONS,
+        default="env",
+        help="what the agent sees: env, the initial env's own observation (default), or spec, the constructed env's",
+    )
+
+
+def _add_check(sub: Any) -> None:
     ck = sub.add_parser(
         "check",
         help="judge an agent trained elsewhere (a saved model, an rl-zoo3 or Hub folder) against specs, "
         "training nothing",
     )
     ck.add_argument("target", metavar="PATH[::NAME]")
-    ck.add_argument(
-        "--agent",
-        required=True,
-        help="the agent: an SB3 or sb3-contrib .zip, an rl-zoo3 or Hugging Face Hub folder, or FILE.py::NAME, a policy "
-        "(a callable obs -> action, or an object with predict) defined in a Python file",
-    )
+    _add_agent(ck, required=True)
     ck.add_argument(
         "--against",
         default=None,
@@ -376,7 +393,6 @@ def _add_check(sub: Any) -> None:
         help="gate the agent against the one it replaces, on the same episodes: exit 1 also when a goal or safety "
         "rate dropped (exact one-sided McNemar test, Holm's procedure at family-wise 5%%)",
     )
-    ck.add_argument("--algorithm", default=None, help="the zip's algorithm, e.g. PPO (default: read from the file)")
     ck.add_argument(
         "--episodes",
         type=_positive,
@@ -391,12 +407,6 @@ def _add_check(sub: Any) -> None:
         metavar="N",
         help="the most evaluation episodes, doubled up to while a goal is undecided "
         "(default: the spec's Budget.max_eval_episodes)",
-    )
-    ck.add_argument(
-        "--observation",
-        choices=AGENT_OBSERVATIONS,
-        default="env",
-        help="what the agent sees: env, the initial env's own observation (default), or spec, the constructed env's",
     )
     ck.add_argument(
         "--seed", type=_natural("the evaluation seeds' run"), default=0, help="which evaluation seeds (default: 0)"
@@ -414,9 +424,11 @@ def _add_check(sub: Any) -> None:
 
 def _add_falsify(sub: Any) -> None:
     fz = sub.add_parser(
-        "falsify", help="search a trained spec's start space for starts from which its agents miss the spec"
+        "falsify",
+        help="search a spec's start space for starts from which its trained agents (or --agent) miss the spec",
     )
     fz.add_argument("target", metavar="PATH[::NAME]")
+    _add_agent(fz, required=False, instead="; default: the spec's own trained runs")
     fz.add_argument("--seed", type=_natural("the search's seed"), default=0, help="the search's seed (default: 0)")
     fz.add_argument("--examples", type=_positive, default=200, help="guided episodes per run at most (default: 200)")
     fz.add_argument(
@@ -432,7 +444,11 @@ def _add_falsify(sub: Any) -> None:
         metavar="NAME=LO:HI",
         help="start ranges of the env's state variables (default: the spec's own, Spec.starts, else the env's)",
     )
-    fz.add_argument("--cache-dir", default=DEFAULT_CACHE_DIR, help=f"run cache (default: {DEFAULT_CACHE_DIR})")
+    fz.add_argument(
+        "--cache-dir",
+        default=DEFAULT_CACHE_DIR,
+        help=f"run cache, and its falsify/ the counterexamples (default: {DEFAULT_CACHE_DIR})",
+    )
     fz.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
 
 
@@ -447,8 +463,9 @@ def _start_range(text: str) -> tuple[str, tuple[float, float]]:
 
 
 def _falsify(args: argparse.Namespace) -> int:
-    """Train (or find in the cache) each spec, then search its start space for counterexamples, per run."""
-    from specguard.engine.falsify_run import falsify_runs, start_space
+    """Train (or find in the cache) each spec, then search its start space for counterexamples, per run; with
+    ``--agent``, the agent's instead, training nothing."""
+    from specguard.engine.falsify_run import falsify_agent, falsify_runs, start_space
     from specguard.engine.run_spec import run_spec
     from specguard.starts.space import StartSpace
     from specguard.training.progress import print_event
@@ -458,10 +475,30 @@ def _falsify(args: argparse.Namespace) -> int:
     specs = load_objects(args.target)
     for spec in specs.values():  # names and bounds checked before anything trains
         start_space(spec, starts).resolve(spec.initial_env.make())
+    say = None if args.quiet else (lambda line: print(f"[specguard] {line}", file=sys.stderr))
+    if args.agent is None and args.algorithm is not None:
+        raise SpecError("falsify: --algorithm names the --agent's algorithm, and no --agent is given", hint=None)
     for name, spec in specs.items():
+        if args.agent is not None:
+            f = falsify_agent(
+                spec,
+                args.agent,
+                starts,
+                examples=args.examples,
+                uniform=args.uniform,
+                search_seed=args.seed,
+                database=Path(args.cache_dir) / "falsify",
+                progress=say,
+                observation=args.observation,
+                algorithm=args.algorithm,
+            )
+            print(f"== {name} agent {args.agent}: {'COUNTEREXAMPLE' if f.found else 'none found'}")
+            print(f.report())
+            print()
+            found_any = found_any or f.found
+            continue
         quiet = args.quiet
         result = run_spec(spec, cache_dir=args.cache_dir, progress=None if quiet else print_event)
-        say = None if quiet else (lambda line: print(f"[specguard] {line}", file=sys.stderr))
         found = falsify_runs(
             result, starts, examples=args.examples, uniform=args.uniform, search_seed=args.seed, progress=say
         )

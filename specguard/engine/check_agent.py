@@ -59,7 +59,7 @@ from specguard.utils.atomic import DEFAULT_CACHE_DIR
 from specguard.utils.text import MAX_SHOWN, elide, function_text, shown
 from specguard.validation import check_choice, check_count, check_natural
 
-__all__ = ["AGENT_OBSERVATIONS", "agent_episodes", "agent_stages", "as_agent", "check_agent"]
+__all__ = ["AGENT_OBSERVATIONS", "agent_envs", "agent_episodes", "agent_stages", "check_agent", "spec_agent"]
 
 AGENT_OBSERVATIONS = ("env", "spec")
 """What an agent may see: the initial env's own observation (``"env"``), or the constructed env's (``"spec"``)."""
@@ -114,7 +114,7 @@ def check_agent(
     first, most = stages[0], stages[-1]
     check_choice(where, "observation", observation, AGENT_OBSERVATIONS)
     seed = check_natural(where, "seed", seed, "the evaluation seeds' run")
-    agent = as_agent(spec, agent, algorithm)
+    agent = spec_agent(spec, agent, algorithm=algorithm, batch=False)
     # The agent as one run: one seed, judged at the looks of its stages (no checkpoints), as a trained run's final
     # evaluation is judged; the quorum of one run is that run.
     one = dataclasses.replace(
@@ -168,7 +168,7 @@ def _evaluate(
     outcomes: list[dict[str, int]] | None = None,
 ) -> RunResult:
     """The agent's evaluation episodes, drawn in ``stages`` until every asserted goal is decided: one run."""
-    env = _agent_env(spec, observation, wrap)
+    env = agent_envs(spec, observation, wrap)()
     try:
         check_fits(agent, env.observation_space, env.action_space)  # before any episode
         base = EVAL_SEED_BASE + seed * EVAL_SEED_STRIDE
@@ -245,20 +245,13 @@ def agent_stages(where: str, spec: Spec, episodes: int | None, max_episodes: int
     return evaluation_stages(first, most)
 
 
-def as_agent(spec: Spec, agent: Any, algorithm: str | type | None) -> Agent:
-    """``agent`` as an unbatched :class:`~specguard.agents.agent.Agent`, loaded as the spec's ``deterministic`` says."""
-    if not isinstance(agent, Agent):
-        return load_agent(agent, algorithm=algorithm, deterministic=spec.deterministic)
-    return agent.batched(False) if agent.batch else agent
-
-
 def agent_episodes(
     spec: Spec, agent: Agent, start: int, count: int, *, observation: str, wrap: Callable[[Any], Any] | None, seed: int
 ) -> list[dict[str, int]]:
     """Episodes ``start..start + count - 1`` of ``agent`` for seed ``seed``, as :func:`check_agent` plays them: each
     episode's own counts, in order (for a paired comparison, beyond the episodes its verdicts needed)."""
     where = f"agent_episodes({spec.label!r})"
-    env = _agent_env(spec, observation, wrap)
+    env = agent_envs(spec, observation, wrap)()
     outcomes: list[dict[str, int]] = []
     try:
         check_fits(agent, env.observation_space, env.action_space)
@@ -293,18 +286,40 @@ def _episodes(
         ) from e
 
 
-def _agent_env(spec: Spec, observation: str, wrap: Callable[[Any], Any] | None) -> Any:
-    """The env the agent acts in: the baseline env (the initial env's observation) or the constructed env, wrapped
-    in ``wrap`` where given; its ``info`` reports the goals, read beneath any wrapper."""
-    import gymnasium as gym
+def spec_agent(spec: Spec, agent: Any, *, algorithm: str | type | None = None, batch: bool = False) -> Agent:
+    """``agent`` as an :class:`~specguard.agents.agent.Agent` acting as ``spec`` says (its ``deterministic``), taking
+    a batch of observations or one (``batch``): loaded by :func:`~specguard.agents.sources.load_agent` unless it is
+    one already."""
+    if not isinstance(agent, Agent):
+        return load_agent(agent, algorithm=algorithm, deterministic=spec.deterministic, batch=batch)
+    return agent if agent.batch == batch else agent.batched(batch)
 
+
+def agent_envs(spec: Spec, observation: str = "env", wrap: Callable[[Any], Any] | None = None) -> Callable[..., Any]:
+    """``make(*, starts=None)``: a new env the agent acts in, the baseline env (the initial env's observation) or the
+    constructed env, wrapped in ``wrap`` where given, in a start space's wrapper where ``starts`` is given
+    (:meth:`~specguard.construction.env.EnvFactory.__call__`); its ``info`` reports the goals, read beneath any
+    wrapper. One factory for all of them (its checks run once).
+
+    Raises:
+        AgentError: ``wrap`` raised, returned no ``gymnasium.Env``, or its env's reset gives no ``info['goals']``.
+    """
     if observation == "spec":
         factory = EnvFactory(spec.initial_env, spec.tree, observation=spec.observation)
     else:
         factory = EnvFactory(spec.initial_env, spec.tree, baseline=True)
-    env = factory()
-    if wrap is None:
-        return env
+
+    def make(*, starts: Any = None) -> Any:
+        env = factory(starts=starts)
+        return env if wrap is None else _wrapped(env, wrap)
+
+    return make
+
+
+def _wrapped(env: Any, wrap: Callable[[Any], Any]) -> Any:
+    """``wrap(env)``, checked: a ``gymnasium.Env`` whose reset still reports the goals."""
+    import gymnasium as gym
+
     name = function_text(wrap)
     try:
         wrapped = wrap(env)

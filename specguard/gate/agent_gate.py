@@ -25,7 +25,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from specguard.engine.check_agent import AGENT_OBSERVATIONS, agent_episodes, agent_stages, as_agent, check_agent
+from specguard.engine.check_agent import AGENT_OBSERVATIONS, agent_episodes, agent_stages, check_agent, spec_agent
 from specguard.engine.spec_result import SpecResult
 from specguard.error import InvalidSpec
 from specguard.spec.spec import Spec
@@ -139,7 +139,7 @@ def compare_agents(
     check_open_fraction(where, "level", level, "the family-wise level")
     if not 0.0 < margin <= 1.0:
         raise InvalidSpec(where, f"expected a margin in (0, 1], got {shown(margin)}")
-    agents = {"new": as_agent(spec, new, algorithm), "old": as_agent(spec, old, algorithm)}
+    agents = {"new": spec_agent(spec, new, algorithm=algorithm), "old": spec_agent(spec, old, algorithm=algorithm)}
     outcomes: dict[str, list[dict[str, int]]] = {"new": [], "old": []}
     options = {"observation": observation, "wrap": wrap, "seed": seed}
     results = {
