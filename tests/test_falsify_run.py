@@ -77,6 +77,9 @@ def test_a_policy_that_never_fails_on_a_narrow_space_gives_nothing_and_the_failu
     found = sg.falsify_agent(BALANCE, steady, NARROW, examples=6, uniform=10)
     assert not found.found and found.uniform_failures == 0 and found.uniform_episodes == 10
     assert found.interval[0] == 0.0 and found.interval[1] == pytest.approx(1 - 0.025**0.1)  # exact, two-sided 95%
+    bound = 1 - 0.05**0.1  # one-sided at 95%: the most the failure rate can be after 10 draws without one
+    assert found.rate_text == f"at most {bound:.1%} at 95% (none in 10 uniform draws; one-sided exact binomial bound)"
+    assert f"failure rate over the start space: at most {bound:.1%} at 95%" in found.report()
     for start in (
         {"x": 0.0, "v": 0.0, "theta": 0.05, "omega": 0.0},
         {"x": 0.0, "v": 0.0, "theta": -0.05, "omega": 0.0},

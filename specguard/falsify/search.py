@@ -56,7 +56,7 @@ from specguard.falsify.portfolio import Portfolio
 from specguard.falsify.robustness import Judgement, feature_scales, judge_end, own_states, reached_early
 from specguard.starts.setter import env_label
 from specguard.starts.space import START_OPTION, Starts, StartSpace, starts_of
-from specguard.stats.intervals import success_interval
+from specguard.stats.intervals import failure_upper_bound, success_interval
 from specguard.validation import check_count, check_flag, check_natural, check_open_fraction
 
 __all__ = ["EpisodeRunner", "Falsification", "Outcome", "falsify", "judged_env", "start_text"]
@@ -216,6 +216,7 @@ class Falsification:
         from_uniform: the guided search found none; the counterexample is the first failing uniform draw, shrunk.
         uniform_failures, uniform_episodes: the uniform draws, counted apart from the guided ones.
         interval: the failure rate's interval over the uniform draws.
+        confidence: the interval's confidence, and the bound's where no uniform draw failed.
         key: the database key the counterexample is stored under.
     """
 
@@ -229,6 +230,7 @@ class Falsification:
     uniform_failures: int = 0
     uniform_episodes: int = 0
     interval: tuple[float, float] = (0.0, 1.0)
+    confidence: float = 0.95
     key: str = ""
     notes: list[str] = field(default_factory=list)
 
@@ -253,9 +255,24 @@ class Falsification:
 
     @property
     def rate_text(self) -> str:
-        """The failure rate over the start space with its draws and interval (``""``: no uniform draws)."""
+        """The failure rate over the start space with its draws and interval (``""``: no uniform draws); where none
+        failed, the most it can be: the one-sided exact binomial bound, never a bare 0%.
+
+        Example:
+            >>> import gymnasium as gym
+            >>> from specguard.starts.space import StartSpace
+            >>> starts = StartSpace({"x": (-0.05, 0.05)}).resolve(gym.make("CartPole-v1"))
+            >>> Falsification(starts, uniform_episodes=100).rate_text
+            'at most 3.0% at 95% (none in 100 uniform draws; one-sided exact binomial bound)'
+        """
         if not self.uniform_episodes:
             return ""
+        if not self.uniform_failures:
+            bound = failure_upper_bound(self.uniform_episodes, self.confidence)
+            return (
+                f"at most {bound:.1%} at {self.confidence:.0%} (none in {self.uniform_episodes} uniform draws; "
+                "one-sided exact binomial bound)"
+            )
         lo, hi = self.interval
         return (
             f"{self.failure_rate:.1%} ({self.uniform_failures}/{self.uniform_episodes} uniform draws), "
@@ -471,7 +488,7 @@ def falsify(
     shrink = check_flag(where, "shrink", shrink)
     say = progress or (lambda line: None)
     starts = runner.starts
-    result = Falsification(starts=starts, key=key)
+    result = Falsification(starts=starts, key=key, confidence=confidence)
     say(starts.note)
     start_count = runner.episodes
 
