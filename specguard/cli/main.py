@@ -163,7 +163,12 @@ def _run_all(args: argparse.Namespace, specs: dict[str, Any], executor: Any) -> 
     results = {}
     failed = False
     for name, spec in specs.items():
-        spec = spec.as_run(args.budget_scale, checkpoints=args.checkpoints, undecided=args.undecided)
+        spec = spec.as_run(
+            args.budget_scale,
+            checkpoints=args.checkpoints,
+            undecided=args.undecided,
+            tensorboard_log=args.tensorboard_log,
+        )
         result = run_spec(
             spec,
             executor=executor,
@@ -298,6 +303,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument("--cache-dir", default=DEFAULT_CACHE_DIR, help=f"run cache (default: {DEFAULT_CACHE_DIR})")
     run.add_argument("--no-cache", action="store_true", help="neither read nor write the cache")
+    run.add_argument(
+        "--tensorboard-log",
+        metavar="DIR",
+        default=None,
+        help="write TensorBoard logs of every training run here (SB3's curves and each goal's success), one "
+        "subfolder per spec and seed; runs found in the cache train nothing and write nothing",
+    )
     run.add_argument("--budget-scale", type=_scale, default=1.0, help="multiply training timesteps, e.g. 0.25")
     run.add_argument(
         "--checkpoints",

@@ -56,7 +56,12 @@ def run_options(state: Session) -> RunOptions:
 def scaled(state: Session, spec: Spec) -> Spec:
     """The spec as this session trains and judges it: the session's options applied, the spec's own where unset."""
     options = state.options
-    return spec.as_run(options.budget_scale, checkpoints=options.checkpoints, undecided=options.undecided)
+    return spec.as_run(
+        options.budget_scale,
+        checkpoints=options.checkpoints,
+        undecided=options.undecided,
+        tensorboard_log=options.tensorboard_log,
+    )
 
 
 def terminal_progress(config: pytest.Config, every: float = 60.0) -> Callable[[Any], None]:
