@@ -67,6 +67,8 @@ _EXPORTS = {
     "VersionMismatch": "specguard.error",
     "check_agent": "specguard.engine.check_agent",
     "check_spec": "specguard.spec.spec",
+    "compare_agents": "specguard.gate.agent_gate",
+    "falsify_agent": "specguard.engine.falsify_run",
     "falsify_runs": "specguard.engine.falsify_run",
     "load_model": "specguard.engine.trained",
     "load_normalizer": "specguard.engine.trained",
@@ -119,6 +121,7 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.construction.initial_env import InitialEnv as InitialEnv
     from specguard.engine.check_agent import AgentCheck as AgentCheck
     from specguard.engine.check_agent import check_agent as check_agent
+    from specguard.engine.falsify_run import falsify_agent as falsify_agent
     from specguard.engine.falsify_run import falsify_runs as falsify_runs
     from specguard.engine.run_spec import run_spec as run_spec
     from specguard.engine.spec_result import GoalVerdict as GoalVerdict
@@ -143,6 +146,7 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.extend import Annotation as Annotation
     from specguard.extend import Node as Node
     from specguard.falsify.assertion import Falsify as Falsify
+    from specguard.gate.agent_gate import compare_agents as compare_agents
     from specguard.pytest_plugin.declare import goal_spec as goal_spec
     from specguard.pytest_plugin.declare import goal_specs as goal_specs
     from specguard.report.table import table as table

@@ -313,3 +313,17 @@ def test_an_agent_is_an_episode_policy():
 
     assert isinstance(load_agent(lean), (Agent, EpisodePolicy))
     assert isinstance(load_agent(lean), EpisodePolicy)
+
+
+def test_a_policy_defined_in_a_python_file_is_named_file_colon_colon_name(tmp_path):
+    policies = tmp_path / "policies.py"
+    policies.write_text("def lean(obs):\n    return int(obs[2] > 0)\n\nEPSILON = 0.1\n")
+    agent = load_agent(f"{policies}::lean")
+    assert agent.name == "lean" and agent(np.array([0.0, 0.0, 0.1, 0.0])) == 1
+    assert len(agent.identity) == 64
+    for target, culprit in [
+        (f"{policies}::absent", "defines nothing named 'absent'; its callables: lean"),
+        (f"{tmp_path / 'none.py'}::lean", "no such file"),
+    ]:
+        with pytest.raises(AgentError, match="^agent .*" + culprit):
+            load_agent(target)

@@ -1,20 +1,28 @@
-"""The SB3 callbacks of a training run, each on its own job, stepped by hand (no training)."""
+"""The SB3 callbacks of a training run, each on its own job, stepped by hand (no training); then the user's callbacks
+and the per-goal logs in real (tiny) training runs, at every door."""
 
 from __future__ import annotations
 
+import functools
 import json
+import os
+from pathlib import Path
 
 import pytest
+from stable_baselines3.common.callbacks import BaseCallback
 
 import specguard as sg
+from specguard.error import TrainingError
 from specguard.training import callback as callbacks
 from specguard.training.auto_weights import MIN_EPISODES, WeightAdapter
 from specguard.training.callback import (
     AdaptWeights,
+    LogGoals,
     RecordGoalCurve,
     ReportProgress,
     StopTrainingOnMetCheckpoint,
     StopTrainingOnWallClock,
+    UserCallback,
     training_callbacks,
 )
 from specguard.training.curve import GoalCurve
@@ -27,8 +35,11 @@ class Model:
     """What a callback reads of a model: its steps so far, and its training env."""
 
     def __init__(self, env=None):
+        from stable_baselines3.common.logger import Logger
+
         self.num_timesteps = 0
         self.env = env
+        self.logger = Logger(folder=None, output_formats=[])
 
     def get_env(self):
         return self.env
@@ -191,3 +202,222 @@ def test_a_run_holds_the_callbacks_it_needs_in_their_order():
         StopTrainingOnWallClock,
     ]
     assert [type(c) for c in training_callbacks(GoalCurve(), every=10, total=100).callbacks] == [RecordGoalCurve]
+
+
+def test_goals_are_logged_per_rollout_and_per_evaluation_through_sb3s_logger():
+    log = LogGoals()
+    step = stepped(log)
+    safe = {"goals": {"root": True, "root/a": False}, "safe": {"root:cool": True}}
+    unsafe = {"goals": {"root": False, "root/a": False}, "safe": {"root:cool": False}}
+    step(1, [True, True, False], [safe, unsafe, {}])
+    step(2, [True], [safe])
+    log.on_rollout_end()
+    records = log.logger.name_to_value
+    assert dict(records) == {
+        "specguard/goal/root": pytest.approx(2 / 3),
+        "specguard/goal/root/a": 0.0,
+        "specguard/safe/root/cool": pytest.approx(2 / 3),
+    }
+    log.logger.dump(2)
+    log.on_rollout_end()  # a rollout that finished no episode records nothing
+    assert dict(log.logger.name_to_value) == {}
+    log.evaluated(3, {"root": 27, "root:cool": 30}, 30)
+    assert dict(log.logger.name_to_value) == {
+        "specguard/eval/goal/root": 0.9,
+        "specguard/eval/safe/root/cool": 1.0,
+        "specguard/eval/episodes": 30,
+    }
+    log.evaluated(4, {"root": 3}, 30, write=True)  # the final evaluation: written at once
+    assert dict(log.logger.name_to_value) == {}
+
+
+def test_a_users_callback_acts_as_alone_and_an_error_names_it():
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class Seen(BaseCallback):
+        def __init__(self):
+            super().__init__()
+            self.seen = []
+
+        def _on_step(self):
+            self.seen.append((self.num_timesteps, len(self.locals["infos"])))
+            return self.num_timesteps < 3
+
+        def _on_rollout_end(self):
+            self.seen.append("rollout end")
+
+    seen = Seen()
+    step = stepped(UserCallback(seen, "Spec 'x', seed 0"))
+    assert step(1, [False], [{}]) is True and step(3, [False], [{}]) is False
+    assert seen.seen == [(1, 1), (3, 1)] and seen.model is not None
+
+    class Broken(BaseCallback):
+        def _on_step(self):
+            raise KeyError("curriculum stage 3")
+
+    step = stepped(UserCallback(Broken(), "Spec 'x', seed 0"))
+    with pytest.raises(
+        TrainingError,
+        match=r"^Spec 'x', seed 0, callback .*Broken, in on_step at step 5: it raised "
+        r"KeyError: 'curriculum stage 3'",
+    ):
+        step(5)
+
+
+def test_logging_and_the_users_callbacks_come_last():
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class Mine(BaseCallback):
+        def _on_step(self):
+            return True
+
+    user = UserCallback(Mine(), "run")
+    every = training_callbacks(GoalCurve(), every=10, total=100, log=LogGoals(), user=[user])
+    assert [type(c) for c in every.callbacks] == [RecordGoalCurve, LogGoals, UserCallback]
+
+
+# -- the user's callbacks and the logs, in real training runs -------------------------------------------------------
+
+CARTPOLE = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+BALANCE = sg.Always(sg.Goal("upright", theta=(-0.2, 0.2)), name="balance")
+QUICK = sg.Budget(timesteps=256, min_seeds=2, max_seeds=2, eval_episodes=4, max_eval_episodes=4)
+
+
+def quick_spec(**kwargs):
+    return sg.Spec(
+        CARTPOLE, BALANCE, budget=QUICK, expect=0.01, hyperparameters={"n_steps": 64, "batch_size": 32}, **kwargs
+    )
+
+
+class MarkTraining(BaseCallback):
+    """Leaves a file named after its process and the steps it trained, when training ends."""
+
+    def __init__(self, folder):
+        super().__init__()
+        self.folder = folder
+
+    def _on_step(self):
+        return True
+
+    def _on_training_end(self):
+        (Path(self.folder) / f"{os.getpid()}-{self.num_timesteps}").write_text("trained")
+
+
+class Raises(BaseCallback):
+    def _on_step(self):
+        raise RuntimeError("the curriculum has no stage 2")
+
+
+def scalars(folder):
+    """Every scalar of the TensorBoard event files under ``folder``, by run subfolder and tag."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    found = {}
+    for events in sorted(Path(folder).rglob("events.out.tfevents.*")):
+        accumulator = EventAccumulator(str(events.parent))
+        accumulator.Reload()
+        run = events.parent.relative_to(folder).as_posix()
+        found[run] = {tag: [e.value for e in accumulator.Scalars(tag)] for tag in accumulator.Tags()["scalars"]}
+    return found
+
+
+def test_a_users_callback_runs_in_every_training_worker(tmp_path):
+    result = sg.run_spec(
+        quick_spec(callbacks=[functools.partial(MarkTraining, tmp_path)]), workers=2, cache_dir=None, progress=None
+    )
+    assert not result.errors
+    marks = sorted(p.name for p in tmp_path.iterdir())
+    assert len(marks) == 2 and all(m.endswith("-256") for m in marks)
+    assert str(os.getpid()) not in {m.split("-")[0] for m in marks}  # in the workers, not here
+
+
+def test_a_callback_that_raises_fails_its_seeds_in_one_line_naming_it():
+    result = sg.run_spec(quick_spec(callbacks=[Raises]), workers=1, cache_dir=None, progress=None)
+    assert sorted(result.errors) == [0, 1] and not result.passed
+    for error in result.errors.values():
+        assert "callback" in error and "Raises" in error and "the curriculum has no stage 2" in error
+        assert "\n" not in error and "environment" not in error
+
+
+def test_callbacks_are_part_of_the_spec_identity_and_the_log_folder_is_not(tmp_path):
+    from specguard.cache.fingerprint import fingerprint_spec
+
+    plain = quick_spec()
+    keys = {
+        fingerprint_spec(s).spec_key
+        for s in (plain, quick_spec(callbacks=[MarkTraining]), quick_spec(callbacks=[Raises]))
+    }
+    assert len(keys) == 3
+    logged = plain.as_run(tensorboard_log=tmp_path)
+    assert logged.tensorboard_log == str(tmp_path)
+    assert fingerprint_spec(logged) == fingerprint_spec(plain)
+
+
+def test_a_callback_that_is_no_factory_is_refused_where_the_spec_is_made():
+    with pytest.raises(sg.InvalidSpec, match=r"callbacks\[0\].*expected a callable returning an SB3 BaseCallback"):
+        quick_spec(callbacks=[3])
+    with pytest.raises(sg.InvalidSpec, match="expected a list of callback factories"):
+        quick_spec(callbacks=MarkTraining)
+
+
+def test_tensorboard_needs_its_package_in_one_line(tmp_path, monkeypatch):
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "tensorboard" else real(name, *a))
+    with pytest.raises(sg.InvalidSpec, match="needs the tensorboard package, which is not installed"):
+        quick_spec().as_run(tensorboard_log=tmp_path)
+
+
+def test_run_spec_writes_each_goals_curve_to_tensorboard_one_folder_per_spec_and_seed(tmp_path):
+    result = sg.run_spec(
+        quick_spec(), workers=2, cache_dir=tmp_path / "cache", progress=None, tensorboard_log=tmp_path / "tb"
+    )
+    assert not result.errors
+    found = scalars(tmp_path / "tb")
+    assert sorted(found) == ["balance/seed_0_1", "balance/seed_1_1"]
+    for tags in found.values():
+        assert {
+            "specguard/goal/balance",
+            "specguard/goal/balance/upright",
+            "specguard/eval/goal/balance",
+            "rollout/ep_len_mean",
+        } <= set(tags)
+        assert all(0 <= v <= 1 for v in tags["specguard/goal/balance/upright"])
+    # The final evaluation is the run's own figure, written last.
+    run = result.runs[0]
+    assert found["balance/seed_0_1"]["specguard/eval/goal/balance"][-1] == run.successes["balance"] / run.episodes
+    # A run found in the cache trains nothing and writes nothing.
+    again = sg.run_spec(
+        quick_spec(), workers=1, cache_dir=tmp_path / "cache", progress=None, tensorboard_log=tmp_path / "tb2"
+    )
+    assert all(again.cached.values()) and not (tmp_path / "tb2").exists()
+
+
+def test_specguard_run_and_pytest_write_tensorboard_logs(tmp_path, pytester, monkeypatch):
+    from specguard.cli.main import main
+
+    specs = tmp_path / "cartpole_specs.py"
+    specs.write_text(
+        "import specguard as sg\n"
+        "cartpole = sg.InitialEnv('CartPole-v1', features=('x', 'v', 'theta', 'omega'))\n"
+        "balance = sg.Always(sg.Goal('upright', theta=(-0.2, 0.2)), name='balance')\n"
+        "budget = sg.Budget(timesteps=128, min_seeds=1, max_seeds=1, eval_episodes=4, checkpoints=1)\n"
+        "tiny = {'n_steps': 64, 'batch_size': 32}\n"
+        "spec = sg.Spec(cartpole, balance, budget=budget, expect=0.0, hyperparameters=tiny)\n"
+    )
+    assert (
+        main(["run", str(specs), "--no-cache", "--quiet", "--workers", "1", "--tensorboard-log", str(tmp_path / "cli")])
+        == 0
+    )
+    assert list(scalars(tmp_path / "cli")) == ["balance/seed_0_1"]
+    pytester.makepyfile(test_cartpole=specs.read_text() + "\n\n@sg.goal_spec()\ndef test_balance():\n    return spec\n")
+    outcome = pytester.runpytest(
+        "--goal-specs",
+        "--goal-specs-no-cache",
+        "--goal-specs-workers=1",
+        f"--goal-specs-tensorboard-log={tmp_path / 'pytest'}",
+    )
+    outcome.assert_outcomes(passed=1)
+    assert list(scalars(tmp_path / "pytest")) == ["balance/seed_0_1"]
+    assert "specguard/goal/balance" in scalars(tmp_path / "pytest")["balance/seed_0_1"]

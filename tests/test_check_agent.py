@@ -4,6 +4,7 @@ the raw env with the same seeds, and computing the goal by hand."""
 from __future__ import annotations
 
 import json
+import warnings
 
 import gymnasium as gym
 import numpy as np
@@ -65,6 +66,12 @@ def assert_replayed(result: sg.SpecResult, expected: dict[str, int]) -> None:
     for path, goal in result.goals.items():
         assert (goal.successes, goal.episodes) == (expected[path], run.episodes)
         assert goal.interval == success_interval(expected[path], run.episodes, 0.95)
+
+
+@pytest.fixture(autouse=True)
+def _cache_in_tmp(tmp_path, monkeypatch):
+    """The default cache (``.specguard/cache``, relative) in the test's own folder, not the checkout."""
+    monkeypatch.chdir(tmp_path)
 
 
 @pytest.fixture(scope="module")
@@ -280,3 +287,84 @@ def test_an_agent_check_runs_check_agent_with_its_settings_and_refuses_bad_ones_
         sg.AgentCheck(KEEP, lean, algorithm=3)
     with pytest.raises(sg.InvalidSpec, match=r"^AgentCheck: expected a Spec, got 'keep'"):
         sg.AgentCheck("keep", lean)
+
+
+# -- the cache -------------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.filterwarnings("error")
+def test_an_evaluation_is_cached_by_agent_spec_and_settings(tmp_path, monkeypatch):
+    calls = []
+    evaluate = check_agent_module._evaluate
+
+    def counted(*args, **kwargs):  # type: ignore[no-untyped-def]
+        calls.append(1)
+        return evaluate(*args, **kwargs)
+
+    monkeypatch.setattr(check_agent_module, "_evaluate", counted)
+    first = check_agent(KEEP, lean, episodes=10, max_episodes=10, cache_dir=tmp_path)
+    again = check_agent(KEEP, lean, episodes=10, max_episodes=10, cache_dir=tmp_path)
+    assert len(calls) == 1 and first.cached == {0: False} and again.cached == {0: True}
+    assert again.runs == first.runs and again.goals == first.goals and again.notes == first.notes
+    # Another agent, spec or setting: evaluated once more, then found.
+    variants = [
+        (KEEP, lambda obs: int(obs[2] < 0), {}),
+        (RIGHT, lean, {}),
+        (KEEP, lean, {"observation": "spec"}),
+        (KEEP, lean, {"episodes": 5}),
+        (KEEP, lean, {"wrap": gym.wrappers.RecordEpisodeStatistics}),
+    ]
+    for spec, agent, settings in variants:
+        settings = {"episodes": 10, "max_episodes": 10, **settings}
+        assert check_agent(spec, agent, cache_dir=tmp_path, **settings).cached == {0: False}, settings
+        assert check_agent(spec, agent, cache_dir=tmp_path, **settings).cached == {0: True}, settings
+    assert len(calls) == 1 + len(variants)
+    assert check_agent(KEEP, lean, episodes=10, max_episodes=10, cache_dir=None).cached == {0: False}
+    assert len(calls) == 2 + len(variants)
+
+
+def test_a_damaged_evaluation_entry_is_discarded_with_a_warning(tmp_path):
+    first = check_agent(KEEP, lean, episodes=10, max_episodes=10, cache_dir=tmp_path)
+    (entry,) = tmp_path.glob("*/*/result.json")
+    entry.write_text(entry.read_text().replace('"episodes": 10', '"episodes": 11'))
+    with pytest.warns(UserWarning, match="discarded entry"):
+        again = check_agent(KEEP, lean, episodes=10, max_episodes=10, cache_dir=tmp_path)
+    assert again.cached == {0: False} and again.runs == first.runs
+
+
+def test_an_agent_trained_on_an_env_made_otherwise_is_judged_with_a_loud_note():
+    from specguard.agents.agent import Agent
+
+    agent = Agent(lean, name="zoo lean", env_kwargs={"sutton_barto_reward": True, "render_mode": None})
+    with pytest.warns(sg.SpecWarning, match=r"made with \{'sutton_barto_reward': True\}"):
+        result = check_agent(KEEP, agent, episodes=10, max_episodes=10, cache_dir=None)
+    assert "sutton_barto_reward" in result.notes[0] and "sutton_barto_reward" in sg.table(result)
+    same = sg.Spec(
+        sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"), sutton_barto_reward=True),
+        BALANCE,
+        budget=sg.Budget(timesteps=1),
+        expect=0.5,
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", sg.SpecWarning)
+        result = check_agent(same, agent, episodes=10, max_episodes=10, cache_dir=None)
+    assert not any("made with" in note for note in result.notes)
+
+
+def test_check_takes_a_policy_defined_in_a_python_file(spec_file, tmp_path, capsys):
+    from specguard.cli.main import main
+
+    policies = tmp_path / "policies.py"
+    policies.write_text("def lean(obs):\n    return int(obs[2] > 0)\n")
+    assert main(["check", f"{spec_file}::hard", "--agent", f"{policies}::lean", "--max-episodes", "10"]) == 1
+    out = capsys.readouterr().out
+    assert "== hard: FAILED" in out and "agent 'lean': 10 evaluation episodes" in out
+    assert main(["check", f"{spec_file}::hard", "--agent", f"{policies}::leen"]) == 2
+    assert "defines nothing named 'leen'; its callables: lean" in capsys.readouterr().err
+
+
+def test_the_table_of_an_agent_counts_no_runs():
+    result = check_agent(KEEP, lean, episodes=10, max_episodes=10)
+    assert result.agent == "lean"
+    header = sg.table(result).splitlines()[0].split()
+    assert header == ["goal", "success", "95%", "interval", "threshold", "verdict"]

@@ -171,7 +171,7 @@ def test_undecided_agent_goals_follow_the_sessions_undecided_option(pytester):
     run(pytester, "--goal-specs", "--goal-specs-undecided=fail").assert_outcomes(failed=1)
 
 
-def test_agent_items_are_left_out_of_baselines_saying_so_and_falsify_is_refused_in_one_line(pytester):
+def test_agent_items_are_left_out_of_baselines_saying_so_and_their_falsify_item_searches_the_agent(pytester):
     write(
         pytester,
         """
@@ -184,7 +184,10 @@ def test_agent_items_are_left_out_of_baselines_saying_so_and_falsify_is_refused_
     saved.assert_outcomes(passed=1, failed=1)
     saved.stdout.fnmatch_lines(
         [
-            "test_agents.py::test_lean[[]falsify[]]: falsify= is not supported yet for an AgentCheck*",
+            "*test_lean[[]falsify[]]*",
+            "falsified:",
+            "*seed 0: missed (no counterexample)*",
+            "*missed: balance*",
             "*test_lean*balance:edges*passed*not compared or saved: an agent judged by check_agent is left out*",
         ]
     )

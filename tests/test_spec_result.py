@@ -84,6 +84,7 @@ def spec_results(draw: st.DrawFn) -> SpecResult:
         undecided=draw(st.sampled_from(UNDECIDED_OUTCOMES)),
         xfail={p: "the paper's local optimum" for p in goals if draw(st.booleans())},
         notes=draw(st.lists(st.sampled_from(["3 of 30 evaluation episodes started inside the root goal 'root'"]))),
+        agent=draw(st.none() | st.just("PPO (ppo-CartPole-v1.zip)")),
     )
 
 

@@ -12,6 +12,7 @@ import warnings
 
 import pytest
 import yaml
+from stable_baselines3.common.callbacks import CheckpointCallback, ProgressBarCallback
 from torch import nn
 
 import specguard as sg
@@ -59,6 +60,7 @@ def test_cartpole_ppo_is_the_zoos_entry_with_its_schedules():
         "n_envs": 8,
         "normalize": False,
         "observation": "features",
+        "callbacks": (),
     }
     assert settings.timesteps == 100_000 and type(settings.timesteps) is int
     assert settings.env_id == "CartPole-v1" and settings.not_taken == {}
@@ -207,7 +209,13 @@ def test_a_file_of_ones_own_with_every_kind_of_key(tmp_path):
           normalize: "dict(norm_obs=True, norm_reward=False, gamma=0.9)"
           env_wrapper: gymnasium.wrappers.TimeAwareObservation
           frame_stack: 4
-          callback: rl_zoo3.callbacks.ParallelTrainCallback
+          callback:
+            - stable_baselines3.common.callbacks.ProgressBarCallback
+            - stable_baselines3.common.callbacks.CheckpointCallback:
+                save_freq: 100
+                save_path: checkpoints
+            - no_such_module.Callback
+            - gymnasium.Env
           no_such_key: 1
           learning_rate: lin_7.3e-4
           clip_range_vf: -1
@@ -222,13 +230,44 @@ def test_a_file_of_ones_own_with_every_kind_of_key(tmp_path):
         "normalize",
         "env_wrapper",
         "frame_stack",
-        "callback",
+        "callback[2]",
+        "callback[3]",
         "no_such_key",
         "clip_range_vf",
     }
     assert settings.not_taken["normalize"].startswith("norm_reward=False: ")  # no gamma: rewards are not normalized
     assert "A2C's constructor takes no 'no_such_key'" in settings.not_taken["no_such_key"]
+    assert "cannot import it (ModuleNotFoundError" in settings.not_taken["callback[2]"]
+    assert "not a stable_baselines3 BaseCallback class" in settings.not_taken["callback[3]"]
+    bar, checkpoint = settings.callbacks
+    assert bar is ProgressBarCallback and settings["callbacks"] == settings.callbacks
+    assert checkpoint.func is CheckpointCallback
+    assert checkpoint.keywords == {"save_freq": 100, "save_path": "checkpoints"}
     assert settings.source == str(path) and str(path) in message
+
+
+def test_the_zoos_callbacks_run_in_the_spec_they_are_unpacked_into(tmp_path):
+    path = write(
+        tmp_path,
+        f"""
+        CartPole-v1:
+          n_timesteps: 128
+          n_steps: 64
+          batch_size: 32
+          callback:
+            - stable_baselines3.common.callbacks.CheckpointCallback:
+                save_freq: 64
+                save_path: {tmp_path / "checkpoints"}
+        """,
+    )
+    settings = sg.zoo_settings("PPO", "CartPole-v1", file=path)
+    cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+    budget = sg.Budget(timesteps=settings.timesteps, min_seeds=1, max_seeds=1, eval_episodes=2, checkpoints=1)
+    spec = sg.Spec(cartpole, sg.Goal("right", x=(0.5, None)), budget=budget, **settings)
+    result = sg.run_spec(spec, workers=1, cache_dir=None, progress=None)
+    assert not result.errors
+    saved = sorted(p.name for p in (tmp_path / "checkpoints").iterdir())
+    assert saved == ["rl_model_128_steps.zip", "rl_model_64_steps.zip"]
 
 
 def test_normalize_discounts_by_the_algorithms_gamma_as_rl_zoo3_does(tmp_path):
@@ -386,6 +425,7 @@ def test_settings_unpack_as_spec_fields_and_can_be_overridden():
         "n_envs",
         "normalize",
         "observation",
+        "callbacks",
     ]
     spec = sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=64), **{**settings, "n_envs": 1})
     assert spec.n_envs == 1 and spec.hyperparameters["n_steps"] == 32

@@ -28,7 +28,7 @@ import numpy as np
 from specguard.error import AgentError, AgentMismatch, SpecError
 from specguard.utils.text import MAX_SHOWN, elide, shown
 
-__all__ = ["Agent", "action_problem", "check_fits", "observation_kind"]
+__all__ = ["Agent", "action_problem", "check_fits", "observation_kind", "observation_rows"]
 
 
 class Agent:
@@ -178,12 +178,7 @@ class Agent:
             return lambda observations, rows: one(observations)
 
         def rows_of(observations: Any, rows: Sequence[int] | None) -> Any:
-            if isinstance(observations, Mapping):  # a Dict observation's batch, key by key
-                n = len(next(iter(observations.values())))
-                each = [{k: v[i] for k, v in observations.items()} for i in range(n)]
-            else:
-                each = list(observations)
-            return np.stack([np.asarray(one(o)) for o in each])
+            return np.stack([np.asarray(one(o)) for o in observation_rows(observations)])
 
         return rows_of
 
@@ -212,6 +207,19 @@ class Agent:
                     hint="an agent's action must be one of the env's action space, as env.action_space.contains says",
                 )
         self._unchecked = False
+
+
+def observation_rows(observations: Any) -> list[Any]:
+    """A batch of observations (rows, one per env) as a list of single observations, a ``Dict``'s key by key.
+
+    Example:
+        >>> observation_rows({"a": np.zeros((2, 3)), "b": np.ones((2, 1))})[1]["b"].tolist()
+        [1.0]
+    """
+    if isinstance(observations, Mapping):
+        n = len(next(iter(observations.values())))
+        return [{k: v[i] for k, v in observations.items()} for i in range(n)]
+    return list(observations)
 
 
 def action_problem(space: Any, action: Any) -> str:

@@ -16,6 +16,9 @@ Four sources, told apart once, when the agent is loaded:
    whose recurrent state is carried from step to step (:class:`specguard.training.policy.Policy`);
 4. a callable ``obs -> action`` for one observation (CleanRL's, TorchRL's, a hand-written rule).
 
+A text ``FILE.py::NAME`` names the object ``NAME`` of a Python file, loaded as the object itself is (a callable, a
+model in memory, a path): how a command line names a hand-written policy.
+
 Every bad input is one :class:`~specguard.error.AgentError` naming the path or the agent.
 
 Example:
@@ -41,6 +44,7 @@ from specguard.cache.store import file_sha256
 from specguard.error import AgentError, InvalidSpec, SpecError
 from specguard.spec.algorithms import ALGORITHMS, CONTRIB, SB3, algorithm_class, hyperparameter_names
 from specguard.spec.algorithms import resolve_algorithm as _resolve
+from specguard.spec.loading import import_file
 from specguard.spec.zoo import read_zoo_file
 from specguard.training.policy import Policy, normalizer_of
 from specguard.utils.text import MAX_SHOWN, elide, function_text, shown
@@ -85,6 +89,10 @@ def load_agent(
     Raises:
         AgentError: one line naming what cannot be loaded and why (see :class:`~specguard.error.AgentError`).
     """
+    if isinstance(agent, str) and "::" in agent:
+        return load_agent(
+            _named(agent), algorithm=algorithm, normalizer=normalizer, deterministic=deterministic, batch=batch
+        )
     if isinstance(agent, (str, os.PathLike)):
         return _from_path(Path(agent), algorithm, normalizer, deterministic=deterministic, batch=batch)
     if algorithm is not None:
@@ -97,6 +105,22 @@ def load_agent(
     if callable(agent):
         return _from_callable(agent, normalizer, batch=batch)
     raise AgentError(f"cannot load an agent from {shown(agent)} (a {type(agent).__name__})")
+
+
+def _named(target: str) -> Any:
+    """The object ``NAME`` of the Python file ``FILE.py::NAME`` (imported as spec files are)."""
+    path, _, name = target.partition("::")
+    try:
+        module = import_file(Path(path))
+    except SpecError as e:
+        raise AgentError(f"agent {target!r}: {e}", hint=None) from None
+    if not name or not hasattr(module, name):
+        defined = [k for k, v in vars(module).items() if not k.startswith("_") and callable(v)]
+        raise AgentError(
+            f"agent {target!r}: {path} defines nothing named {name!r}; its callables: {', '.join(defined) or 'none'}",
+            hint="name a policy defined in the file, e.g. policies.py::lean",
+        )
+    return getattr(module, name)
 
 
 # -- a model in memory, a callable ---------------------------------------------------------------------------

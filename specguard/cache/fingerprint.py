@@ -53,8 +53,8 @@ __all__ = ["SpecFingerprint", "fingerprint_spec"]
 # Spec fields that change how many runs are trained or how they are counted, not what one run does:
 # they are part of the spec's identity (shared results, baselines) but not of a run's cache key.
 _SPEC_ONLY_FIELDS = frozenset({"quorum", "undecided", "name", "xfail"})
-# Spec fields that change neither a run nor a verdict: the falsifier's default start space.
-_NOT_IDENTITY_FIELDS = frozenset({"starts"})
+# Spec fields that change neither a run nor a verdict: the falsifier's default start space, where runs write logs.
+_NOT_IDENTITY_FIELDS = frozenset({"starts", "tensorboard_log"})
 _BUDGET_SPEC_ONLY_FIELDS = frozenset({"min_seeds", "max_seeds"})
 
 
@@ -88,8 +88,8 @@ def _fields(obj: Any, exclude: frozenset[str]) -> dict[str, Any]:
 
 
 def _algorithm_fields(spec: Any, fields: dict[str, Any]) -> dict[str, Any]:
-    """``fields`` with the algorithm by identity and version, and the policy and the observation only where they are
-    not the default.
+    """``fields`` with the algorithm by identity and version, and the policy, the observation and the user's
+    callbacks only where they are not the default.
 
     stable-baselines3's algorithms stay their names (its version is in every key already); any other algorithm is
     its class: an installed one by module, qualified name and its distribution's version (sb3-contrib's), the user's
@@ -104,6 +104,8 @@ def _algorithm_fields(spec: Any, fields: dict[str, Any]) -> dict[str, Any]:
         del out["policy"]
     if not (isinstance(spec.algorithm, str) and spec.algorithm in SB3):
         out["algorithm"] = algorithm_class(spec.algorithm)
+    if not out["callbacks"]:  # a run without callbacks of the user's keeps the key it had before specs took them
+        del out["callbacks"]
     return out
 
 

@@ -108,10 +108,10 @@ def _check_signature(record: dict[str, Any], secret: bytes | None) -> None:
         raise ValueError(f"no valid signature for the key in {SECRET_ENV}")
 
 
-def _check_files(record: dict[str, Any], folder: Path) -> None:
+def _check_files(record: dict[str, Any], folder: Path, *, model: bool = True) -> None:
     files = record.get("files")
-    if not isinstance(files, dict) or MODEL not in files:
-        raise ValueError("no file checksums recorded")
+    if not isinstance(files, dict) or (MODEL in files) != model:
+        raise ValueError("no file checksums recorded" if model else "a model recorded in an evaluation's entry")
     for name, expected in files.items():
         if name not in (MODEL, NORMALIZER):
             raise ValueError(f"unexpected file {name!r} recorded")
@@ -125,12 +125,20 @@ def _check_versions(record: dict[str, Any]) -> None:
 
 
 def validate_record(
-    record: Any, folder: Path, *, key: str, seed: int, paths: Collection[str], secret: bytes | None
+    record: Any,
+    folder: Path,
+    *,
+    key: str,
+    seed: int,
+    paths: Collection[str],
+    secret: bytes | None,
+    model: bool = True,
 ) -> RunResult:
     """The run stored in ``record`` (parsed ``result.json`` of ``folder``), after every check.
 
     ``paths`` are the keys the run must have measured, exactly: the tree's node
-    paths and its safety keys (:func:`specguard.tree.keys.result_keys`).
+    paths and its safety keys (:func:`specguard.tree.keys.result_keys`). ``model``: the entry holds the run's
+    model (a trained run), or no file at all (an evaluation of an agent trained elsewhere).
 
     Raises:
         ValueError: the first check that failed, in words.
@@ -138,7 +146,7 @@ def validate_record(
     _check_envelope(record, key)
     _check_checksum(record)
     _check_signature(record, secret)
-    _check_files(record, folder)
+    _check_files(record, folder, model=model)
     _check_versions(record)
     return RunResult.from_dict(record.get("result"), seed=seed, paths=paths)
 
@@ -176,18 +184,22 @@ class Cache:
         """The cached result of the run, or ``None`` when absent or not trustworthy."""
         return self.load_key(fingerprint_spec(spec).run_key(seed), seed=seed, paths=_paths(spec))
 
-    def load_key(self, key: str, *, seed: int, paths: Collection[str]) -> RunResult | None:
-        """The run stored under ``key`` if it passes :func:`validate_record`; a failing entry is discarded."""
+    def load_key(self, key: str, *, seed: int, paths: Collection[str], model: bool = True) -> RunResult | None:
+        """The run stored under ``key`` if it passes :func:`validate_record`; a failing entry is discarded.
+
+        ``model=False``: an evaluation's entry (:meth:`store_evaluation`), which holds no file.
+        """
         folder = self.folder(key)
         if not folder.exists():
             return None
         try:
             record = json.loads((folder / RESULT).read_text())
-            return validate_record(record, folder, key=key, seed=seed, paths=paths, secret=self.secret)
+            return validate_record(record, folder, key=key, seed=seed, paths=paths, secret=self.secret, model=model)
         except (OSError, ValueError, KeyError, TypeError) as e:
             # Damaged, edited, unsigned or stale: remove it so the retrained run can take its place.
             shutil.rmtree(folder, ignore_errors=True)
-            warnings.warn(f"specguard cache: discarded entry {folder} ({e}); retraining", stacklevel=2)
+            again = "retraining" if model else "evaluating again"
+            warnings.warn(f"specguard cache: discarded entry {folder} ({e}); {again}", stacklevel=2)
             return None
 
     def store(self, spec: Spec, seed: int, result: RunResult, model: Any) -> Path:
@@ -206,6 +218,15 @@ class Cache:
         unknown = sorted(set(files) - {MODEL, NORMALIZER})
         if MODEL not in files or unknown:
             raise ValueError(f"expected {MODEL} (and optionally {NORMALIZER}), got files {sorted(files)}")
+        return self._write(key, result, files)
+
+    def store_evaluation(self, key: str, result: RunResult) -> Path:
+        """Write an evaluation of an agent trained elsewhere (:func:`specguard.engine.check_agent.check_agent`):
+        the result alone, no file (the agent is the user's, not the cache's); read back with
+        ``load_key(key, model=False)``."""
+        return self._write(key, result, {})
+
+    def _write(self, key: str, result: RunResult, files: dict[str, bytes]) -> Path:
         folder = self.folder(key)
         with staged(folder, folder=True) as tmp:
             for name, data in sorted(files.items()):

@@ -12,7 +12,10 @@ module-level ``Spec`` objects (named by variable) and the values of its
 module-level dicts of specs (named by key); ``show`` also lists goal trees.
 
 ``specguard falsify PATH[::NAME]`` searches each trained run's start space for
-starts from which it misses the spec.
+starts from which it misses the spec; with ``--agent AGENT`` (and ``--algorithm``, ``--observation``, as ``check``
+takes them), an agent trained elsewhere instead, training nothing
+(:func:`specguard.engine.falsify_run.falsify_agent`). Its exit status: 0 when nothing was found, 1 when a
+counterexample was, 2 for bad input (an agent that cannot be loaded, or whose spaces do not fit the env, in one line).
 
 ``specguard check PATH[::NAME] --agent AGENT`` judges an agent trained elsewhere (a saved SB3 or sb3-contrib zip, an
 rl-zoo3 or Hub folder) against each spec, training nothing (:func:`specguard.engine.check_agent.check_agent`), and
@@ -160,7 +163,12 @@ def _run_all(args: argparse.Namespace, specs: dict[str, Any], executor: Any) -> 
     results = {}
     failed = False
     for name, spec in specs.items():
-        spec = spec.as_run(args.budget_scale, checkpoints=args.checkpoints, undecided=args.undecided)
+        spec = spec.as_run(
+            args.budget_scale,
+            checkpoints=args.checkpoints,
+            undecided=args.undecided,
+            tensorboard_log=args.tensorboard_log,
+        )
         result = run_spec(
             spec,
             executor=executor,
@@ -295,6 +303,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument("--cache-dir", default=DEFAULT_CACHE_DIR, help=f"run cache (default: {DEFAULT_CACHE_DIR})")
     run.add_argument("--no-cache", action="store_true", help="neither read nor write the cache")
+    run.add_argument(
+        "--tensorboard-log",
+        metavar="DIR",
+        default=None,
+        help="write TensorBoard logs of every training run here (SB3's curves and each goal's success), one "
+        "subfolder per spec and seed; runs found in the cache train nothing and write nothing",
+    )
     run.add_argument("--budget-scale", type=_scale, default=1.0, help="multiply training timesteps, e.g. 0.25")
     run.add_argument(
         "--checkpoints",
@@ -354,19 +369,42 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _add_check(sub: Any) -> None:
+def _add_agent(parser: argparse.ArgumentParser, *, required: bool, instead: str = "") -> None:
+    """The options naming an agent trained elsewhere and what it sees: ``--agent``, ``--algorithm``,
+    ``--observation`` (``check``'s and ``falsify``'s)."""
     from specguard.engine.check_agent import AGENT_OBSERVATIONS
 
+    parser.add_argument(
+        "--agent",
+        required=required,
+        default=None,
+        help="the agent: an SB3 or sb3-contrib .zip, an rl-zoo3 or Hugging Face Hub folder, or FILE.py::NAME, a "
+        "policy (a callable obs -> action, or an object with predict) defined in a Python file" + instead,
+    )
+    parser.add_argument("--algorithm", default=None, help="the zip's algorithm, e.g. PPO (default: read from the file)")
+    parser.add_argument(
+        "--observation",
+        choices=AGENT_OBSERVATIONS,
+        default="env",
+        help="what the agent sees: env, the initial env's own observation (default), or spec, the constructed env's",
+    )
+
+
+def _add_check(sub: Any) -> None:
     ck = sub.add_parser(
         "check",
         help="judge an agent trained elsewhere (a saved model, an rl-zoo3 or Hub folder) against specs, "
         "training nothing",
     )
     ck.add_argument("target", metavar="PATH[::NAME]")
+    _add_agent(ck, required=True)
     ck.add_argument(
-        "--agent", required=True, help="the agent: an SB3 or sb3-contrib .zip, or an rl-zoo3 or Hugging Face Hub folder"
+        "--against",
+        default=None,
+        metavar="OLD",
+        help="gate the agent against the one it replaces, on the same episodes: exit 1 also when a goal or safety "
+        "rate dropped (exact one-sided McNemar test, Holm's procedure at family-wise 5%%)",
     )
-    ck.add_argument("--algorithm", default=None, help="the zip's algorithm, e.g. PPO (default: read from the file)")
     ck.add_argument(
         "--episodes",
         type=_positive,
@@ -383,12 +421,6 @@ def _add_check(sub: Any) -> None:
         "(default: the spec's Budget.max_eval_episodes)",
     )
     ck.add_argument(
-        "--observation",
-        choices=AGENT_OBSERVATIONS,
-        default="env",
-        help="what the agent sees: env, the initial env's own observation (default), or spec, the constructed env's",
-    )
-    ck.add_argument(
         "--seed", type=_natural("the evaluation seeds' run"), default=0, help="which evaluation seeds (default: 0)"
     )
     ck.add_argument(
@@ -397,14 +429,18 @@ def _add_check(sub: Any) -> None:
         default=None,
         help="what a goal still undecided counts as: fail, xfail or pass (default: the spec's own Spec.undecided)",
     )
+    ck.add_argument("--cache-dir", default=DEFAULT_CACHE_DIR, help=f"evaluation cache (default: {DEFAULT_CACHE_DIR})")
+    ck.add_argument("--no-cache", action="store_true", help="neither read nor write the cache")
     ck.add_argument("--json", metavar="FILE", help="also write the results as JSON (missing directories are created)")
 
 
 def _add_falsify(sub: Any) -> None:
     fz = sub.add_parser(
-        "falsify", help="search a trained spec's start space for starts from which its agents miss the spec"
+        "falsify",
+        help="search a spec's start space for starts from which its trained agents (or --agent) miss the spec",
     )
     fz.add_argument("target", metavar="PATH[::NAME]")
+    _add_agent(fz, required=False, instead="; default: the spec's own trained runs")
     fz.add_argument("--seed", type=_natural("the search's seed"), default=0, help="the search's seed (default: 0)")
     fz.add_argument("--examples", type=_positive, default=200, help="guided episodes per run at most (default: 200)")
     fz.add_argument(
@@ -420,7 +456,11 @@ def _add_falsify(sub: Any) -> None:
         metavar="NAME=LO:HI",
         help="start ranges of the env's state variables (default: the spec's own, Spec.starts, else the env's)",
     )
-    fz.add_argument("--cache-dir", default=DEFAULT_CACHE_DIR, help=f"run cache (default: {DEFAULT_CACHE_DIR})")
+    fz.add_argument(
+        "--cache-dir",
+        default=DEFAULT_CACHE_DIR,
+        help=f"run cache, and its falsify/ the counterexamples (default: {DEFAULT_CACHE_DIR})",
+    )
     fz.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
 
 
@@ -435,8 +475,9 @@ def _start_range(text: str) -> tuple[str, tuple[float, float]]:
 
 
 def _falsify(args: argparse.Namespace) -> int:
-    """Train (or find in the cache) each spec, then search its start space for counterexamples, per run."""
-    from specguard.engine.falsify_run import falsify_runs, start_space
+    """Train (or find in the cache) each spec, then search its start space for counterexamples, per run; with
+    ``--agent``, the agent's instead, training nothing."""
+    from specguard.engine.falsify_run import falsify_agent, falsify_runs, start_space
     from specguard.engine.run_spec import run_spec
     from specguard.starts.space import StartSpace
     from specguard.training.progress import print_event
@@ -446,10 +487,30 @@ def _falsify(args: argparse.Namespace) -> int:
     specs = load_objects(args.target)
     for spec in specs.values():  # names and bounds checked before anything trains
         start_space(spec, starts).resolve(spec.initial_env.make())
+    say = None if args.quiet else (lambda line: print(f"[specguard] {line}", file=sys.stderr))
+    if args.agent is None and args.algorithm is not None:
+        raise SpecError("falsify: --algorithm names the --agent's algorithm, and no --agent is given", hint=None)
     for name, spec in specs.items():
+        if args.agent is not None:
+            f = falsify_agent(
+                spec,
+                args.agent,
+                starts,
+                examples=args.examples,
+                uniform=args.uniform,
+                search_seed=args.seed,
+                database=Path(args.cache_dir) / "falsify",
+                progress=say,
+                observation=args.observation,
+                algorithm=args.algorithm,
+            )
+            print(f"== {name} agent {args.agent}: {'COUNTEREXAMPLE' if f.found else 'none found'}")
+            print(f.report())
+            print()
+            found_any = found_any or f.found
+            continue
         quiet = args.quiet
         result = run_spec(spec, cache_dir=args.cache_dir, progress=None if quiet else print_event)
-        say = None if quiet else (lambda line: print(f"[specguard] {line}", file=sys.stderr))
         found = falsify_runs(
             result, starts, examples=args.examples, uniform=args.uniform, search_seed=args.seed, progress=say
         )
@@ -464,6 +525,7 @@ def _falsify(args: argparse.Namespace) -> int:
 def _check(args: argparse.Namespace) -> int:
     """Judge the agent against each spec, training nothing; 1 when a spec failed."""
     from specguard.engine.check_agent import check_agent
+    from specguard.gate.agent_gate import compare_agents
     from specguard.report.table import table
 
     specs = load_objects(args.target)
@@ -473,23 +535,54 @@ def _check(args: argparse.Namespace) -> int:
     results = {}
     failed = False
     for name, spec in specs.items():
-        result = check_agent(
-            spec.as_run(undecided=args.undecided),
-            args.agent,
-            episodes=args.episodes,
-            max_episodes=args.max_episodes,
-            observation=args.observation,
-            seed=args.seed,
-            algorithm=args.algorithm,
-        )
-        results[name] = result.to_dict()
+        options = {
+            "episodes": args.episodes,
+            "max_episodes": args.max_episodes,
+            "observation": args.observation,
+            "seed": args.seed,
+            "algorithm": args.algorithm,
+        }
+        run = spec.as_run(undecided=args.undecided)
+        if args.against is None:
+            result = check_agent(run, args.agent, cache_dir=None if args.no_cache else args.cache_dir, **options)
+            results[name] = result.to_dict()
+        else:
+            comparison = compare_agents(run, args.agent, args.against, **options)
+            result = comparison.result
+            results[name] = {**result.to_dict(), "comparison": comparison.to_dict()}
         print(f"== {name}: {result.status()} ({result.seconds:.1f}s)")
         print(table(result))
+        if args.against is not None:
+            print(f"-- against {args.against}: {'passed' if comparison.passed else 'DROPPED'}")
+            print(_comparison_table(comparison))
+            print(comparison.summary())
+            failed = failed or not comparison.passed
         print()
         failed = failed or not result.as_expected
     if json_path is not None:
         _write_results(json_path, json.dumps(results, indent=1))
     return 1 if failed else 0
+
+
+def _comparison_table(comparison: Any) -> str:
+    """Per goal and safety rate: the old and new agents' successes, the drop's bound, the p-value, the state."""
+    from specguard.tree.keys import label
+
+    rows = [("goal", "old", "new", "lost/gained", "drop <=", "p", "state")]
+    for key, k in comparison.keys.items():
+        rows.append(
+            (
+                label(key),
+                f"{k.old}/{k.episodes}",
+                f"{k.new}/{k.episodes}",
+                f"{k.lost}/{k.gained}",
+                f"{k.bound:+.1%}",
+                f"{k.p_value:.3g}",
+                k.state.value,
+            )
+        )
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+    return "\n".join("  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows)
 
 
 def _reproduce(args: argparse.Namespace, argv: Sequence[str]) -> int:

@@ -434,6 +434,8 @@ class BaselineEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         state: ``state(obs*)``; ``None`` for the identity.
         from_info, from_env: the features read from ``info`` and from the env (see :class:`SpecEnv`).
         compiled: ``compile_tree(tree, features)`` when the caller has it; ``None`` compiles the tree here.
+        feature_low, feature_high: bounds of the features, ``None`` for unbounded (as :class:`SpecEnv`'s); the
+            observation does not show them, the falsifier's margins are measured in them.
     """
 
     def __init__(
@@ -446,6 +448,8 @@ class BaselineEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         from_info: Sequence[tuple[str, str]] = (),
         from_env: Sequence[tuple[str, Callable[[Any], Any]]] = (),
         compiled: CompiledTree | None = None,
+        feature_low: Sequence[float] | None = None,
+        feature_high: Sequence[float] | None = None,
     ) -> None:
         RecordConstructorArgs.__init__(  # not deep-copied, as SpecEnv's
             self,
@@ -464,6 +468,10 @@ class BaselineEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         self.evaluator = _compiled_for(tree, self.features, compiled).evaluator()
         self._read = FeatureReader(tree.name, self.features, state, from_info, from_env)
         self._read.check(env.observation_space)
+        n = len(self.features)
+        self.feature_low = np.full(n, -np.inf) if feature_low is None else np.asarray(feature_low, dtype=np.float64)
+        self.feature_high = np.full(n, np.inf) if feature_high is None else np.asarray(feature_high, dtype=np.float64)
+        """The features' bounds (``-inf``/``inf`` where unknown)."""
         self._t = 0
 
     def _info(self, info: dict[str, Any], members: tuple[bool, ...]) -> dict[str, Any]:
@@ -681,6 +689,8 @@ class EnvFactory:
                     from_info=initial_env.from_info,
                     from_env=initial_env.from_env,
                     compiled=compiled,
+                    feature_low=tuple(low.tolist()),
+                    feature_high=tuple(high.tolist()),
                 )
             return SpecEnv(
                 base,

@@ -33,15 +33,20 @@ import contextlib
 import dataclasses
 import sys
 import time
+import warnings
 from collections.abc import Callable, Iterator, Mapping
+from pathlib import Path
 from typing import Any
 
 from specguard.agents.agent import Agent, check_fits
 from specguard.agents.sources import load_agent
+from specguard.cache.canonical import digest
+from specguard.cache.fingerprint import fingerprint_spec
+from specguard.cache.store import Cache
 from specguard.construction.env import EnvFactory
 from specguard.engine.judging import judged
 from specguard.engine.spec_result import SpecResult
-from specguard.error import AgentError, EvaluationError, InvalidSpec, SpecError
+from specguard.error import AgentError, EvaluationError, FingerprintError, InvalidSpec, SpecError, SpecWarning
 from specguard.spec.budget import Budget
 from specguard.spec.spec import Spec
 from specguard.stats.anytime import evaluation_stages, final_evaluation
@@ -49,11 +54,20 @@ from specguard.stats.intervals import failure_upper_bound
 from specguard.training.policy import one_torch_thread
 from specguard.training.result import RunResult
 from specguard.training.train import EVAL_SEED_BASE, EVAL_SEED_STRIDE, evaluate
-from specguard.tree.keys import label
+from specguard.tree.keys import label, result_keys
+from specguard.utils.atomic import DEFAULT_CACHE_DIR
 from specguard.utils.text import MAX_SHOWN, elide, function_text, shown
 from specguard.validation import check_choice, check_count, check_natural
 
-__all__ = ["AGENT_OBSERVATIONS", "AgentCheck", "check_agent"]
+__all__ = [
+    "AGENT_OBSERVATIONS",
+    "AgentCheck",
+    "agent_envs",
+    "agent_episodes",
+    "agent_stages",
+    "check_agent",
+    "spec_agent",
+]
 
 AGENT_OBSERVATIONS = ("env", "spec")
 """What an agent may see: the initial env's own observation (``"env"``), or the constructed env's (``"spec"``)."""
@@ -69,6 +83,8 @@ def check_agent(
     wrap: Callable[[Any], Any] | None = None,
     seed: int = 0,
     algorithm: str | type | None = None,
+    cache_dir: str | Path | None = DEFAULT_CACHE_DIR,
+    outcomes: list[dict[str, int]] | None = None,
 ) -> SpecResult:
     """Judge ``agent`` against ``spec`` on evaluation episodes, training nothing.
 
@@ -85,6 +101,11 @@ def check_agent(
         wrap: ``wrap(env) -> env``, the observation wrappers the agent was trained with, around the env it sees.
         seed: which evaluation seeds the episodes take, as a trained run's seed (see the module).
         algorithm: a zip's algorithm, as for :func:`~specguard.agents.sources.load_agent`.
+        cache_dir: where evaluations are kept and looked up, keyed by the agent's identity (its files' bytes, or a
+            callable's code), the spec's key and these settings; ``None`` disables the cache.
+        outcomes: if given, receives each episode's own counts in order (1 or 0 per goal and safety key), for a
+            paired comparison (:func:`specguard.gate.agent_gate.compare_agents`); the cache is then neither read nor
+            written (it keeps counts, not each episode's).
 
     Returns:
         The result, with the agent's episodes as one run (seed ``seed``, no training).
@@ -97,12 +118,11 @@ def check_agent(
     """
     started = time.perf_counter()
     where = f"check_agent({spec.label!r})" if isinstance(spec, Spec) else "check_agent"
-    first, most, seed = _check_settings(where, spec, episodes, max_episodes, observation, seed)
-    if not isinstance(agent, Agent):
-        agent = load_agent(agent, algorithm=algorithm, deterministic=spec.deterministic)
-    elif agent.batch:
-        agent = agent.batched(False)
-    stages = evaluation_stages(first, most)
+    stages = agent_stages(where, spec, episodes, max_episodes)
+    first, most = stages[0], stages[-1]
+    check_choice(where, "observation", observation, AGENT_OBSERVATIONS)
+    seed = check_natural(where, "seed", seed, "the evaluation seeds' run")
+    agent = spec_agent(spec, agent, algorithm=algorithm, batch=False)
     # The agent as one run: one seed, judged at the looks of its stages (no checkpoints), as a trained run's final
     # evaluation is judged; the quorum of one run is that run.
     one = dataclasses.replace(
@@ -112,7 +132,51 @@ def check_agent(
         ),
         quorum=None,
     )
-    env = _agent_env(spec, observation, wrap)
+    settings = {"first": first, "most": most, "observation": observation, "seed": seed}
+    cache, key = _cache_entry(spec, agent, wrap, settings, None if outcomes is not None else cache_dir)
+    run = cache.load_key(key, seed=seed, paths=result_keys(spec.tree), model=False) if cache is not None else None
+    hit = run is not None
+    if run is None:
+        run = _evaluate(where, spec, one, agent, observation, wrap, seed, stages, outcomes)
+        if cache is not None:
+            try:
+                cache.store_evaluation(key, run)
+            except OSError as e:  # fail loudly, lose nothing: the result stands, uncached
+                warnings.warn(f"specguard cache: {where}'s evaluation kept, not cached: {e}", stacklevel=2)
+    n = run.episodes
+    base = EVAL_SEED_BASE + seed * EVAL_SEED_STRIDE
+    counts = run.successes
+    result = judged(one, [run])
+    seen = "the constructed env's" if observation == "spec" else "the initial env's own"
+    wrapped = f", through {function_text(wrap)}" if wrap is not None else ""
+    result.notes[:0] = [
+        *_other_env_kwargs(spec, agent),
+        f"agent {agent.name!r}: {n} evaluation episodes (env seeds {base}..{base + n - 1}), seeing {seen} "
+        f"observation{wrapped}",
+        *_never_failed(counts, n, spec.confidence),
+    ]
+    result.agent = agent.name
+    result.trained = None  # no model behind it
+    result.cached = {seed: hit}
+    result.spec_key = key
+    result.cache_dir = cache.root if cache is not None else None
+    result.seconds = time.perf_counter() - started
+    return result
+
+
+def _evaluate(
+    where: str,
+    spec: Spec,
+    one: Spec,
+    agent: Agent,
+    observation: str,
+    wrap: Callable[[Any], Any] | None,
+    seed: int,
+    stages: list[int],
+    outcomes: list[dict[str, int]] | None = None,
+) -> RunResult:
+    """The agent's evaluation episodes, drawn in ``stages`` until every asserted goal is decided: one run."""
+    env = agent_envs(spec, observation, wrap)()
     try:
         check_fits(agent, env.observation_space, env.action_space)  # before any episode
         base = EVAL_SEED_BASE + seed * EVAL_SEED_STRIDE
@@ -121,23 +185,13 @@ def check_agent(
         capped: list[bool] = []
 
         def episodes_of(start: int, count: int) -> dict[str, int]:
-            try:
-                return evaluate(
-                    agent, env, count, range(base + start, base + start + count), started_in, terminated, capped
-                )
-            except SpecError:
-                raise
-            except Exception as e:
-                raise EvaluationError(
-                    f"{where}, evaluation episodes {start}..{start + count - 1} of agent {agent.name!r}: the "
-                    f"environment raised {type(e).__name__}: {elide(str(e), MAX_SHOWN)}"
-                ) from e
+            return _episodes(where, agent, env, base, start, count, started_in, terminated, capped, outcomes)
 
         with _threads(agent):
             counts, n = final_evaluation(episodes_of, stages, spec.thresholds, one.verdict_confidence)
     finally:
         env.close()
-    run = RunResult(
+    return RunResult(
         spec=spec.label,
         seed=seed,
         timesteps=0,
@@ -148,38 +202,36 @@ def check_agent(
         terminated=sum(terminated),
         capped=sum(capped),
     )
-    result = judged(one, [run])
-    seen = "the constructed env's" if observation == "spec" else "the initial env's own"
-    wrapped = f", through {function_text(wrap)}" if wrap is not None else ""
-    result.notes[:0] = [
-        f"agent {agent.name!r}: {n} evaluation episodes (env seeds {base}..{base + n - 1}), seeing {seen} "
-        f"observation{wrapped}",
-        *_never_failed(counts, n, spec.confidence),
-    ]
-    result.trained = None  # no model behind it
-    result.seconds = time.perf_counter() - started
-    return result
 
 
-def _check_settings(
-    where: str, spec: object, episodes: object, max_episodes: object, observation: object, seed: object
-) -> tuple[int, int, int]:
-    """check_agent's settings checked: the first stage's episodes, the most episodes, and the seed.
+def _cache_entry(
+    spec: Spec,
+    agent: Agent,
+    wrap: Callable[[Any], Any] | None,
+    settings: dict[str, Any],
+    cache_dir: str | Path | None,
+) -> tuple[Cache | None, str]:
+    """The cache and the key of this evaluation: the agent's identity, the spec's key and the evaluation's settings.
 
-    Raises:
-        InvalidSpec: naming ``where``, the argument and the value given.
+    ``(None, "")`` where nothing is cached: ``cache_dir=None``, an env that does not repeat a fixed-seed rollout, or
+    an agent or ``wrap`` that cannot be fingerprinted exactly (said in a warning: its verdict stands, uncached).
     """
-    if not isinstance(spec, Spec):
-        raise InvalidSpec(where, f"expected a Spec, got {shown(spec)}", hint="check_agent(spec, agent)")
-    budget = spec.budget
-    first = check_count(where, "episodes", budget.eval_episodes if episodes is None else episodes)
-    assert budget.max_eval_episodes is not None
-    most_default = max(first, budget.max_eval_episodes)
-    most = check_count(where, "max_episodes", most_default if max_episodes is None else max_episodes)
-    if most < first:
-        raise InvalidSpec(where, f"expected max_episodes >= episodes, got {most} < {first}")
-    check_choice(where, "observation", observation, AGENT_OBSERVATIONS)
-    return first, most, check_natural(where, "seed", seed, "the evaluation seeds' run")
+    if cache_dir is None:
+        return None, ""
+    try:
+        fingerprint = fingerprint_spec(spec)
+        parts = {
+            "agent": agent.identity,
+            "spec": fingerprint.spec_key,
+            "wrap": None if wrap is None else digest(wrap, "wrap"),
+            "evaluation": settings,
+        }
+    except (FingerprintError, AgentError) as e:
+        warnings.warn(f"specguard cache: agent {agent.name!r} evaluated, not cached: {e}", stacklevel=3)
+        return None, ""
+    if not fingerprint.reproducible:
+        return None, ""
+    return Cache(Path(cache_dir)), digest(parts, "evaluation")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -214,14 +266,16 @@ class AgentCheck:
 
     def __post_init__(self) -> None:
         where = f"AgentCheck({self.spec.label!r})" if isinstance(self.spec, Spec) else "AgentCheck"
-        _check_settings(where, self.spec, self.episodes, self.max_episodes, self.observation, self.seed)
+        agent_stages(where, self.spec, self.episodes, self.max_episodes)
+        check_choice(where, "observation", self.observation, AGENT_OBSERVATIONS)
+        check_natural(where, "seed", self.seed, "the evaluation seeds' run")
         if self.wrap is not None and not callable(self.wrap):
             raise InvalidSpec(where, f"expected wrap to be a function env -> env or None, got {shown(self.wrap)}")
         if self.algorithm is not None and not isinstance(self.algorithm, (str, type)):
             raise InvalidSpec(where, f"expected algorithm to be a name, a class or None, got {shown(self.algorithm)}")
 
-    def run(self) -> SpecResult:
-        """The agent judged against the spec: :func:`check_agent` with these settings."""
+    def run(self, *, cache_dir: str | Path | None = DEFAULT_CACHE_DIR) -> SpecResult:
+        """The agent judged against the spec: :func:`check_agent` with these settings (and ``cache_dir``)."""
         return check_agent(
             self.spec,
             self.agent,
@@ -231,21 +285,104 @@ class AgentCheck:
             wrap=self.wrap,
             seed=self.seed,
             algorithm=self.algorithm,
+            cache_dir=cache_dir,
         )
 
 
-def _agent_env(spec: Spec, observation: str, wrap: Callable[[Any], Any] | None) -> Any:
-    """The env the agent acts in: the baseline env (the initial env's observation) or the constructed env, wrapped
-    in ``wrap`` where given; its ``info`` reports the goals, read beneath any wrapper."""
-    import gymnasium as gym
+def agent_stages(where: str, spec: Spec, episodes: int | None, max_episodes: int | None) -> list[int]:
+    """The episodes evaluated after each stage of an agent's evaluation: ``episodes`` (default: the spec's
+    ``budget.eval_episodes``), doubled up to ``max_episodes`` (default: ``budget.max_eval_episodes``).
 
+    Raises:
+        InvalidSpec: ``spec`` is not a Spec, or the counts are out of range.
+    """
+    if not isinstance(spec, Spec):
+        raise InvalidSpec(where, f"expected a Spec, got {shown(spec)}", hint="check_agent(spec, agent)")
+    budget = spec.budget
+    first = check_count(where, "episodes", budget.eval_episodes if episodes is None else episodes)
+    assert budget.max_eval_episodes is not None
+    most_default = max(first, budget.max_eval_episodes)
+    most = check_count(where, "max_episodes", most_default if max_episodes is None else max_episodes)
+    if most < first:
+        raise InvalidSpec(where, f"expected max_episodes >= episodes, got {most} < {first}")
+    return evaluation_stages(first, most)
+
+
+def agent_episodes(
+    spec: Spec, agent: Agent, start: int, count: int, *, observation: str, wrap: Callable[[Any], Any] | None, seed: int
+) -> list[dict[str, int]]:
+    """Episodes ``start..start + count - 1`` of ``agent`` for seed ``seed``, as :func:`check_agent` plays them: each
+    episode's own counts, in order (for a paired comparison, beyond the episodes its verdicts needed)."""
+    where = f"agent_episodes({spec.label!r})"
+    env = agent_envs(spec, observation, wrap)()
+    outcomes: list[dict[str, int]] = []
+    try:
+        check_fits(agent, env.observation_space, env.action_space)
+        with _threads(agent):
+            _episodes(
+                where, agent, env, EVAL_SEED_BASE + seed * EVAL_SEED_STRIDE, start, count, None, None, None, outcomes
+            )
+    finally:
+        env.close()
+    return outcomes
+
+
+def _episodes(
+    where: str,
+    agent: Agent,
+    env: Any,
+    base: int,
+    start: int,
+    count: int,
+    *lists: Any,
+) -> dict[str, int]:
+    """Episodes ``start..start + count - 1`` of ``agent`` on env seeds from ``base``; an env's failure as an
+    EvaluationError."""
+    try:
+        return evaluate(agent, env, count, range(base + start, base + start + count), *lists)
+    except SpecError:
+        raise
+    except Exception as e:
+        raise EvaluationError(
+            f"{where}, evaluation episodes {start}..{start + count - 1} of agent {agent.name!r}: the "
+            f"environment raised {type(e).__name__}: {elide(str(e), MAX_SHOWN)}"
+        ) from e
+
+
+def spec_agent(spec: Spec, agent: Any, *, algorithm: str | type | None = None, batch: bool = False) -> Agent:
+    """``agent`` as an :class:`~specguard.agents.agent.Agent` acting as ``spec`` says (its ``deterministic``), taking
+    a batch of observations or one (``batch``): loaded by :func:`~specguard.agents.sources.load_agent` unless it is
+    one already."""
+    if not isinstance(agent, Agent):
+        return load_agent(agent, algorithm=algorithm, deterministic=spec.deterministic, batch=batch)
+    return agent if agent.batch == batch else agent.batched(batch)
+
+
+def agent_envs(spec: Spec, observation: str = "env", wrap: Callable[[Any], Any] | None = None) -> Callable[..., Any]:
+    """``make(*, starts=None)``: a new env the agent acts in, the baseline env (the initial env's observation) or the
+    constructed env, wrapped in ``wrap`` where given, in a start space's wrapper where ``starts`` is given
+    (:meth:`~specguard.construction.env.EnvFactory.__call__`); its ``info`` reports the goals, read beneath any
+    wrapper. One factory for all of them (its checks run once).
+
+    Raises:
+        AgentError: ``wrap`` raised, returned no ``gymnasium.Env``, or its env's reset gives no ``info['goals']``.
+    """
     if observation == "spec":
         factory = EnvFactory(spec.initial_env, spec.tree, observation=spec.observation)
     else:
         factory = EnvFactory(spec.initial_env, spec.tree, baseline=True)
-    env = factory()
-    if wrap is None:
-        return env
+
+    def make(*, starts: Any = None) -> Any:
+        env = factory(starts=starts)
+        return env if wrap is None else _wrapped(env, wrap)
+
+    return make
+
+
+def _wrapped(env: Any, wrap: Callable[[Any], Any]) -> Any:
+    """``wrap(env)``, checked: a ``gymnasium.Env`` whose reset still reports the goals."""
+    import gymnasium as gym
+
     name = function_text(wrap)
     try:
         wrapped = wrap(env)
@@ -266,6 +403,21 @@ def _agent_env(spec: Spec, observation: str, wrap: Callable[[Any], Any] | None) 
             hint="a wrapper must pass the info of the env it wraps on",
         )
     return wrapped
+
+
+def _other_env_kwargs(spec: Spec, agent: Agent) -> list[str]:
+    """A loud note (and warning) where the agent's own files say its env was made otherwise than the spec's."""
+    ours = spec.initial_env.make_kwargs
+    other = {k: v for k, v in agent.env_kwargs.items() if k != "render_mode" and (k not in ours or ours[k] != v)}
+    if not other:
+        return []
+    text = (
+        f"agent {agent.name!r} was trained on an env made with {other}, which the spec's initial env is not "
+        f"(its kwargs: {dict(ours)}): the verdicts are about the spec's env; give InitialEnv those kwargs to judge "
+        "the agent in the env it was trained in"
+    )
+    warnings.warn(text, SpecWarning, stacklevel=3)
+    return [text]
 
 
 def _never_failed(counts: Mapping[str, int], episodes: int, confidence: float) -> list[str]:

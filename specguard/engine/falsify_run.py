@@ -1,4 +1,4 @@
-"""Falsifying a spec's trained runs: the cached model as a batched policy, the spec's property and identity.
+"""Falsifying a spec's trained runs, or an agent trained elsewhere: a batched policy, the spec's property and identity.
 
 :func:`falsify_runs` falsifies the runs of a :class:`~specguard.engine.spec_result.SpecResult`, each as
 :func:`falsify_run` does: it takes run ``seed``'s model from the cache (no retraining),
@@ -9,6 +9,12 @@ the spec evaluates so) and searches a start space with
 root goal and every thresholded goal and safety rate at the end of an episode.
 Counterexamples are stored in a Hypothesis example database under a key made
 of the spec's identity (its fingerprint's ``spec_key``), the seed and the start space.
+
+:func:`falsify_agent` runs the same search on an agent trained elsewhere
+(:func:`specguard.agents.sources.load_agent`), in the env
+:func:`~specguard.engine.check_agent.check_agent` judges it in: the baseline env
+by default, whose episodes end as the initial env ends them. Its counterexamples are stored under the
+spec's identity, the agent's (:attr:`~specguard.agents.agent.Agent.identity`, what it sees) and the start space.
 """
 
 from __future__ import annotations
@@ -27,7 +33,15 @@ from specguard.spec.spec import Spec
 from specguard.starts.space import StartSpace
 from specguard.training.policy import one_torch_thread
 
-__all__ = ["batch_policy", "database_key", "falsify_run", "falsify_runs", "property_keys", "start_space"]
+__all__ = [
+    "batch_policy",
+    "database_key",
+    "falsify_agent",
+    "falsify_run",
+    "falsify_runs",
+    "property_keys",
+    "start_space",
+]
 
 
 def start_space(spec: Spec, starts: StartSpace | None = None) -> StartSpace:
@@ -50,9 +64,17 @@ def property_keys(spec: Spec) -> list[str]:
     return list(dict.fromkeys([spec.tree.name, *spec.thresholds]))
 
 
-def database_key(spec_key: str, seed: int, space: StartSpace) -> str:
-    """The key a counterexample of run ``seed`` over ``space`` is stored under."""
-    return hashlib.sha256(f"{spec_key}\n{seed}\n{space.describe()}".encode()).hexdigest()
+def database_key(spec_key: str, seed: int | None, space: StartSpace, *, agent: str = "") -> str:
+    """The key a counterexample of run ``seed`` over ``space`` is stored under; of an agent trained elsewhere
+    (``agent``: its identity and what it sees; ``seed`` is ``None``), under the agent instead.
+
+    Example:
+        >>> space = StartSpace({"x": (-1, 1)})
+        >>> database_key("k", 0, space) != database_key("k", None, space, agent="a1 env")
+        True
+    """
+    who = f"agent {agent}" if agent else str(seed)
+    return hashlib.sha256(f"{spec_key}\n{who}\n{space.describe()}".encode()).hexdigest()
 
 
 def batch_policy(model: Any, normalizer: Any, deterministic: bool) -> Callable[[np.ndarray], Any]:
@@ -153,6 +175,87 @@ def falsify_run(
     db = DirectoryBasedExampleDatabase(str(database)) if database is not None and spec_key else None
     key = database_key(spec_key, seed, space) if spec_key else ""
     label = f"{spec.label} seed {seed}"
+    with one_torch_thread():
+        return falsify(
+            runner,
+            examples=examples,
+            uniform=uniform,
+            seed=search_seed,
+            database=db,
+            key=key,
+            confidence=spec.confidence,
+            progress=(lambda line: progress(f"{label}: {line}")) if progress is not None else None,
+        )
+
+
+def falsify_agent(
+    spec: Spec,
+    agent: Any,
+    starts: StartSpace | None = None,
+    *,
+    examples: int = 200,
+    uniform: int = 100,
+    search_seed: int = 0,
+    database: str | Path | None = None,
+    progress: Callable[[str], None] | None = None,
+    observation: str = "env",
+    wrap: Callable[[Any], Any] | None = None,
+    algorithm: str | type | None = None,
+) -> Falsification:
+    """Search ``starts`` for a start from which ``agent``, trained elsewhere, misses ``spec`` (training nothing).
+
+    The agent acts in the env :func:`~specguard.engine.check_agent.check_agent` judges it in, each start's episode
+    ending as that env ends it: by default the initial env's own observation and episodes (a root goal that holds
+    until the end is missed by an episode the initial env terminates, docs/semantics.md).
+
+    Args:
+        spec: the spec; its property (:func:`property_keys`), ``confidence`` and ``deterministic`` apply.
+        agent: an :class:`~specguard.agents.agent.Agent`, or anything
+            :func:`~specguard.agents.sources.load_agent` takes; asked for a batch of observations at once (a callable
+            for one observation is asked row by row).
+        starts: the start space; ``None``: :func:`start_space`'s (the spec's own, else the env's).
+        database: the directory of the Hypothesis example database; ``None``: nothing stored or replayed.
+        observation, wrap, algorithm: what the agent sees and how it is loaded, as for ``check_agent``.
+        Others: as :func:`specguard.falsify.search.falsify`.
+
+    Raises:
+        AgentError: the agent cannot be loaded or raised; :class:`~specguard.error.AgentMismatch` before any
+            episode when its spaces do not fit the env's.
+        InvalidSpec: an argument is out of range.
+
+    Example:
+        >>> import specguard as sg
+        >>> cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+        >>> balance = sg.Always(sg.Goal("upright", theta=(-0.2, 0.2)), name="balance")
+        >>> spec = sg.Spec(cartpole, balance, budget=sg.Budget(timesteps=1))
+        >>> found = falsify_agent(spec, lambda obs: int(obs[2] > 0), sg.StartSpace({"theta": (-0.1, 0.1)}),
+        ...                       examples=4, uniform=0)
+        >>> found.found, found.counterexample.judgement.missed
+        (True, ('balance',))
+    """
+    from hypothesis.database import DirectoryBasedExampleDatabase
+
+    from specguard.agents.agent import check_fits
+    from specguard.cache.fingerprint import fingerprint_spec
+    from specguard.engine.check_agent import AGENT_OBSERVATIONS, agent_envs, spec_agent
+    from specguard.error import InvalidSpec
+    from specguard.utils.text import function_text, shown
+    from specguard.validation import check_choice
+
+    if not isinstance(spec, Spec):
+        raise InvalidSpec("falsify_agent", f"expected a Spec, got {shown(spec)}", hint="falsify_agent(spec, agent)")
+    where = f"falsify_agent({spec.label!r})"
+    check_choice(where, "observation", observation, AGENT_OBSERVATIONS)
+    acting = spec_agent(spec, agent, algorithm=algorithm, batch=True)
+    space = start_space(spec, starts)
+    runner = EpisodeRunner(agent_envs(spec, observation, wrap), acting, space, property_keys(spec))
+    check_fits(acting, runner.observation_space, runner.action_space)  # before any episode
+    db, key = None, ""
+    if database is not None:
+        seen = observation + (f" through {function_text(wrap)}" if wrap is not None else "")
+        key = database_key(fingerprint_spec(spec).spec_key, None, space, agent=f"{acting.identity} {seen}")
+        db = DirectoryBasedExampleDatabase(str(database))
+    label = f"{spec.label} agent {acting.name}"
     with one_torch_thread():
         return falsify(
             runner,

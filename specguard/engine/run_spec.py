@@ -19,6 +19,7 @@ Example:
 from __future__ import annotations
 
 import contextlib
+import os
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -79,6 +80,7 @@ def run_spec(
     progress: Progress | None = print_event,
     lock_timeout: float = 3600.0,
     executor: str | Executor = LOCAL,
+    tensorboard_log: str | os.PathLike[str] | None = None,
 ) -> SpecResult:
     """Train and judge ``spec`` within its budget.
 
@@ -100,6 +102,9 @@ def run_spec(
             at once), a Dask scheduler address (``"tcp://host:8786"``), or an
             :class:`~specguard.parallel.executors.Executor`. The cache stays on this
             machine either way: only missing seeds are submitted.
+        tensorboard_log: a folder every run trained writes TensorBoard logs to (SB3's curves and each goal's
+            success), one subfolder per spec and seed (:attr:`Spec.tensorboard_log <specguard.Spec>`); not part of
+            the cache key: a run found in the cache trains nothing and writes nothing.
 
     Returns:
         The runs, per-goal verdicts, errors by seed and which runs came from the cache.
@@ -108,6 +113,8 @@ def run_spec(
         SpecError: the spec is invalid (also when a worker finds it so, e.g.
             rejected hyperparameters), or cannot be fingerprinted for the cache.
     """
+    if tensorboard_log is not None:
+        spec = spec.as_run(tensorboard_log=tensorboard_log)
     return run_with(spec, RunOptions(workers, cache_dir, progress, lock_timeout, executor))
 
 

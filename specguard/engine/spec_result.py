@@ -122,6 +122,8 @@ class SpecResult:
         xfail: the goals the spec expects to miss, with the reasons (``Spec.xfail``).
         notes: the facts about the evaluation episodes that every door shows beside the
             verdicts, one line each (:func:`specguard.engine.judging.episode_notes`).
+        agent: the name of the agent judged, for a result of :func:`~specguard.engine.check_agent.check_agent` (one
+            run that trained nothing); ``None`` for a trained spec.
         trained: the spec as run, which with ``cache_dir`` reaches the runs' models
             (:func:`specguard.engine.trained.load_model`); neither is reported nor serialised.
     """
@@ -138,6 +140,7 @@ class SpecResult:
     undecided: str = DEFAULT_UNDECIDED
     xfail: dict[str, str] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    agent: str | None = None
     trained: Spec | None = field(default=None, repr=False, compare=False)
     cache_dir: Path | None = field(default=None, repr=False, compare=False)
 
@@ -212,6 +215,7 @@ class SpecResult:
             "undecided": self.undecided,
             "xfail": dict(self.xfail),
             "notes": list(self.notes),
+            "agent": self.agent,
         }
 
     @classmethod
@@ -246,6 +250,7 @@ class SpecResult:
             undecided=data.get("undecided", DEFAULT_UNDECIDED),
             xfail=dict(data.get("xfail", {})),
             notes=list(data.get("notes", [])),
+            agent=data.get("agent"),
             trained=trained,
             cache_dir=None if cache_dir is None else Path(cache_dir),
         )

@@ -48,16 +48,18 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from specguard.construction.env import features_space, stack_observations
+from specguard.construction.env import BaselineEnv, SpecEnv, features_space, stack_observations
 from specguard.construction.episode_policy import EpisodePolicy
+from specguard.error import InvalidSpec
 from specguard.extend import until_end
 from specguard.falsify.portfolio import Portfolio
 from specguard.falsify.robustness import Judgement, feature_scales, judge_end, own_states, reached_early
+from specguard.starts.setter import env_label
 from specguard.starts.space import START_OPTION, Starts, StartSpace, starts_of
-from specguard.stats.intervals import success_interval
+from specguard.stats.intervals import failure_upper_bound, success_interval
 from specguard.validation import check_count, check_flag, check_natural, check_open_fraction
 
-__all__ = ["EpisodeRunner", "Falsification", "Outcome", "falsify", "start_text"]
+__all__ = ["EpisodeRunner", "Falsification", "Outcome", "falsify", "judged_env", "start_text"]
 
 BISECTIONS = 16
 """Bisection steps per variable when a counterexample is moved to the failure region's boundary."""
@@ -110,7 +112,9 @@ class EpisodeRunner:
     Args:
         make_env: ``make_env(starts=space)`` builds the spec's env in the start space's wrapper (a ``SpecEnv``:
             it reports goals, safety and its evaluator), as :meth:`Spec.make_env
-            <specguard.spec.spec.Spec.make_env>` and :func:`~specguard.construction.env.make_env` do.
+            <specguard.spec.spec.Spec.make_env>` and :func:`~specguard.construction.env.make_env` do; or a
+            ``BaselineEnv`` (:func:`~specguard.construction.env.make_baseline_env`), its episodes the initial env's
+            own; either may be wrapped (an agent's observation wrappers), the goals read beneath.
         act: ``act(observations) -> actions``, a batch (rows) to a batch; an
             :class:`~specguard.construction.episode_policy.EpisodePolicy` is told when the batch's episodes start and
             which rows still run.
@@ -136,13 +140,15 @@ class EpisodeRunner:
         first = make_env(starts=space)
         self.starts: Starts = starts_of(first)
         self._envs: list[Any] = [first]
-        self.tree = first.tree
-        n = len(first.features)
-        box = features_space(first.observation_space)  # the features, with either kind of observation
-        self.scales = feature_scales(first.features, box.low[:n], box.high[:n])
+        judged = judged_env(first)
+        self.observation_space, self.action_space = first.observation_space, first.action_space
+        """What the policy reads and gives (the env's, outermost wrapper's)."""
+        self.tree = judged.tree
+        self.scales = feature_scales(judged.features, *_feature_bounds(judged))
         self.discrete = isinstance(first.action_space, gym.spaces.Discrete)
         self.max_steps = _time_limit(first)
-        self.reach = not until_end(self.tree)  # reaching the root goal ends the episode
+        # Reaching the root goal ends a constructed env's episode; a baseline's end where the initial env ends them.
+        self.reach = isinstance(judged, SpecEnv) and not until_end(self.tree)
         """The episode's step limit (``None``: the env has no ``TimeLimit``)."""
         self.episodes = 0
         """Episodes run so far."""
@@ -185,7 +191,7 @@ class EpisodeRunner:
     def _outcome(
         self, env: Any, start: dict[str, float], info: dict[str, Any], steps: int, terminated: bool
     ) -> Outcome:
-        ev = env.evaluator
+        ev = judged_env(env).evaluator
         s = ev.state
         judgement = judge_end(
             self.tree, self.keys, s, own_states(ev.slots, ev.own_state), info["goals"], info["safe"], self.scales
@@ -210,6 +216,7 @@ class Falsification:
         from_uniform: the guided search found none; the counterexample is the first failing uniform draw, shrunk.
         uniform_failures, uniform_episodes: the uniform draws, counted apart from the guided ones.
         interval: the failure rate's interval over the uniform draws.
+        confidence: the interval's confidence, and the bound's where no uniform draw failed.
         key: the database key the counterexample is stored under.
     """
 
@@ -223,6 +230,7 @@ class Falsification:
     uniform_failures: int = 0
     uniform_episodes: int = 0
     interval: tuple[float, float] = (0.0, 1.0)
+    confidence: float = 0.95
     key: str = ""
     notes: list[str] = field(default_factory=list)
 
@@ -247,9 +255,24 @@ class Falsification:
 
     @property
     def rate_text(self) -> str:
-        """The failure rate over the start space with its draws and interval (``""``: no uniform draws)."""
+        """The failure rate over the start space with its draws and interval (``""``: no uniform draws); where none
+        failed, the most it can be: the one-sided exact binomial bound, never a bare 0%.
+
+        Example:
+            >>> import gymnasium as gym
+            >>> from specguard.starts.space import StartSpace
+            >>> starts = StartSpace({"x": (-0.05, 0.05)}).resolve(gym.make("CartPole-v1"))
+            >>> Falsification(starts, uniform_episodes=100).rate_text
+            'at most 3.0% at 95% (none in 100 uniform draws; one-sided exact binomial bound)'
+        """
         if not self.uniform_episodes:
             return ""
+        if not self.uniform_failures:
+            bound = failure_upper_bound(self.uniform_episodes, self.confidence)
+            return (
+                f"at most {bound:.1%} at {self.confidence:.0%} (none in {self.uniform_episodes} uniform draws; "
+                "one-sided exact binomial bound)"
+            )
         lo, hi = self.interval
         return (
             f"{self.failure_rate:.1%} ({self.uniform_failures}/{self.uniform_episodes} uniform draws), "
@@ -290,6 +313,35 @@ class Falsification:
 def start_text(start: Mapping[str, float]) -> str:
     """A start as reports print it: ``x=0.502075, v=0`` (6 significant digits; JSON keeps it exact)."""
     return ", ".join(f"{k}={v:.6g}" for k, v in start.items())
+
+
+def judged_env(env: Any) -> SpecEnv | BaselineEnv:
+    """The env beneath ``env``'s wrappers that judges the goals (a ``SpecEnv`` or a ``BaselineEnv``), or ``env``.
+
+    Raises:
+        InvalidSpec: none of ``env`` and its wrappers reports goals.
+    """
+    inner = env
+    while not isinstance(inner, (SpecEnv, BaselineEnv)):
+        if not isinstance(inner, gym.Wrapper):
+            raise InvalidSpec(
+                env_label(env),
+                f"no SpecEnv or BaselineEnv among the env's wrappers ({type(env).__name__} over "
+                f"{type(env.unwrapped).__name__}): nothing judges its goals",
+                hint="make it with make_env or make_baseline_env",
+            )
+        inner = inner.env
+    return inner
+
+
+def _feature_bounds(env: SpecEnv | BaselineEnv) -> tuple[np.ndarray, np.ndarray]:
+    """The bounds of ``env``'s features: a ``SpecEnv`` shows them in its observation (either kind), a baseline
+    keeps them aside."""
+    if isinstance(env, BaselineEnv):
+        return env.feature_low, env.feature_high
+    n = len(env.features)
+    box = features_space(env.observation_space)
+    return box.low[:n], box.high[:n]
 
 
 def _time_limit(env: Any) -> int | None:
@@ -436,7 +488,7 @@ def falsify(
     shrink = check_flag(where, "shrink", shrink)
     say = progress or (lambda line: None)
     starts = runner.starts
-    result = Falsification(starts=starts, key=key)
+    result = Falsification(starts=starts, key=key, confidence=confidence)
     say(starts.note)
     start_count = runner.episodes
 

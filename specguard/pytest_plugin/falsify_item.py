@@ -1,4 +1,6 @@
-"""The ``[falsify]`` item of a goal spec: the falsifier on the session's trained runs, and its pytest outcome.
+"""The ``[falsify]`` item of a goal spec: the falsifier on the session's trained runs (or on the agent of an
+:class:`~specguard.engine.check_agent.AgentCheck`, :func:`specguard.engine.falsify_run.falsify_agent`), and its
+pytest outcome.
 
 The spec is trained (or read back) once per session, as for its goal items; the
 falsifier then searches each run's start space on the cached model
@@ -14,11 +16,12 @@ from __future__ import annotations
 
 import json
 import warnings
+from pathlib import Path
 from typing import Any
 
 import pytest
 
-from specguard.pytest_plugin.items import GoalMissed, group_of, one_line_errors, spec_of, where
+from specguard.pytest_plugin.items import GoalMissed, group_of, one_line_errors, spec_of
 from specguard.pytest_plugin.session import Session, run, scaled, terminal_lines
 
 __all__ = ["COUNTEREXAMPLES", "run_falsify_item"]
@@ -29,23 +32,36 @@ COUNTEREXAMPLES = "specguard.counterexamples"
 
 def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: Any) -> None:
     """Train (or read back) the item's spec, falsify every run, and pass, fail or xfail the item."""
-    from specguard.engine.falsify_run import falsify_runs, start_space
+    from specguard.engine.falsify_run import falsify_agent, falsify_runs, start_space
     from specguard.falsify.assertion import falsify_verdict, verdict_lines
     from specguard.stats.verdicts import UNDECIDED_AS, RunVerdict, Word
 
     with one_line_errors(item):
         spec, _, agent = spec_of(item, expect)
-        if agent is not None:
-            pytest.fail(
-                f"{where(item)}: falsify= is not supported yet for an AgentCheck (an agent trained elsewhere); "
-                "falsify a spec that specguard trains",
-                pytrace=False,
-            )
-        trained = scaled(state, spec)
-        space = start_space(trained, check.starts)
-        space.resolve(trained.initial_env.make())  # names and bounds checked before anything trains
-        result = run(state, trained, item)
-        found = falsify_runs(result, space, **check.kwargs(), progress=terminal_lines(item.config))
+        if agent is not None:  # an agent trained elsewhere: its one policy, in the env check_agent judges it in
+            trained = spec.as_run(undecided=state.options.undecided)
+            space = start_space(trained, check.starts)
+            cache = state.options.cache_dir
+            found = {
+                agent.seed: falsify_agent(
+                    trained,
+                    agent.agent,
+                    space,
+                    **check.kwargs(),
+                    database=None if cache is None else Path(cache) / "falsify",
+                    progress=terminal_lines(item.config),
+                    observation=agent.observation,
+                    wrap=agent.wrap,
+                    algorithm=agent.algorithm,
+                )
+            }
+            result = None
+        else:
+            trained = scaled(state, spec)
+            space = start_space(trained, check.starts)
+            space.resolve(trained.initial_env.make())  # names and bounds checked before anything trains
+            result = run(state, trained, item)
+            found = falsify_runs(result, space, **check.kwargs(), progress=terminal_lines(item.config))
     verdicts = {seed: falsify_verdict(f, check.max_rate, trained.confidence) for seed, f in found.items()}
     for seed, falsification in sorted(found.items()):
         item.config.hook.pytest_goal_spec_falsification(
@@ -53,7 +69,7 @@ def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: 
         )
     lines = verdict_lines(found, verdicts, check.max_rate)
     gifs: dict[int, Any] = {}
-    if state.options.report_dir is not None:  # the counterexamples' episodes, replayed as GIFs
+    if state.options.report_dir is not None and result is not None:  # the counterexamples' episodes, as GIFs
         from specguard.report.gifs import counterexample_gifs
 
         gifs = counterexample_gifs(state.options.report_dir, group_of(item), result, found, space)

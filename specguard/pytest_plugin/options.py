@@ -40,6 +40,7 @@ class Options:
     compare_seeds: int = DEFAULT_COMPARE_SEEDS
     plan: bool = False
     progress_every: int = PROGRESS_EVERY_S  # in a log: seconds between progress lines (0: each seed's last only)
+    tensorboard_log: str | None = None  # None: each spec's own Spec.tensorboard_log
 
 
 # (option, ini name, ini type, default, help)
@@ -74,6 +75,14 @@ _SETTINGS: list[tuple[str, str, str, Any, str]] = [
         "",
         "what a goal whose runs stayed undecided counts as: fail, xfail or pass (with a warning); "
         "default: the spec's own Spec.undecided, fail unless set",
+    ),
+    (
+        "--goal-specs-tensorboard-log",
+        "goal_specs_tensorboard_log",
+        "string",
+        "",
+        "write TensorBoard logs of every training run to this directory (SB3's curves and each goal's success), "
+        "one subfolder per spec and seed; runs found in the cache train nothing and write nothing",
     ),
     (
         "--goal-specs-report",
@@ -228,6 +237,14 @@ def parse_options(config: pytest.Config) -> Options:
     except ValueError as e:
         raise pytest.UsageError(f"--goal-specs-progress-every: {e}") from None
     report = get("--goal-specs-report")
+    tensorboard_log = get("--goal-specs-tensorboard-log") or None
+    if tensorboard_log is not None:
+        from specguard.spec.spec import check_tensorboard_log
+
+        try:
+            check_tensorboard_log("--goal-specs-tensorboard-log", tensorboard_log)
+        except InvalidSpec as e:
+            raise pytest.UsageError(str(e).splitlines()[0]) from None
     return Options(
         enabled=bool(config.getoption("goal_specs") or config.getini("goal_specs")),
         budget_scale=scale,
@@ -243,6 +260,7 @@ def parse_options(config: pytest.Config) -> Options:
         compare_seeds=compare_seeds,
         plan=bool(config.getoption("goal_specs_plan")),
         progress_every=progress_every,
+        tensorboard_log=tensorboard_log,
     )
 
 

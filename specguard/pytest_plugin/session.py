@@ -72,7 +72,12 @@ def run_options(state: Session) -> RunOptions:
 def scaled(state: Session, spec: Spec) -> Spec:
     """The spec as this session trains and judges it: the session's options applied, the spec's own where unset."""
     options = state.options
-    return spec.as_run(options.budget_scale, checkpoints=options.checkpoints, undecided=options.undecided)
+    return spec.as_run(
+        options.budget_scale,
+        checkpoints=options.checkpoints,
+        undecided=options.undecided,
+        tensorboard_log=options.tensorboard_log,
+    )
 
 
 def terminal_progress(config: pytest.Config, every: float = 60.0) -> Callable[[Any], None]:
@@ -156,7 +161,7 @@ def judge_agent(state: Session, check: AgentCheck, item: pytest.Item, group: str
     trained spec's (``pytest_goal_spec_result``)."""
     check = dataclasses.replace(check, spec=check.spec.as_run(undecided=state.options.undecided))
     if group not in state.agents:
-        result = state.agents[group] = check.run()
+        result = state.agents[group] = check.run(cache_dir=state.options.cache_dir)
         item.config.hook.pytest_goal_spec_result(item=item, spec=check.spec, result=result)
     return check, state.agents[group]
 

@@ -29,7 +29,8 @@ __all__ = ["table"]
 
 
 def table(result: SpecResult) -> str:
-    """A per-goal table of ``result``: pooled success with interval, threshold, runs met, verdict word.
+    """A per-goal table of ``result``: pooled success with interval, threshold, runs met, verdict word (no runs met
+    for an agent's result: its episodes are one run that trained nothing).
 
     Goals first, then the safety rates, labelled ``path:name (safe)``; a measured goal without a
     threshold shows ``-`` for what it lacks. Under the table: the result's notes (the episodes that
@@ -38,8 +39,16 @@ def table(result: SpecResult) -> str:
     """
     paths = [p for r in result.runs[:1] for p in r.successes] or list(result.goals)
     paths.sort(key=lambda p: kind(p) != GOAL)  # stable: each kind keeps its order
-    header = ("goal", "success", f"{result.confidence:.0%} interval", "threshold", "runs met", "verdict")
-    rows = []
+    header: tuple[str, ...] = (
+        "goal",
+        "success",
+        f"{result.confidence:.0%} interval",
+        "threshold",
+        "runs met",
+        "verdict",
+    )
+    agent = result.agent is not None  # one agent's episodes: no runs to count
+    rows: list[tuple[str, ...]] = []
     for p in paths:
         g = result.goals.get(p)
         k, n = result.success(p) if result.runs else (g.successes, g.episodes) if g is not None else (0, 0)
@@ -48,6 +57,9 @@ def table(result: SpecResult) -> str:
         met = "-" if g is None else f"{g.runs.count(RunVerdict.MET)}/{len(g.runs)} (need {g.required})"
         threshold = "-" if g is None else f">= {g.threshold:g}"
         rows.append((label(p), rate, iv, threshold, met, "-" if g is None else str(result.word(p))))
+    if agent:
+        header = header[:4] + header[5:]
+        rows = [row[:4] + row[5:] for row in rows]
     lines = render_table(header, rows) + result.notes
     for run in result.runs:
         if run.weights:

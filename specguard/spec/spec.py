@@ -22,7 +22,9 @@ Example:
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+import importlib.util
+import os
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from numbers import Real
 from typing import Any, cast
@@ -41,7 +43,39 @@ from specguard.tree.nodes import Node
 from specguard.utils.text import shown
 from specguard.validation import check_choice, check_count, check_open_fraction, is_finite
 
-__all__ = ["Spec", "check_spec"]
+__all__ = ["Spec", "check_spec", "check_tensorboard_log"]
+
+
+def _checked_callbacks(where: str, callbacks: object) -> tuple[Callable[[], Any], ...]:
+    """The spec's callback factories as a tuple, each callable (a class, a partial, a function)."""
+    if isinstance(callbacks, (str, bytes)) or not isinstance(callbacks, Sequence):
+        raise InvalidSpec(where, f"expected a list of callback factories, got {shown(callbacks)}")
+    for i, factory in enumerate(callbacks):
+        if not callable(factory):
+            raise InvalidSpec(
+                f"{where}[{i}]",
+                f"expected a callable returning an SB3 BaseCallback (its class, a functools.partial), got "
+                f"{shown(factory)}",
+                hint="pass the class, not an instance: callbacks=[MyCallback] or [functools.partial(MyCallback, n=5)]",
+            )
+    return tuple(callbacks)
+
+
+def check_tensorboard_log(where: str, folder: object) -> str:
+    """A TensorBoard folder option: a path, with the ``tensorboard`` package installed to write it.
+
+    Raises:
+        InvalidSpec: not a path, or ``tensorboard`` is not installed.
+    """
+    if not isinstance(folder, (str, os.PathLike)) or not os.fspath(folder):
+        raise InvalidSpec(where, f"expected tensorboard_log to be a folder, got {shown(folder)}")
+    if importlib.util.find_spec("tensorboard") is None:
+        raise InvalidSpec(
+            where,
+            f"tensorboard_log={os.fspath(folder)!r} needs the tensorboard package, which is not installed",
+            hint="pip install tensorboard (or specguard's tensorboard extra)",
+        )
+    return str(os.fspath(folder))
 
 
 @dataclass(frozen=True)
@@ -107,6 +141,16 @@ class Spec:
             ``Box``) when the env is built.
             ``normalize=True`` normalizes the ``"spec"`` part only. Part of a run's key only
             when it is not the default.
+        callbacks: the user's own SB3 callbacks, as factories: each a callable (a ``BaseCallback`` subclass, a
+            ``functools.partial`` of one, a function) that returns a new ``BaseCallback``, called in every
+            training process, once per run, and composed after specguard's own through SB3's ``CallbackList``.
+            Part of the spec's identity (a callback may change training, as a curriculum does): a changed callback
+            retrains. One that raises fails its seed in one line naming it.
+        tensorboard_log: a TensorBoard folder the runs write to, as SB3's ``tensorboard_log``: SB3's own curves
+            and every goal's success and safety rate (``specguard/goal/<path>``, ``specguard/safe/<path>/<name>``;
+            :class:`~specguard.training.callback.LogGoals`), one subfolder per spec and seed
+            (``<label>/seed_<seed>_<n>``). A run option (:meth:`as_run`), not part of the spec's identity: a run
+            found in the cache trained nothing, and writes nothing.
     """
 
     initial_env: InitialEnv
@@ -127,6 +171,8 @@ class Spec:
     starts: StartSpace | None = None
     policy: str | type | None = None
     observation: str = "features"
+    callbacks: Sequence[Callable[[], Any]] = ()
+    tensorboard_log: str | None = None
 
     def __post_init__(self) -> None:
         label = f"Spec {self.label!r}"
@@ -161,6 +207,9 @@ class Spec:
         object.__setattr__(self, "expect", self._resolve_thresholds(label))
         object.__setattr__(self, "xfail", self._resolve_xfail(label))
         object.__setattr__(self, "starts", as_start_space(f"{label}.starts", self.starts))
+        object.__setattr__(self, "callbacks", _checked_callbacks(f"{label}.callbacks", self.callbacks))
+        if self.tensorboard_log is not None:
+            object.__setattr__(self, "tensorboard_log", check_tensorboard_log(label, self.tensorboard_log))
 
     @property
     def label(self) -> str:
@@ -202,18 +251,26 @@ class Spec:
         return dataclasses.replace(self, budget=self.budget.scaled(factor, checkpoints=checkpoints))
 
     def as_run(
-        self, budget_scale: float = 1.0, *, checkpoints: int | None = None, undecided: str | None = None
+        self,
+        budget_scale: float = 1.0,
+        *,
+        checkpoints: int | None = None,
+        undecided: str | None = None,
+        tensorboard_log: str | os.PathLike[str] | None = None,
     ) -> Spec:
         """This spec as a door (``specguard run``, ``pytest --goal-specs``) runs it, with the door's options.
 
-        ``budget_scale`` and ``checkpoints`` as for :meth:`scaled`; ``undecided``,
-        if given, replaces the spec's own. ``None`` keeps the spec's own, so
+        ``budget_scale`` and ``checkpoints`` as for :meth:`scaled`; ``undecided`` and ``tensorboard_log``,
+        if given, replace the spec's own. ``None`` keeps the spec's own, so
         that every door judges a spec the same way unless told otherwise.
         """
         spec = self.scaled(budget_scale, checkpoints=checkpoints)
-        if undecided is None or undecided == spec.undecided:
-            return spec
-        return dataclasses.replace(spec, undecided=undecided)
+        changes: dict[str, Any] = {}
+        if undecided is not None and undecided != spec.undecided:
+            changes["undecided"] = undecided
+        if tensorboard_log is not None and os.fspath(tensorboard_log) != spec.tensorboard_log:
+            changes["tensorboard_log"] = os.fspath(tensorboard_log)
+        return dataclasses.replace(spec, **changes) if changes else spec
 
     @property
     def verdict_confidence(self) -> float:

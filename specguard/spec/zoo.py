@@ -27,6 +27,7 @@ from __future__ import annotations
 import ast
 import difflib
 import functools
+import importlib
 import importlib.util
 import math
 import warnings
@@ -69,7 +70,7 @@ ZOO_FILES: dict[str, str] = {
 SCHEDULED = ("learning_rate", "clip_range", "clip_range_vf", "delta_std")
 """The hyperparameters whose ``"lin_<x>"`` values rl-zoo3 turns into linear schedules (as it does, and no others)."""
 
-SPEC_FIELDS = ("algorithm", "policy", "hyperparameters", "n_envs", "normalize", "observation")
+SPEC_FIELDS = ("algorithm", "policy", "hyperparameters", "n_envs", "normalize", "observation", "callbacks")
 """The :class:`~specguard.spec.spec.Spec` keyword arguments a :class:`ZooSettings` unpacks into."""
 
 _HINT = "pip install 'specguard[zoo]'"
@@ -79,7 +80,6 @@ _NOT_TAKEN = {
     "env_wrapper": "a wrapper around the env; a spec trains on its constructed env: wrap the initial env yourself",
     "vec_env_wrapper": "a wrapper around the vectorized env; specguard builds the training envs itself",
     "frame_stack": "VecFrameStack around the training envs; specguard builds the training envs itself",
-    "callback": "training callbacks; specguard's training loop sets its own",
     "env_kwargs": "the env's make kwargs: give them to sg.InitialEnv(env_id, ..., **kwargs)",
     "eval_env_kwargs": "the evaluation env's make kwargs; a spec evaluates on its constructed env",
     "monitor_kwargs": "Monitor's options; specguard records episodes itself",
@@ -115,6 +115,10 @@ class ZooSettings(Mapping[str, Any]):
 
     As a mapping it holds exactly the :class:`~specguard.spec.spec.Spec` keyword arguments ``algorithm``, ``policy``,
     ``hyperparameters``, ``n_envs``, ``normalize`` and ``observation``; override one with ``{**settings, "n_envs": 1}``.
+    ``callbacks`` are the entry's ``callback`` classes as the spec's callback factories (a class, or a
+    ``functools.partial`` with the entry's keyword arguments), as rl-zoo3's ``get_callback_list`` makes them
+    (imported where the settings are read, and again in each training process: one of ``rl_zoo3.callbacks``
+    imports rl_zoo3, which patches Gymnasium's ``TimeLimit`` in that process, as it does wherever rl-zoo3 trains).
     ``observation`` is ``"features+env"`` where the zoo's policy takes a ``Dict`` (``MultiInputPolicy``: the zoo's env
     gave one), so the agent sees the env's own observation beside the spec's features; else ``"features"``.
 
@@ -133,6 +137,7 @@ class ZooSettings(Mapping[str, Any]):
     normalize: bool
     timesteps: int
     observation: str = "features"
+    callbacks: tuple[Any, ...] = ()
     not_taken: dict[str, str] = field(default_factory=dict)
     source: str = ""
 
@@ -435,6 +440,36 @@ def _normalize(value: Any, gamma: Any, where: str, not_taken: dict[str, str]) ->
     return True
 
 
+def _callbacks(where: str, value: Any, not_taken: dict[str, str]) -> tuple[Any, ...]:
+    """The entry's ``callback`` (a dotted class name, ``{name: kwargs}``, or a list of them, as rl-zoo3's
+    ``get_callback_list`` reads it) as callback factories; each one that cannot be taken is named in ``not_taken``."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    if value is None:
+        return ()
+    factories = []
+    for i, item in enumerate(value if isinstance(value, list) else [value]):
+        key = "callback" if not isinstance(value, list) else f"callback[{i}]"
+        name: Any = item
+        kwargs: Any = {}
+        if isinstance(item, dict) and len(item) == 1:
+            name, kwargs = next(iter(item.items()))
+        if not isinstance(name, str) or "." not in name or not isinstance(kwargs, dict):
+            not_taken[key] = f"{value_text(item)}: expected a class's dotted name, or {{name: keyword arguments}}"
+            continue
+        module, _, attribute = name.rpartition(".")
+        try:
+            found = getattr(importlib.import_module(module), attribute)
+        except (ImportError, AttributeError) as e:
+            not_taken[key] = f"{value_text(item)}: cannot import it ({type(e).__name__}: {elide(str(e), MAX_VALUE)})"
+            continue
+        if not (isinstance(found, type) and issubclass(found, BaseCallback)):
+            not_taken[key] = f"{value_text(item)}: not a stable_baselines3 BaseCallback class"
+            continue
+        factories.append(functools.partial(found, **kwargs) if kwargs else found)
+    return tuple(factories)
+
+
 def _map(where: str, algorithm: str, entry: dict[str, Any]) -> tuple[dict[str, Any], dict[str, str]]:
     """The entry's spec fields and what is not taken (rl-zoo3's ``_preprocess_hyperparams``, step by step)."""
     not_taken: dict[str, str] = {}
@@ -448,6 +483,7 @@ def _map(where: str, algorithm: str, entry: dict[str, Any]) -> tuple[dict[str, A
         "policy": entry.pop("policy", None),
         "normalize": _normalize(entry.pop("normalize", False), entry.get("gamma"), where, not_taken),
     }
+    fields["callbacks"] = _callbacks(where, entry.pop("callback", None), not_taken)
     for key in SCHEDULED:
         if key in entry:
             entry[key] = _schedule(key, entry[key], where)
@@ -483,7 +519,9 @@ def zoo_settings(algorithm: str | type, env_id: str, *, file: str | Path | None 
         zoo = sg.zoo_settings("PPO", "CartPole-v1")
         spec = sg.Spec(initial_env, tree, budget=sg.Budget(timesteps=zoo.timesteps), **zoo)
 
-    Taken: ``policy``, ``n_envs``, ``normalize`` (``True``, or VecNormalize's options: see below),
+    Taken: ``callback`` (its classes, with their keyword arguments, as :attr:`ZooSettings.callbacks`; one that cannot
+    be imported, or is no SB3 callback, is named below), ``policy``, ``n_envs``,
+    ``normalize`` (``True``, or VecNormalize's options: see below),
     ``n_timesteps`` (as :attr:`ZooSettings.timesteps`), and every key the algorithm's constructor takes as a
     hyperparameter, as rl-zoo3 preprocesses it: ``"lin_<x>"`` of ``learning_rate``, ``clip_range``,
     ``clip_range_vf`` and ``delta_std`` as a :class:`LinearSchedule`, a ``train_freq`` list as a tuple,
@@ -491,7 +529,7 @@ def zoo_settings(algorithm: str | type, env_id: str, *, file: str | Path | None 
     from ``torch.nn``, and ``RMSpropTFLike``; anything else is refused).
 
     Not taken, each named in one :class:`~specguard.error.SpecWarning` and in :attr:`ZooSettings.not_taken`:
-    the keys rl-zoo3 reads itself (``env_wrapper``, ``vec_env_wrapper``, ``frame_stack``, ``callback``,
+    the keys rl-zoo3 reads itself (``env_wrapper``, ``vec_env_wrapper``, ``frame_stack``,
     ``env_kwargs``, ``monitor_kwargs``, ``noise_type`` and ``noise_std``, ``replay_buffer_class`` and
     ``replay_buffer_kwargs``), any other key the constructor does not take, and VecNormalize options other than its
     defaults: rl-zoo3 discounts normalized rewards by the algorithm's ``gamma`` (a spec's ``normalize=True`` by
@@ -546,6 +584,7 @@ def zoo_settings(algorithm: str | type, env_id: str, *, file: str | Path | None 
         normalize=fields["normalize"],
         timesteps=int(timesteps),
         observation="features+env" if dict_observation else "features",
+        callbacks=fields["callbacks"],
         not_taken=not_taken,
         source=source,
     )

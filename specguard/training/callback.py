@@ -13,7 +13,11 @@ At every step, in this order:
 * :class:`StopTrainingOnMetCheckpoint` evaluates the policy at each interim
   checkpoint, after that step's point, and stops training once every
   threshold is met;
-* :class:`StopTrainingOnWallClock` stops training at the budget's wall-clock cap.
+* :class:`StopTrainingOnWallClock` stops training at the budget's wall-clock cap;
+* :class:`LogGoals` records each goal's success and each constraint's safety through SB3's logger (the logs
+  users already read: stdout, CSV, TensorBoard), over the training episodes of each rollout and at each evaluation;
+* the user's own callbacks (``Spec(callbacks=...)``), each behind :class:`UserCallback`, which names it when it
+  raises.
 
 They are composed as SB3 composes its own (``CallbackList``,
 ``StopTrainingOnMaxEpisodes``), and each may be tested alone with a model that
@@ -30,8 +34,10 @@ from typing import TYPE_CHECKING, Any
 
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
-from specguard.training.curve import root_success
+from specguard.error import SpecError, TrainingError
+from specguard.training.curve import count_episode, root_success
 from specguard.training.progress import encode_update
+from specguard.utils.text import MAX_SHOWN, elide, function_text
 
 if TYPE_CHECKING:
     from specguard.parallel.protocol import Report
@@ -42,11 +48,14 @@ __all__ = [
     "HEARTBEAT_S",
     "TICKS",
     "AdaptWeights",
+    "LogGoals",
     "Look",
     "RecordGoalCurve",
     "ReportProgress",
     "StopTrainingOnMetCheckpoint",
     "StopTrainingOnWallClock",
+    "UserCallback",
+    "log_key",
     "training_callbacks",
 ]
 
@@ -213,6 +222,107 @@ class StopTrainingOnWallClock(BaseCallback):  # type: ignore[misc]
         return not self.hit_wall_clock
 
 
+def log_key(key: str, *, evaluation: bool = False) -> str:
+    """The logger's name of a goal (by path) or a safety rate (``path:name``): ``specguard/goal/<path>``,
+    ``specguard/safe/<path>/<name>``; under ``specguard/eval/`` for an evaluation's.
+
+    Example:
+        >>> log_key("balance/upright"), log_key("balance:edges", evaluation=True)
+        ('specguard/goal/balance/upright', 'specguard/eval/safe/balance/edges')
+    """
+    path, safety, name = key.partition(":")
+    head = "specguard/eval" if evaluation else "specguard"
+    return f"{head}/safe/{path}/{name}" if safety else f"{head}/goal/{path}"
+
+
+class LogGoals(BaseCallback):  # type: ignore[misc]
+    """Records every goal's success and every safety rate through the model's SB3 logger.
+
+    At each rollout's end, the rates over the training episodes finished during it (:func:`log_key`); at each
+    evaluation (:meth:`evaluated`: a checkpoint's look, the final evaluation), the evaluation's rates under
+    ``specguard/eval/``. SB3 writes them with its own records, in the formats its
+    logger has (``tensorboard_log``: TensorBoard; ``stable_baselines3.common.logger.configure``: CSV, JSON, ...).
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.counts: dict[str, int] = {}
+        self.episodes = 0
+
+    def _on_step(self) -> bool:
+        for info in _finished(self.locals):
+            self.episodes += 1
+            count_episode(self.counts, info)
+        return True
+
+    def _on_rollout_end(self) -> None:
+        if self.episodes:
+            for key, count in self.counts.items():
+                self.logger.record(log_key(key), count / self.episodes)
+        self.counts, self.episodes = {}, 0
+
+    def evaluated(self, step: int, counts: Mapping[str, int], episodes: int, *, write: bool = False) -> None:
+        """Record an evaluation of ``episodes`` episodes at training step ``step``.
+
+        SB3 writes it with its next records (a checkpoint's, while training: writing it at once would move SB3's
+        own pending records to this step); ``write=True`` writes it now, at ``step`` (the final evaluation, after
+        training, when SB3 writes nothing more).
+        """
+        for key, count in counts.items():
+            self.logger.record(log_key(key, evaluation=True), count / episodes)
+        self.logger.record("specguard/eval/episodes", episodes)
+        if write:
+            self.logger.dump(step)
+
+
+class UserCallback(BaseCallback):  # type: ignore[misc]
+    """A user's callback (``Spec(callbacks=...)``) among specguard's: it acts as it would alone, and an exception
+    it raises fails the run in one line naming it (a :class:`~specguard.error.TrainingError`), not as the env's.
+
+    Args:
+        callback: the user's ``BaseCallback``.
+        label: the run, as messages name it (``Spec 'x', seed 0``).
+    """
+
+    def __init__(self, callback: BaseCallback, label: str) -> None:
+        super().__init__()
+        self.callback = callback
+        self.label = label
+
+    def _guard(self, hook: str, call: Callable[[], Any]) -> Any:
+        try:
+            return call()
+        except SpecError:
+            raise
+        except Exception as e:
+            name = function_text(type(self.callback))
+            raise TrainingError(
+                f"{self.label}, callback {name}, in {hook} at step {self.num_timesteps}: it raised "
+                f"{type(e).__name__}: {elide(str(e), MAX_SHOWN)}"
+            ) from e
+
+    def _init_callback(self) -> None:
+        self._guard("init_callback", lambda: self.callback.init_callback(self.model))
+
+    def _on_training_start(self) -> None:
+        self._guard("on_training_start", lambda: self.callback.on_training_start(self.locals, self.globals))
+
+    def _on_rollout_start(self) -> None:
+        self._guard("on_rollout_start", self.callback.on_rollout_start)
+
+    def _on_step(self) -> bool:
+        return bool(self._guard("on_step", self.callback.on_step))
+
+    def _on_rollout_end(self) -> None:
+        self._guard("on_rollout_end", self.callback.on_rollout_end)
+
+    def _on_training_end(self) -> None:
+        self._guard("on_training_end", self.callback.on_training_end)
+
+    def update_child_locals(self, locals_: dict[str, Any]) -> None:
+        self.callback.update_locals(locals_)
+
+
 def training_callbacks(
     curve: GoalCurve,
     *,
@@ -222,6 +332,8 @@ def training_callbacks(
     adapter: WeightAdapter | None = None,
     stop_on_checkpoint: StopTrainingOnMetCheckpoint | None = None,
     stop_on_wall_clock: StopTrainingOnWallClock | None = None,
+    log: LogGoals | None = None,
+    user: Sequence[UserCallback] = (),
 ) -> CallbackList:
     """The callbacks of a training run, in the order they act at each step (the module's list).
 
@@ -238,6 +350,8 @@ def training_callbacks(
         adapter: the run's weight adapter (``weights="auto"``), or ``None`` (no :class:`AdaptWeights`).
         stop_on_checkpoint: the interim checkpoints' looks, or ``None``.
         stop_on_wall_clock: the wall-clock cap, or ``None``.
+        log: the logger's per-goal records, or ``None``.
+        user: the user's callbacks, last, in the spec's order.
     """
     checkpoints = () if stop_on_checkpoint is None else stop_on_checkpoint.checkpoints
     callbacks: list[BaseCallback] = [RecordGoalCurve(curve, every, checkpoints)]
@@ -246,4 +360,7 @@ def training_callbacks(
     if report is not None:
         callbacks.append(ReportProgress(curve, report, total))
     callbacks.extend(stop for stop in (stop_on_checkpoint, stop_on_wall_clock) if stop is not None)
+    if log is not None:
+        callbacks.append(log)
+    callbacks.extend(user)
     return CallbackList(callbacks)

@@ -37,6 +37,7 @@ from specguard.training.curve import GoalCurve, count_episode
 from specguard.training.policy import policy as policy_of
 from specguard.training.progress import ProgressEvent, decode_update
 from specguard.training.result import RunResult
+from specguard.utils.text import MAX_SHOWN, elide, function_text, shown
 
 __all__ = ["EVAL_SEED_BASE", "EVAL_SEED_STRIDE", "evaluate", "train_run"]
 
@@ -57,6 +58,7 @@ def evaluate(
     started: list[bool] | None = None,
     terminated: list[bool] | None = None,
     capped: list[bool] | None = None,
+    outcomes: list[dict[str, int]] | None = None,
 ) -> dict[str, int]:
     """Run ``episodes`` episodes of ``policy`` on ``env`` (which reports ``info["goals"]`` and ``info["safe"]``).
 
@@ -66,7 +68,8 @@ def evaluate(
     ``started``, if given, receives per episode whether its first state (at reset) was in the root goal
     (the first of ``info["goals"]``); ``terminated``, whether it ended by termination rather than
     truncation (a fall or a crash of the initial env, before its horizon); ``capped``, whether specguard's
-    step cap cut it (``info[CAPPED]``: the env declares no episode limit, :mod:`specguard.construction.cap`).
+    step cap cut it (``info[CAPPED]``: the env declares no episode limit, :mod:`specguard.construction.cap`);
+    ``outcomes``, the episode's own counts (1 or 0 per key, as returned), for paired comparisons.
 
     Returns:
         Per node path, the number of episodes whose last state lies in the
@@ -88,6 +91,10 @@ def evaluate(
         if capped is not None:
             capped.append(CAPPED in info)
         count_episode(counts, info)
+        if outcomes is not None:
+            episode: dict[str, int] = {}
+            count_episode(episode, info)
+            outcomes.append(episode)
     return counts
 
 
@@ -109,6 +116,7 @@ class _Run:
     capped: dict[int, bool] = field(default_factory=dict)  # evaluation episode -> specguard's step cap cut it
     met_early: bool = False  # a checkpoint's look met every threshold and stopped training
     hit_wall_clock: bool = False  # the wall-clock cap stopped training
+    log: Any = None  # the run's LogGoals callback, made when it trains: its evaluations go to the model's logger
 
     @property
     def label(self) -> str:
@@ -195,8 +203,11 @@ def _build(spec: Spec, seed: int) -> _Run:
         )
     if spec.normalize:  # a Dict observation's "spec" part only: the features and own state, as for a Box
         venv = VecNormalize(venv, norm_obs_keys=[SPEC_KEY] if spec.observation == "features+env" else None)
+    hyperparameters = dict(spec.hyperparameters)
+    if spec.tensorboard_log is not None:  # the run option over the spec's own, which would write into one folder
+        hyperparameters["tensorboard_log"] = spec.tensorboard_log
     try:
-        model = algorithm(spec.policy, venv, seed=seed, device="cpu", verbose=0, **dict(spec.hyperparameters))
+        model = algorithm(spec.policy, venv, seed=seed, device="cpu", verbose=0, **hyperparameters)
     except (TypeError, ValueError, AssertionError) as e:
         venv.close()
         raise InvalidSpec(f"{label}.hyperparameters", f"{name} rejected them: {e}") from e
@@ -213,7 +224,12 @@ def _learn(run: _Run, emit: Emit) -> tuple[GoalCurve, WeightAdapter | None, dict
         TrainingError: the env or a user function failed while training (the training step named) or in a
             checkpoint's evaluation (the checkpoint and evaluation episode named).
     """
-    from specguard.training.callback import StopTrainingOnMetCheckpoint, StopTrainingOnWallClock, training_callbacks
+    from specguard.training.callback import (
+        LogGoals,
+        StopTrainingOnMetCheckpoint,
+        StopTrainingOnWallClock,
+        training_callbacks,
+    )
 
     spec, budget = run.spec, run.spec.budget
     confidence = spec.verdict_confidence  # corrected for every look (specguard.stats.anytime)
@@ -225,6 +241,7 @@ def _learn(run: _Run, emit: Emit) -> tuple[GoalCurve, WeightAdapter | None, dict
         except Exception as e:
             raise run.failure(f"checkpoint evaluation at step {step}, evaluation episode {run.episode}", e) from e
         curve.evaluated(step, counts, episodes)
+        log.evaluated(step, counts, episodes)
         if ok:
             looked.update(counts=counts, episodes=episodes)
         return ok
@@ -235,6 +252,7 @@ def _learn(run: _Run, emit: Emit) -> tuple[GoalCurve, WeightAdapter | None, dict
     checkpoints = checkpoint_steps(budget.timesteps, budget.checkpoints) if spec.thresholds else []
     stop_on_checkpoint = StopTrainingOnMetCheckpoint(checkpoints, look)
     stop_on_wall_clock = StopTrainingOnWallClock(budget.wall_clock_s)
+    log = run.log = LogGoals()
     callback = training_callbacks(
         curve,
         every=budget.timesteps // CURVE_POINTS,
@@ -243,11 +261,13 @@ def _learn(run: _Run, emit: Emit) -> tuple[GoalCurve, WeightAdapter | None, dict
         adapter=adapter,
         stop_on_checkpoint=stop_on_checkpoint,
         stop_on_wall_clock=stop_on_wall_clock,
+        log=log,
+        user=_user_callbacks(run),
     )
     emit("train", 0, None)
     start = time.perf_counter()
     try:
-        run.model.learn(total_timesteps=budget.timesteps, callback=callback)
+        run.model.learn(total_timesteps=budget.timesteps, callback=callback, tb_log_name=_log_name(run))
     except TrainingError:
         run.eval_env.close()
         raise
@@ -259,6 +279,39 @@ def _learn(run: _Run, emit: Emit) -> tuple[GoalCurve, WeightAdapter | None, dict
     run.met_early = stop_on_checkpoint.met_early
     run.hit_wall_clock = stop_on_wall_clock.hit_wall_clock and not run.met_early
     return curve, adapter, looked, seconds
+
+
+def _user_callbacks(run: _Run) -> list[Any]:
+    """The spec's callbacks of the user's, each made by its factory for this run and guarded (its errors named).
+
+    Raises:
+        TrainingError: a factory raised, or returned something that is no SB3 ``BaseCallback``.
+    """
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from specguard.training.callback import UserCallback
+
+    made = []
+    for factory in run.spec.callbacks:
+        name = function_text(factory)
+        try:
+            callback = factory()
+        except Exception as e:
+            raise TrainingError(
+                f"{run.label}, making callback {name}: it raised {type(e).__name__}: {elide(str(e), MAX_SHOWN)}"
+            ) from e
+        if not isinstance(callback, BaseCallback):
+            raise TrainingError(
+                f"{run.label}, callback {name} made {shown(callback)}, not a stable_baselines3 BaseCallback"
+            )
+        made.append(UserCallback(callback, run.label))
+    return made
+
+
+def _log_name(run: _Run) -> str:
+    """The run's TensorBoard subfolder (SB3's ``tb_log_name``; SB3 appends ``_<n>``): ``<spec label>/seed_<seed>``."""
+    label = "".join(c if c.isalnum() or c in "-_." else "_" for c in run.spec.label) or "spec"
+    return f"{label}/seed_{run.seed}"
 
 
 def _evaluate(run: _Run, curve: GoalCurve, looked: Mapping[str, Any], emit: Emit) -> tuple[dict[str, int], int]:
@@ -278,6 +331,7 @@ def _evaluate(run: _Run, curve: GoalCurve, looked: Mapping[str, Any], emit: Emit
             stages, thresholds = spec.budget.evaluation_stages, spec.thresholds
             counts, episodes = final_evaluation(run.episodes, stages, thresholds, spec.verdict_confidence)
             curve.evaluated(int(run.model.num_timesteps), counts, episodes)
+            run.log.evaluated(int(run.model.num_timesteps), counts, episodes, write=True)
         emit("evaluate", episodes, None)
     except Exception as e:
         raise run.failure(f"evaluation episode {run.episode}", e) from e

@@ -1,0 +1,178 @@
+"""Gating a retrained agent against the one it replaces: :func:`compare_agents` (docs/semantics.md, "Two agents'
+comparison").
+
+Both agents are judged against the spec as :func:`~specguard.engine.check_agent.check_agent` judges one (the new
+agent's verdicts are the check's verdict), on the same evaluation seed, so that episode ``i`` of each starts from the
+same state: the episodes are paired. Every goal and safety rate is then compared on those pairs by the exact one-sided
+McNemar test of a drop (:mod:`specguard.stats.paired`), looked at after each stage of the evaluation
+(``episodes``, doubled up to ``max_episodes``) while a comparison is *open* and none has *dropped*, each look at its
+Bonferroni share of the level; the comparisons together are held at the family-wise ``level`` by Holm's procedure
+(:mod:`specguard.stats.family`). A comparison is *fine* once the upper bound of its drop is below ``margin``.
+
+Example:
+    >>> import specguard as sg
+    >>> cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+    >>> up = sg.Always(sg.Goal("upright", theta=(-0.2, 0.2)), name="up")
+    >>> spec = sg.Spec(cartpole, up, budget=sg.Budget(timesteps=1, eval_episodes=20), expect=0.5)
+    >>> lean = lambda obs: int(obs[2] > 0)
+    >>> comparison = compare_agents(spec, lean, lean, max_episodes=20)
+    >>> comparison.passed, comparison.keys["up"].state
+    (True, <GateState.FINE: 'fine'>)
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from specguard.engine.check_agent import AGENT_OBSERVATIONS, agent_episodes, agent_stages, check_agent, spec_agent
+from specguard.engine.spec_result import SpecResult
+from specguard.error import InvalidSpec
+from specguard.spec.spec import Spec
+from specguard.stats.family import holm, procedure_text
+from specguard.stats.paired import TEST, discordant, drop_p_value, drop_upper_bound, repeated_p_value
+from specguard.stats.sequential import DEFAULT_ALPHA, DEFAULT_MARGIN, GateState
+from specguard.utils.text import shown
+from specguard.validation import check_choice, check_natural, check_open_fraction
+
+__all__ = ["AgentComparison", "KeyComparison", "compare_agents"]
+
+
+@dataclass(frozen=True)
+class KeyComparison:
+    """One goal's or safety rate's comparison on the paired episodes.
+
+    Attributes:
+        old: the old agent's successes in the compared episodes; new: the new agent's; episodes: the pairs.
+        lost: episodes only the old agent met (``b``); gained: episodes only the new one met (``c``).
+        p_value: the repeated p-value of the looks taken (:func:`specguard.stats.paired.repeated_p_value`).
+        bound: the upper bound of the drop in success (rate points).
+        state: dropped (flagged by Holm's procedure), fine (bound below the margin) or open.
+    """
+
+    old: int
+    new: int
+    episodes: int
+    lost: int
+    gained: int
+    p_value: float
+    bound: float
+    state: GateState
+
+
+@dataclass
+class AgentComparison:
+    """The new agent against the old one on one spec.
+
+    Attributes:
+        result: the new agent's result against the spec's thresholds (the check's verdict).
+        baseline: the old agent's result against them.
+        keys: per goal path and safety key, its comparison.
+        looks: the episodes at each look taken; planned: the looks planned.
+        level: the family-wise level; margin: the drop called fine once clearly below it.
+    """
+
+    result: SpecResult
+    baseline: SpecResult
+    keys: dict[str, KeyComparison]
+    looks: list[int]
+    planned: int
+    level: float
+    margin: float
+
+    @property
+    def passed(self) -> bool:
+        """No goal or safety rate dropped."""
+        return all(k.state is not GateState.DROPPED for k in self.keys.values())
+
+    def summary(self) -> str:
+        """The family-wise line: the test, the procedure and its level, the looks."""
+        dropped = sum(k.state is GateState.DROPPED for k in self.keys.values())
+        return (
+            f"{dropped} of {len(self.keys)} dropped: {TEST}, {procedure_text(self.level, max(1, len(self.keys)))}, "
+            f"{len(self.looks)} of {self.planned} looks (at {', '.join(map(str, self.looks))} episodes), "
+            f"margin {self.margin:.0%}"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "passed": self.passed,
+            "looks": self.looks,
+            "planned_looks": self.planned,
+            "level": self.level,
+            "margin": self.margin,
+            "keys": {key: {**asdict(k), "state": k.state.value} for key, k in self.keys.items()},
+        }
+
+
+def compare_agents(
+    spec: Spec,
+    new: Any,
+    old: Any,
+    *,
+    episodes: int | None = None,
+    max_episodes: int | None = None,
+    observation: str = "env",
+    wrap: Any = None,
+    seed: int = 0,
+    algorithm: str | type | None = None,
+    level: float = DEFAULT_ALPHA,
+    margin: float = DEFAULT_MARGIN,
+) -> AgentComparison:
+    """Judge ``new`` against ``spec`` and compare it with ``old`` on paired episodes, per goal and safety rate.
+
+    Args:
+        spec, episodes, max_episodes, observation, wrap, seed, algorithm: as for
+            :func:`~specguard.engine.check_agent.check_agent`, the same for both agents (``wrap`` and ``algorithm``
+            too: two agents trained alike).
+        new: the agent to gate; old: the agent it replaces (anything ``check_agent`` takes).
+        level: the family-wise level of the comparisons (Holm's procedure).
+        margin: the drop in success (rate points) a comparison is *fine* once clearly below.
+
+    Raises:
+        InvalidSpec: an argument is out of range. AgentError, AgentMismatch, EvaluationError: as ``check_agent``.
+    """
+    where = f"compare_agents({spec.label!r})" if isinstance(spec, Spec) else "compare_agents"
+    stages = agent_stages(where, spec, episodes, max_episodes)
+    check_choice(where, "observation", observation, AGENT_OBSERVATIONS)
+    seed = check_natural(where, "seed", seed, "the evaluation seeds' run")
+    check_open_fraction(where, "level", level, "the family-wise level")
+    if not 0.0 < margin <= 1.0:
+        raise InvalidSpec(where, f"expected a margin in (0, 1], got {shown(margin)}")
+    agents = {"new": spec_agent(spec, new, algorithm=algorithm), "old": spec_agent(spec, old, algorithm=algorithm)}
+    outcomes: dict[str, list[dict[str, int]]] = {"new": [], "old": []}
+    options = {"observation": observation, "wrap": wrap, "seed": seed}
+    results = {
+        side: check_agent(spec, agent, episodes=stages[0], max_episodes=stages[-1], outcomes=outcomes[side], **options)
+        for side, agent in agents.items()
+    }
+    paths = [key for key in outcomes["new"][0] if key in outcomes["old"][0]]
+    p_values: dict[str, list[float]] = {key: [] for key in paths}
+    looks: list[int] = []
+    keys: dict[str, KeyComparison] = {}
+    for total in stages:
+        for side, agent in agents.items():  # episodes beyond those the verdicts needed, for the pairs
+            have = len(outcomes[side])
+            if have < total:
+                outcomes[side] += agent_episodes(spec, agent, have, total - have, **options)
+        looks.append(total)
+        figures = {}
+        for key in paths:
+            old_k = [bool(o[key]) for o in outcomes["old"][:total]]
+            new_k = [bool(o[key]) for o in outcomes["new"][:total]]
+            b, c = discordant(old_k, new_k)
+            p_values[key].append(drop_p_value(b, c))
+            figures[key] = (sum(old_k), sum(new_k), b, c)
+        repeated = {key: repeated_p_value(p_values[key], len(stages)) for key in paths}
+        flagged = holm(repeated, level)
+        keys = {}
+        for key, (old_n, new_n, b, c) in figures.items():
+            bound = drop_upper_bound(b, c, total)
+            state = (
+                GateState.DROPPED if flagged[key] is not None else GateState.FINE if bound < margin else GateState.OPEN
+            )
+            keys[key] = KeyComparison(old_n, new_n, total, b, c, repeated[key], bound, state)
+        states = {k.state for k in keys.values()}
+        if GateState.DROPPED in states or GateState.OPEN not in states:
+            break
+    return AgentComparison(results["new"], results["old"], keys, looks, len(stages), level, margin)
