@@ -72,7 +72,9 @@ def ppo_cartpole(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPa
         threads = torch.get_num_threads()
         torch.set_num_threads(1)  # a small network: more threads only wait for each other
         try:
-            model = sb3.PPO("MlpPolicy", "CartPole-v1", n_steps=256, batch_size=64, n_epochs=4, seed=PPO_SEED)
+            model = sb3.PPO(
+                "MlpPolicy", "CartPole-v1", n_steps=256, batch_size=64, n_epochs=4, seed=PPO_SEED, device="cpu"
+            )
             model.learn(PPO_STEPS)
         finally:
             torch.set_num_threads(threads)
