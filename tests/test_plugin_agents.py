@@ -53,7 +53,8 @@ def pytest_goal_spec_result(item, spec, result):
 
 
 def write(pytester: pytest.Pytester, body: str) -> None:
-    pytester.makepyfile(test_agents=HEADER + textwrap.dedent(body))
+    # Not test_agents.py: an in-process run beside tests/test_agents.py (imported by then) would not import it.
+    pytester.makepyfile(test_agent_checks=HEADER + textwrap.dedent(body))
     pytester.makeconftest(CONFTEST)
 
 
@@ -100,20 +101,20 @@ def test_an_agent_check_is_judged_per_goal_with_xfail_xpass_table_and_junit(pyte
         [
             "*= specguard goal specs =*",
             "spec*goal*success*interval*threshold*runs met*per seed*verdict*training",
-            "test_agents.py::test_lean *balance *0% (0/10)*>= 0.5*0/1*xfailed*",
-            "test_agents.py::test_lean *balance:edges (safe)*100% (10/10)*>= 0.5*1/1*passed*",
-            "test_agents.py::test_random *balance *0% (0/10)*>= 0.5*0/1*failed*",
-            "test_agents.py::test_safe_after_all *balance:edges (safe)*100% (10/10)*>= 0.5*1/1*xpassed*",
-            "test_agents.py::test_declared[[]lean[]] *balance:edges (safe)*100% (10/10)*>= 0.5*1/1*passed*",
+            "test_agent_checks.py::test_lean *balance *0% (0/10)*>= 0.5*0/1*xfailed*",
+            "test_agent_checks.py::test_lean *balance:edges (safe)*100% (10/10)*>= 0.5*1/1*passed*",
+            "test_agent_checks.py::test_random *balance *0% (0/10)*>= 0.5*0/1*failed*",
+            "test_agent_checks.py::test_safe_after_all *balance:edges (safe)*100% (10/10)*>= 0.5*1/1*xpassed*",
+            "test_agent_checks.py::test_declared[[]lean[]] *balance:edges (safe)*100% (10/10)*>= 0.5*1/1*passed*",
         ]
     )
     # judged once per test, its items sharing the result, which other plugins hear of
     heard = sorted(line.split("[")[0].split(" ")[0] for line in results(pytester))
     assert heard == [
-        "test_agents.py::test_declared",
-        "test_agents.py::test_lean",
-        "test_agents.py::test_random",
-        "test_agents.py::test_safe_after_all",
+        "test_agent_checks.py::test_declared",
+        "test_agent_checks.py::test_lean",
+        "test_agent_checks.py::test_random",
+        "test_agent_checks.py::test_safe_after_all",
     ]
     props = {
         p.get("name"): p.get("value")
@@ -150,7 +151,7 @@ def test_agent_items_are_skipped_without_the_flag_and_a_wrong_return_fails_in_on
     result.assert_outcomes(passed=1, failed=1)
     result.stdout.fnmatch_lines(
         [
-            "test_agents.py::test_an_agent[[]root[]]: a goal spec must return a specguard.Spec or a "
+            "test_agent_checks.py::test_an_agent[[]root[]]: a goal spec must return a specguard.Spec or a "
             "specguard.AgentCheck, got function"
         ]
     )
@@ -205,8 +206,8 @@ def test_xdist_judges_agents_on_the_workers_and_reports_on_the_controller(pytest
     result.stdout.fnmatch_lines(
         [
             "*= specguard goal specs =*",
-            "test_agents.py::test_lean *balance *0% (0/10)*xfailed*",
-            "test_agents.py::test_lean *balance:edges (safe)*100% (10/10)*passed*",
+            "test_agent_checks.py::test_lean *balance *0% (0/10)*xfailed*",
+            "test_agent_checks.py::test_lean *balance:edges (safe)*100% (10/10)*passed*",
         ]
     )
     assert len(results(pytester)) >= 4  # each worker judges its tests once
