@@ -175,17 +175,7 @@ def falsify_run(
     db = DirectoryBasedExampleDatabase(str(database)) if database is not None and spec_key else None
     key = database_key(spec_key, seed, space) if spec_key else ""
     label = f"{spec.label} seed {seed}"
-    with one_torch_thread():
-        return falsify(
-            runner,
-            examples=examples,
-            uniform=uniform,
-            seed=search_seed,
-            database=db,
-            key=key,
-            confidence=spec.confidence,
-            progress=(lambda line: progress(f"{label}: {line}")) if progress is not None else None,
-        )
+    return _search(runner, spec, label, db, key, examples, uniform, search_seed, progress)
 
 
 def falsify_agent(
@@ -256,13 +246,28 @@ def falsify_agent(
         key = database_key(fingerprint_spec(spec).spec_key, None, space, agent=f"{acting.identity} {seen}")
         db = DirectoryBasedExampleDatabase(str(database))
     label = f"{spec.label} agent {acting.name}"
+    return _search(runner, spec, label, db, key, examples, uniform, search_seed, progress)
+
+
+def _search(
+    runner: EpisodeRunner,
+    spec: Spec,
+    label: str,
+    database: Any,
+    key: str,
+    examples: int,
+    uniform: int,
+    search_seed: int,
+    progress: Callable[[str], None] | None,
+) -> Falsification:
+    """The search on ``runner`` at the spec's confidence, one torch thread, its progress lines labelled."""
     with one_torch_thread():
         return falsify(
             runner,
             examples=examples,
             uniform=uniform,
             seed=search_seed,
-            database=db,
+            database=database,
             key=key,
             confidence=spec.confidence,
             progress=(lambda line: progress(f"{label}: {line}")) if progress is not None else None,
