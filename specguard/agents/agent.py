@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from specguard.error import AgentError, AgentMismatch, SpecError
+from specguard.training.policy import observation_rows
 from specguard.utils.text import MAX_SHOWN, elide, shown
 
 __all__ = ["Agent", "action_problem", "check_fits", "observation_kind", "observation_rows"]
@@ -172,15 +173,11 @@ class Agent:
     def _callable_act(self, fn: Callable[[Any], Any]) -> Callable[[Any, Sequence[int] | None], Any]:
         """``fn`` (one observation to one action) as the agent's step, decided once: normalized or not, batched or
         not (its actions stacked)."""
+        from specguard.training.policy import callable_policy
+
         norm = self.normalizer
         one = fn if norm is None else (lambda obs: fn(norm.normalize_obs(obs)))
-        if not self.batch:
-            return lambda observations, rows: one(observations)
-
-        def rows_of(observations: Any, rows: Sequence[int] | None) -> Any:
-            return np.stack([np.asarray(one(o)) for o in observation_rows(observations)])
-
-        return rows_of
+        return callable_policy(one, batch=self.batch)
 
     def _expect(self, action_space: Any) -> None:
         """Check actions against ``action_space`` (the env's, where the agent names none); a callable's discrete
@@ -207,19 +204,6 @@ class Agent:
                     hint="an agent's action must be one of the env's action space, as env.action_space.contains says",
                 )
         self._unchecked = False
-
-
-def observation_rows(observations: Any) -> list[Any]:
-    """A batch of observations (rows, one per env) as a list of single observations, a ``Dict``'s key by key.
-
-    Example:
-        >>> observation_rows({"a": np.zeros((2, 3)), "b": np.ones((2, 1))})[1]["b"].tolist()
-        [1.0]
-    """
-    if isinstance(observations, Mapping):
-        n = len(next(iter(observations.values())))
-        return [{k: v[i] for k, v in observations.items()} for i in range(n)]
-    return list(observations)
 
 
 def action_problem(space: Any, action: Any) -> str:

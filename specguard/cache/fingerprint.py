@@ -88,8 +88,8 @@ def _fields(obj: Any, exclude: frozenset[str]) -> dict[str, Any]:
 
 
 def _algorithm_fields(spec: Any, fields: dict[str, Any]) -> dict[str, Any]:
-    """``fields`` with the algorithm by identity and version, and the policy, the observation and the user's
-    callbacks only where they are not the default.
+    """``fields`` with the algorithm by identity and version, and the policy, the observation, the user's
+    callbacks and trainer only where they are not the default (a trainer by its code, as the tree's functions).
 
     stable-baselines3's algorithms stay their names (its version is in every key already); any other algorithm is
     its class: an installed one by module, qualified name and its distribution's version (sb3-contrib's), the user's
@@ -106,6 +106,8 @@ def _algorithm_fields(spec: Any, fields: dict[str, Any]) -> dict[str, Any]:
         out["algorithm"] = algorithm_class(spec.algorithm)
     if not out["callbacks"]:  # a run without callbacks of the user's keeps the key it had before specs took them
         del out["callbacks"]
+    if out["trainer"] is None:  # a spec trained by SB3 keeps the key it had before specs took trainers
+        del out["trainer"]
     return out
 
 

@@ -1,4 +1,5 @@
-"""Trained models: a cached run's SB3 model and its ``VecNormalize`` statistics, loaded after the cache's checks."""
+"""Trained models: a cached run's SB3 model and its ``VecNormalize`` statistics, loaded after the cache's checks;
+a trainer's run (``Spec(trainer=...)``), its last agent."""
 
 from __future__ import annotations
 
@@ -12,19 +13,23 @@ __all__ = ["load_model"]
 
 
 def load_model(spec: Spec, seed: int, cache_dir: Path | str) -> tuple[Any, Any]:
-    """The cached model of run ``seed`` of ``spec`` and its ``VecNormalize`` statistics (or ``None``).
+    """The cached model of run ``seed`` of ``spec`` and its ``VecNormalize`` statistics (or ``None``); for a spec
+    with a trainer, the agent its last checkpoint yielded (unpickled) and ``None``.
 
     Raises:
         FileNotFoundError: the run is not (or no longer validly) cached.
     """
     import pickle
 
-    from specguard.cache.store import NORMALIZER, Cache
+    from specguard.cache.store import AGENT, NORMALIZER, Cache
 
     cache = Cache(cache_dir)
     if cache.load(spec, seed) is None:  # validates the entry's checksums before anything is unpickled
         raise FileNotFoundError(f"run seed {seed} of spec {spec.label!r} is not in the cache {str(cache_dir)!r}")
     path = cache.model_path(spec, seed)
+    if spec.trainer is not None:
+        with (path.parent / AGENT).open("rb") as f:
+            return pickle.load(f), None  # cloudpickle's output is read by pickle
     model = sb3.load_model(spec.algorithm, path)
     stats = path.parent / NORMALIZER
     normalizer = None

@@ -6,7 +6,8 @@ an exact digest of everything that decides the run (see
 
 An entry is a folder ``<root>/<key[:2]>/<key>/`` holding ``result.json``,
 ``model.zip`` (loadable with SB3's ``load``) and, with ``normalize=True``,
-``vecnormalize.pkl``. It is written in a temporary folder and renamed into
+``vecnormalize.pkl``; a run of a trainer of the user's (``Spec(trainer=...)``) holds its last agent as
+``agent.pkl`` (cloudpickle) in place of the zip. It is written in a temporary folder and renamed into
 place, which is atomic: a run killed midway leaves only a temporary folder that
 is never read. ``result.json`` holds the result, the versions it was made
 with, a SHA-256 of every file, and a checksum over all of that; with a secret
@@ -16,7 +17,7 @@ warning and retrained, never trusted and never a traceback.
 
 Trust boundary: a cache folder is trusted input. The checksum catches damage,
 not intent (anyone who can write the folder can recompute it), and SB3's
-``load`` unpickles, so a model file from an untrusted source can run code.
+``load`` unpickles (and ``agent.pkl`` is a pickle), so a model file from an untrusted source can run code.
 For a cache shared between machines or branches, set the same secret in
 :data:`SECRET_ENV` everywhere: entries are then signed, and an entry whose
 signature does not verify with the key is discarded.
@@ -53,6 +54,7 @@ __all__ = [
     "CacheLockTimeout",
     "file_sha256",
     "model_files",
+    "run_files",
     "try_acquire",
     "validate_record",
     "wait_for",
@@ -61,6 +63,7 @@ __all__ = [
 SECRET_ENV = "SPECGUARD_CACHE_KEY"
 FORMAT = 5  # 3: runs record met_early (anytime verdicts); 4: adapted weights; 5: stopped_early is hit_wall_clock
 MODEL = "model.zip"
+AGENT = "agent.pkl"  # a trainer's agent (Spec(trainer=...)), in place of MODEL
 NORMALIZER = "vecnormalize.pkl"
 RESULT = "result.json"
 
@@ -110,10 +113,10 @@ def _check_signature(record: dict[str, Any], secret: bytes | None) -> None:
 
 def _check_files(record: dict[str, Any], folder: Path, *, model: bool = True) -> None:
     files = record.get("files")
-    if not isinstance(files, dict) or (MODEL in files) != model:
+    if not isinstance(files, dict) or (MODEL in files or AGENT in files) != model:
         raise ValueError("no file checksums recorded" if model else "a model recorded in an evaluation's entry")
     for name, expected in files.items():
-        if name not in (MODEL, NORMALIZER):
+        if name not in (MODEL, AGENT, NORMALIZER):
             raise ValueError(f"unexpected file {name!r} recorded")
         if not (folder / name).is_file() or file_sha256(folder / name) != expected:
             raise ValueError(f"{name} is missing or does not match its checksum")
@@ -215,9 +218,9 @@ class Cache:
 
         The driver stores what a worker sent back, so workers need no shared filesystem.
         """
-        unknown = sorted(set(files) - {MODEL, NORMALIZER})
-        if MODEL not in files or unknown:
-            raise ValueError(f"expected {MODEL} (and optionally {NORMALIZER}), got files {sorted(files)}")
+        unknown = sorted(set(files) - {MODEL, AGENT, NORMALIZER})
+        if (MODEL in files) == (AGENT in files) or unknown:
+            raise ValueError(f"expected {MODEL} (and optionally {NORMALIZER}) or {AGENT}, got files {sorted(files)}")
         return self._write(key, result, files)
 
     def store_evaluation(self, key: str, result: RunResult) -> Path:
@@ -266,6 +269,19 @@ def model_files(model: Any, *, normalize: bool) -> dict[str, bytes]:
         if normalize and hasattr(env, "save"):
             env.save(str(Path(tmp) / NORMALIZER))
         return {p.name: p.read_bytes() for p in sorted(Path(tmp).iterdir())}
+
+
+def run_files(spec: Spec, model: Any) -> tuple[dict[str, bytes], str | None]:
+    """A trained run's entry files, and why they are none: an SB3 model's (:func:`model_files`), or a trainer's
+    last agent pickled (cloudpickle, as the spec reaches a worker), or ``({}, why)`` when it cannot be pickled."""
+    if spec.trainer is None:
+        return model_files(model, normalize=spec.normalize), None
+    import cloudpickle
+
+    try:
+        return {AGENT: cloudpickle.dumps(model)}, None
+    except Exception as e:  # a lock, a file, a generator in it: the run is kept and judged all the same
+        return {}, f"its agent {type(model).__name__} cannot be pickled ({type(e).__name__}: {e})"
 
 
 def _paths(spec: Spec) -> list[str]:

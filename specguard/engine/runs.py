@@ -132,7 +132,15 @@ class Runs:
                 self.say(ProgressEvent(self.spec.label, seed, "failed", message=self.result.errors[seed]))
                 return
             key = self._key(seed)
-            if key is not None and self.cache is not None:
+            unstored = outcome.value.get("unstored")
+            if unstored and key is not None and self.cache is not None:  # fail loudly, lose nothing
+                warnings.warn(
+                    f"specguard cache: spec {self.spec.label!r}, seed {seed}: {unstored}; the run is kept and "
+                    "judged, not cached",
+                    CacheWarning,
+                    stacklevel=2,
+                )
+            elif key is not None and self.cache is not None:
                 try:
                     self.cache.store_files(key, run, outcome.value["files"])
                 except OSError as e:  # read-only, full, not a folder: the run is kept and judged all the same

@@ -18,19 +18,20 @@ def train_task(spec: Spec, seed: int, keyed_versions: Mapping[str, str] | None, 
 
     The driver stores them in its cache: keys are computed only by the driver
     (functions unpickled in a worker are not the driver's), and cluster
-    workers need no shared filesystem. ``keyed_versions``, given when the
+    workers need no shared filesystem. ``"unstored"`` says why a run has no files to store (a trainer's agent that
+    cannot be pickled): the driver warns, and keeps and judges the run uncached. ``keyed_versions``, given when the
     result is to be cached, are the versions the driver's key names: a worker
     with other code refuses to train (:class:`~specguard.error.VersionMismatch`).
     """
-    from specguard.cache.store import model_files
+    from specguard.cache.store import run_files
     from specguard.training.train import train_run
 
     if keyed_versions is not None:
         check_versions(keyed_versions, f"Spec {spec.label!r}, seed {seed}")
     with_model = keyed_versions is not None
     result, model = train_run(spec, seed, report=report)  # the spec arrives checked (Spec.env_factory)
-    files = model_files(model, normalize=spec.normalize) if with_model else {}
-    return {"result": result.to_dict(), "files": files}
+    files, unstored = run_files(spec, model) if with_model else ({}, None)
+    return {"result": result.to_dict(), "files": files, "unstored": unstored}
 
 
 _PHASES = {"start": "starting", "build": "building the env", "train": "training step", "evaluate": "evaluation episode"}

@@ -22,7 +22,9 @@ Example:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import importlib.util
+import inspect
 import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -40,7 +42,7 @@ from specguard.starts.space import StartSpace, as_start_space
 from specguard.stats.verdicts import DEFAULT_UNDECIDED, UNDECIDED_OUTCOMES
 from specguard.tree.keys import check_expect, check_xfail, check_xfail_thresholded, resolve_goal
 from specguard.tree.nodes import Node
-from specguard.utils.text import shown
+from specguard.utils.text import function_text, shown
 from specguard.validation import check_choice, check_count, check_open_fraction, is_finite
 
 __all__ = ["Spec", "check_spec", "check_tensorboard_log"]
@@ -59,6 +61,52 @@ def _checked_callbacks(where: str, callbacks: object) -> tuple[Callable[[], Any]
                 hint="pass the class, not an instance: callbacks=[MyCallback] or [functools.partial(MyCallback, n=5)]",
             )
     return tuple(callbacks)
+
+
+# What a trainer of the user's (Spec(trainer=...)) makes meaningless: the fields that only configure SB3's training.
+_SB3_ONLY = (
+    ("callbacks", "are SB3 callbacks; a trainer runs its own loop", lambda spec: bool(spec.callbacks)),
+    ("hyperparameters", "are the SB3 algorithm's; give them to the trainer", lambda spec: bool(spec.hyperparameters)),
+    ("normalize", "wraps SB3's training envs in VecNormalize; normalize in the trainer", lambda spec: spec.normalize),
+    (
+        "n_envs",
+        "is SB3's number of training envs; the trainer calls make_env as often as it needs",
+        lambda spec: spec.n_envs != 1,
+    ),
+    ("algorithm", "names an SB3 algorithm, which a trainer replaces", lambda spec: spec.algorithm != "PPO"),
+    ("policy", "is the SB3 algorithm's policy; the trainer builds its own", lambda spec: not _default_policy(spec)),
+    (
+        "tensorboard_log",
+        "is SB3's logger folder; a trainer writes its own logs",
+        lambda spec: spec.tensorboard_log is not None,
+    ),
+)
+
+
+def _default_policy(spec: Spec) -> bool:
+    """The spec's policy is left out, or is the one it defaults to (a spec made again by ``dataclasses.replace``)."""
+    with_env = spec.observation == "features+env"
+    return spec.policy is None or spec.policy == default_policy(spec.algorithm, dict_observation=with_env)
+
+
+def _checked_trainer(where: str, trainer: object) -> Callable[..., Any]:
+    """A trainer: callable as ``trainer(make_env, timesteps, seed)``; a plain function (or a partial of one) must be
+    a generator function. Another callable (an object with ``__call__``) must return an iterator when called, which
+    the run checks (:mod:`specguard.training.trainer`)."""
+    if not callable(trainer):
+        raise InvalidSpec(
+            where,
+            f"expected a generator function trainer(make_env, timesteps, seed) yielding (steps, agent), got "
+            f"{shown(trainer)}",
+        )
+    inner = trainer.func if isinstance(trainer, functools.partial) else trainer
+    if inspect.isfunction(inner) and not inspect.isgeneratorfunction(inner):
+        raise InvalidSpec(
+            where,
+            f"expected a generator function, got the function {function_text(inner)}, which does not yield",
+            hint="a trainer yields (steps, agent) as it trains: write `yield steps, agent` at each checkpoint",
+        )
+    return trainer
 
 
 def check_tensorboard_log(where: str, folder: object) -> str:
@@ -151,6 +199,16 @@ class Spec:
             :class:`~specguard.training.callback.LogGoals`), one subfolder per spec and seed
             (``<label>/seed_<seed>_<n>``). A run option (:meth:`as_run`), not part of the spec's identity: a run
             found in the cache trained nothing, and writes nothing.
+        trainer: the user's own training loop in place of SB3's: a generator function
+            ``trainer(make_env, timesteps, seed)`` that trains on envs made by ``make_env()`` (the constructed env,
+            as SB3 trains on), for ``timesteps`` steps from ``seed``, and **yields** ``(steps, agent)`` checkpoints
+            as it trains: ``steps`` the steps trained so far (increasing ints), ``agent`` a callable
+            ``obs -> action``, an object with SB3's ``predict``, or an SB3 model. The checkpoints are judged with
+            the anytime looks of SB3's training, the generator closed once a look meets every threshold, and the last
+            agent gets the final evaluation (:mod:`specguard.training.trainer`). Part of the spec's identity (its
+            code, as the tree's functions); the SB3 fields mean nothing with it and are refused (``algorithm``
+            left at its default is not used, ``callbacks``, ``hyperparameters``, ``normalize``, ``n_envs``,
+            ``policy``, ``tensorboard_log``, a tree with ``weights="auto"``).
     """
 
     initial_env: InitialEnv
@@ -173,6 +231,7 @@ class Spec:
     observation: str = "features"
     callbacks: Sequence[Callable[[], Any]] = ()
     tensorboard_log: str | None = None
+    trainer: Callable[..., Any] | None = None
 
     def __post_init__(self) -> None:
         label = f"Spec {self.label!r}"
@@ -182,6 +241,8 @@ class Spec:
             raise InvalidSpec(f"{label}.tree", f"expected a Goal or All node, got {self.tree!r}")
         if not isinstance(self.budget, Budget):
             raise InvalidSpec(f"{label}.budget", f"expected a Budget, got {self.budget!r}")
+        if self.trainer is not None:  # before the SB3 fields take their defaults (policy, ...)
+            self._check_trainer(label)
         algorithm = resolve_algorithm(f"{label}.algorithm", self.algorithm)
         object.__setattr__(self, "algorithm", algorithm)
         if not isinstance(self.hyperparameters, Mapping):
@@ -210,6 +271,26 @@ class Spec:
         object.__setattr__(self, "callbacks", _checked_callbacks(f"{label}.callbacks", self.callbacks))
         if self.tensorboard_log is not None:
             object.__setattr__(self, "tensorboard_log", check_tensorboard_log(label, self.tensorboard_log))
+
+    def _check_trainer(self, label: str) -> None:
+        """A trainer, and none of the fields that only configure SB3's training (:data:`_SB3_ONLY`)."""
+        name = function_text(_checked_trainer(f"{label}.trainer", self.trainer))
+        for field_name, meaning, given in _SB3_ONLY:
+            if given(self):
+                raise InvalidSpec(
+                    f"{label}.{field_name}",
+                    f"{field_name}={shown(getattr(self, field_name))} {meaning}, and the spec trains with the "
+                    f"trainer {name}",
+                    hint=f"leave {field_name} out of a spec with a trainer",
+                )
+        adapting = [path for path, node in self.tree.walk() if node.adapts_weights]
+        if adapting:
+            raise InvalidSpec(
+                f"{label}.tree",
+                f"weights='auto' at {', '.join(adapting)} adapts SB3's training envs' weights, and the spec trains "
+                f"with the trainer {name}",
+                hint="give the node fixed weights in a spec with a trainer",
+            )
 
     @property
     def label(self) -> str:
@@ -261,14 +342,15 @@ class Spec:
         """This spec as a door (``specguard run``, ``pytest --goal-specs``) runs it, with the door's options.
 
         ``budget_scale`` and ``checkpoints`` as for :meth:`scaled`; ``undecided`` and ``tensorboard_log``,
-        if given, replace the spec's own. ``None`` keeps the spec's own, so
+        if given, replace the spec's own (``tensorboard_log`` is SB3's folder: a spec with a ``trainer`` keeps
+        none). ``None`` keeps the spec's own, so
         that every door judges a spec the same way unless told otherwise.
         """
         spec = self.scaled(budget_scale, checkpoints=checkpoints)
         changes: dict[str, Any] = {}
         if undecided is not None and undecided != spec.undecided:
             changes["undecided"] = undecided
-        if tensorboard_log is not None and os.fspath(tensorboard_log) != spec.tensorboard_log:
+        if tensorboard_log is not None and spec.trainer is None and os.fspath(tensorboard_log) != spec.tensorboard_log:
             changes["tensorboard_log"] = os.fspath(tensorboard_log)
         return dataclasses.replace(spec, **changes) if changes else spec
 

@@ -13,12 +13,13 @@ rollouts and GIFs (:mod:`specguard.training.rollout`) and the falsifier
 * the env's action masks, read before every action, for an algorithm whose
   ``predict`` takes ``action_masks`` (sb3-contrib's MaskablePPO).
 
-A model without a recurrent state acts exactly as ``model.predict(obs)[0]``.
+A model without a recurrent state acts exactly as ``model.predict(obs)[0]``. A callable ``obs -> action`` without
+``predict`` (the agent a trainer of the user's yields, ``Spec(trainer=...)``) acts as itself (:func:`callable_policy`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from typing import Any
 
@@ -27,7 +28,7 @@ import numpy as np
 from specguard.error import SpecError
 from specguard.spec.algorithms import takes_action_masks
 
-__all__ = ["Policy", "normalizer_of", "one_torch_thread", "policy"]
+__all__ = ["Policy", "callable_policy", "normalizer_of", "observation_rows", "one_torch_thread", "policy"]
 
 
 @contextmanager
@@ -141,6 +142,38 @@ def _rows(observations: Any) -> int:
     return len(observations)
 
 
-def policy(model: Any, normalizer: Any = None, *, deterministic: bool = True, batch: bool = False) -> Policy:
-    """``model``'s :class:`Policy` (its arguments as there)."""
+def observation_rows(observations: Any) -> list[Any]:
+    """A batch of observations (rows, one per env) as a list of single observations, a ``Dict``'s key by key.
+
+    Example:
+        >>> observation_rows({"a": np.zeros((2, 3)), "b": np.ones((2, 1))})[1]["b"].tolist()
+        [1.0]
+    """
+    if isinstance(observations, Mapping):
+        n = len(next(iter(observations.values())))
+        return [{k: v[i] for k, v in observations.items()} for i in range(n)]
+    return list(observations)
+
+
+def callable_policy(fn: Callable[[Any], Any], *, batch: bool = False) -> Callable[..., Any]:
+    """A callable ``obs -> action`` for one observation as a policy's step ``(observations, rows=None)``: asked once,
+    or for a batch (``batch=True``) row by row, its actions stacked.
+
+    Example:
+        >>> step = callable_policy(lambda obs: int(obs[0] > 0), batch=True)
+        >>> step(np.array([[1.0], [-1.0]])).tolist()
+        [1, 0]
+    """
+    if not batch:
+        return lambda observations, rows=None: fn(observations)
+    return lambda observations, rows=None: np.stack([np.asarray(fn(o)) for o in observation_rows(observations)])
+
+
+def policy(
+    model: Any, normalizer: Any = None, *, deterministic: bool = True, batch: bool = False
+) -> Callable[..., Any]:
+    """``model``'s :class:`Policy` (its arguments as there); a callable without ``predict`` (a trainer's agent),
+    its :func:`callable_policy`, which reads no ``VecNormalize`` statistics (a trainer normalizes on its own)."""
+    if callable(model) and not callable(getattr(model, "predict", None)):
+        return callable_policy(model, batch=batch)
     return Policy(model, normalizer, deterministic=deterministic, batch=batch)

@@ -117,6 +117,12 @@ class _Run:
     met_early: bool = False  # a checkpoint's look met every threshold and stopped training
     hit_wall_clock: bool = False  # the wall-clock cap stopped training
     log: Any = None  # the run's LogGoals callback, made when it trains: its evaluations go to the model's logger
+    steps: int | None = None  # a trainer's last checkpoint's steps (Spec(trainer=...)); None: the SB3 model's
+
+    @property
+    def timesteps(self) -> int:
+        """The steps the run trained: the SB3 model's, or the trainer's last checkpoint's."""
+        return int(self.model.num_timesteps) if self.steps is None else self.steps
 
     @property
     def label(self) -> str:
@@ -232,27 +238,13 @@ def _learn(run: _Run, emit: Emit) -> tuple[GoalCurve, WeightAdapter | None, dict
     )
 
     spec, budget = run.spec, run.spec.budget
-    confidence = spec.verdict_confidence  # corrected for every look (specguard.stats.anytime)
     looked: dict[str, Any] = {}
-
-    def look(step: int) -> bool:
-        try:
-            counts, episodes, ok = interim_look(run.episodes, budget.eval_episodes, spec.thresholds, confidence)
-        except Exception as e:
-            raise run.failure(f"checkpoint evaluation at step {step}, evaluation episode {run.episode}", e) from e
-        curve.evaluated(step, counts, episodes)
-        log.evaluated(step, counts, episodes)
-        if ok:
-            looked.update(counts=counts, episodes=episodes)
-        return ok
-
     # weights="auto" adapts on the constructed env's reward; a baseline trains on the initial env's own.
     adapter = None if spec.baseline else WeightAdapter.of(spec.tree)
     curve = GoalCurve(adapter)
-    checkpoints = checkpoint_steps(budget.timesteps, budget.checkpoints) if spec.thresholds else []
-    stop_on_checkpoint = StopTrainingOnMetCheckpoint(checkpoints, look)
-    stop_on_wall_clock = StopTrainingOnWallClock(budget.wall_clock_s)
     log = run.log = LogGoals()
+    stop_on_checkpoint = StopTrainingOnMetCheckpoint(_checkpoints(spec), _looker(run, curve, looked))
+    stop_on_wall_clock = StopTrainingOnWallClock(budget.wall_clock_s)
     callback = training_callbacks(
         curve,
         every=budget.timesteps // CURVE_POINTS,
@@ -279,6 +271,76 @@ def _learn(run: _Run, emit: Emit) -> tuple[GoalCurve, WeightAdapter | None, dict
     run.met_early = stop_on_checkpoint.met_early
     run.hit_wall_clock = stop_on_wall_clock.hit_wall_clock and not run.met_early
     return curve, adapter, looked, seconds
+
+
+def _checkpoints(spec: Spec) -> list[int]:
+    """The steps of a run's planned looks (none without thresholds: nothing to meet early)."""
+    return checkpoint_steps(spec.budget.timesteps, spec.budget.checkpoints) if spec.thresholds else []
+
+
+def _looker(run: _Run, curve: GoalCurve, looked: dict[str, Any]) -> Callable[[int], bool]:
+    """A look at the run's policy at a step (:func:`~specguard.stats.anytime.interim_look` on its evaluation
+    episodes), recorded in ``curve`` (and the run's logger); a met look's counts go to ``looked``."""
+    spec = run.spec
+    confidence = spec.verdict_confidence  # corrected for every look (specguard.stats.anytime)
+
+    def look(step: int) -> bool:
+        try:
+            counts, episodes, ok = interim_look(run.episodes, spec.budget.eval_episodes, spec.thresholds, confidence)
+        except Exception as e:
+            raise run.failure(f"checkpoint evaluation at step {step}, evaluation episode {run.episode}", e) from e
+        curve.evaluated(step, counts, episodes)
+        if run.log is not None:
+            run.log.evaluated(step, counts, episodes)
+        if ok:
+            looked.update(counts=counts, episodes=episodes)
+        return ok
+
+    return look
+
+
+def _learn_with_trainer(run: _Run, emit: Emit) -> tuple[GoalCurve, None, dict[str, Any], float]:
+    """Run the spec's trainer through its checkpoints (:func:`specguard.training.trainer.drive`), looking at the
+    planned ones as :func:`_learn` does; the run's model is then the last agent, its steps the last checkpoint's.
+
+    Raises:
+        InvalidSpec: the trainer returned no generator.
+        TrainingError: the trainer failed or yielded a bad checkpoint, or an evaluation failed (named).
+    """
+    from specguard.training.trainer import drive
+
+    spec, budget = run.spec, run.spec.budget
+    looked: dict[str, Any] = {}
+    curve = GoalCurve()  # the trainer's own episodes are not seen: the curve has the looks' evaluations
+    look = _looker(run, curve, looked)
+
+    def at(steps: int, agent: Any) -> bool:
+        run.model, run.steps = agent, steps
+        return look(steps)
+
+    assert spec.trainer is not None
+    emit("train", 0, None)
+    start = time.perf_counter()
+    try:
+        done = drive(
+            spec.trainer,
+            spec.env_factory(),
+            budget.timesteps,
+            run.seed,
+            checkpoints=_checkpoints(spec),
+            look=at,
+            label=run.label,
+            wall_clock_s=budget.wall_clock_s,
+            report=lambda steps: emit("train", steps, None),
+        )
+    except Exception:
+        run.eval_env.close()
+        raise
+    seconds = time.perf_counter() - start
+    run.model, run.steps = done.agent, done.steps
+    run.met_early = done.met_early
+    run.hit_wall_clock = done.hit_wall_clock and not done.met_early
+    return curve, None, looked, seconds
 
 
 def _user_callbacks(run: _Run) -> list[Any]:
@@ -330,8 +392,9 @@ def _evaluate(run: _Run, curve: GoalCurve, looked: Mapping[str, Any], emit: Emit
         else:
             stages, thresholds = spec.budget.evaluation_stages, spec.thresholds
             counts, episodes = final_evaluation(run.episodes, stages, thresholds, spec.verdict_confidence)
-            curve.evaluated(int(run.model.num_timesteps), counts, episodes)
-            run.log.evaluated(int(run.model.num_timesteps), counts, episodes, write=True)
+            curve.evaluated(run.timesteps, counts, episodes)
+            if run.log is not None:
+                run.log.evaluated(run.timesteps, counts, episodes, write=True)
         emit("evaluate", episodes, None)
     except Exception as e:
         raise run.failure(f"evaluation episode {run.episode}", e) from e
@@ -355,12 +418,15 @@ def train_run(
     receives ``(phase, step, line)`` as the run moves through building the
     env, training and evaluation (worker processes pass it to the parent).
 
+    A spec with a ``trainer`` trains with it instead (:mod:`specguard.training.trainer`): its checkpoints are
+    looked at as SB3's are, and its last agent is evaluated as an SB3 model is.
+
     Returns:
-        The result and the trained model (an SB3 ``BaseAlgorithm``).
+        The result and the trained model (an SB3 ``BaseAlgorithm``; with a trainer, its last agent).
 
     Raises:
         InvalidSpec: the algorithm does not fit the action space, or SB3
-            rejects the hyperparameters (its message, attributed to the spec).
+            rejects the hyperparameters (its message, attributed to the spec); a trainer returned no generator.
         TrainingError: the env or a user function failed; the message has the
             seed and the training step, or the checkpoint and evaluation episode.
     """
@@ -375,13 +441,17 @@ def train_run(
             progress(decode_update(spec.label, seed, line))
 
     emit("build", None, None)
-    run = _build(spec, seed)
-    curve, adapter, looked, train_seconds = _learn(run, emit)
+    if spec.trainer is None:
+        run = _build(spec, seed)
+        curve, adapter, looked, train_seconds = _learn(run, emit)
+    else:  # the user's trainer: its agent on envs it makes; evaluated on one of the spec's, as an SB3 model is
+        run = _Run(spec, seed, None, None, spec.make_env())
+        curve, adapter, looked, train_seconds = _learn_with_trainer(run, emit)
     counts, episodes = _evaluate(run, curve, looked, emit)
     result = RunResult(
         spec=spec.label,
         seed=seed,
-        timesteps=int(run.model.num_timesteps),
+        timesteps=run.timesteps,
         episodes=episodes,
         successes=counts,
         train_seconds=train_seconds,
