@@ -2,9 +2,19 @@
 
 from __future__ import annotations
 
+import json
+import re
+
 import pytest
 
-from specguard.gate.baseline import Baseline, BaselineError, load_baseline, save_baseline
+from specguard.gate.baseline import AgentEntry, Baseline, BaselineError, load_baseline, save_baseline
+
+SETTINGS = {"observation": "env", "wrap": None, "seed_base": 1_000_000}
+
+
+def entry(agent: str = "a1", outcomes: dict[str, list[int]] | None = None) -> AgentEntry:
+    outcomes = outcomes or {"up": [1, 0, 1], "up:edges": [1, 1, 1]}
+    return AgentEntry(agent, "lean", "spec1", SETTINGS, [1_000_000, 1_000_001, 1_000_002], outcomes)
 
 
 def test_save_and_load_round_trip(tmp_path):
@@ -48,7 +58,9 @@ def test_format_1_baselines_still_load(tmp_path):
     "content",
     [
         "{oops",
-        '{"format": 4, "goals": {}}',
+        '{"format": 5, "goals": {}}',
+        '{"format": 4, "goals": {}, "agents": {"t": {"agent": "a", "name": "n", "spec": "s"}}}',
+        '{"format": 4, "goals": {}, "agents": []}',
         '{"format": 2, "goals": {"k": {"runs": [[1, 2]], "spec": 5}}}',
         '{"format": 1, "goals": {"k": [[5, 4]]}}',
         '{"format": 1, "goals": {"k": "x"}}',
@@ -197,3 +209,57 @@ def test_concurrent_saves_to_one_baseline_all_survive(tmp_path):
     runs = load_baseline(path).runs
     assert sorted(runs) == sorted(f"{s}::t::{goal}" for s in specs for goal in ("up", "up/x"))
     assert all(runs[f"{s}::t::up"] == [(59 % 5, 4)] for s in specs)  # each process's last save
+
+
+def test_agents_round_trip_beside_goals_and_count_in_the_family(tmp_path):
+    path = tmp_path / "main.json"
+    save_baseline(path, {"f.py::test_spec::goal": [(3, 4)]}, {"f.py::test_spec::goal": "abc"})
+    saved = save_baseline(path, {}, agents={"f.py::test_agent": entry()})
+    assert saved.text() == "replaced none, added 1 spec (f.py::test_agent), kept 1 other"
+    baseline = load_baseline(path)
+    assert baseline.runs == {"f.py::test_spec::goal": [(3, 4)]}  # the trained spec's entry kept beside the agent's
+    assert baseline.agents == {"f.py::test_agent": entry()}
+    assert baseline.family == 3  # one goal, and the agent's two keys
+    episode = json.loads(path.read_text())["agents"]["f.py::test_agent"]["episodes"][1]
+    assert episode == {"seed": 1_000_001, "outcomes": {"up": 0, "up:edges": 1}}
+
+
+def test_a_test_saved_as_an_agent_replaces_its_trained_goals_and_the_other_way_round(tmp_path):
+    path = tmp_path / "main.json"
+    save_baseline(path, {"f.py::test::goal": [(3, 4)], "f.py::other::goal": [(1, 4)]})
+    assert save_baseline(path, {}, agents={"f.py::test": entry()}).replaced == ["f.py::test"]
+    baseline = load_baseline(path)
+    assert list(baseline.runs) == ["f.py::other::goal"] and list(baseline.agents) == ["f.py::test"]
+    save_baseline(path, {"f.py::test::goal": [(2, 4)]})
+    baseline = load_baseline(path)
+    assert baseline.agents == {} and baseline.runs["f.py::test::goal"] == [(2, 4)]
+    save_baseline(path, {}, agents={"f.py::a": entry("a1")})
+    save_baseline(path, {}, agents={"f.py::a": entry("a2")})  # the agent saved last replaces the one before
+    assert load_baseline(path).agents["f.py::a"].agent == "a2"
+    save_baseline(path, {}, agents={"f.py::b": entry("b1")})  # another test's agent is kept beside it
+    assert {group: e.agent for group, e in load_baseline(path).agents.items()} == {"f.py::a": "a2", "f.py::b": "b1"}
+
+
+def test_a_format_3_baseline_has_no_agents(tmp_path):
+    path = tmp_path / "old.json"
+    path.write_text('{"format": 3, "goals": {"k": {"runs": [[3, 4]], "spec": "abc", "seeds": [0]}}}')
+    assert load_baseline(path).agents == {} and load_baseline(path).family == 1
+
+
+@pytest.mark.parametrize(
+    ("episodes", "message"),
+    [
+        ([], "bad episodes for agent 't'"),
+        ([{"seed": 1, "outcomes": {"up": 2}}], "bad outcomes for agent 't'"),
+        ([{"seed": 1, "outcomes": {"up": True}}], "bad outcomes for agent 't'"),
+        ([{"seed": 1, "outcomes": {"up": 1}}, {"seed": 2, "outcomes": {"down": 1}}], "bad outcomes for agent 't'"),
+        ([{"seed": 1, "outcomes": {"up": 1}}, {"seed": 1, "outcomes": {"up": 1}}], "bad seeds for 't'"),
+        ([{"seed": -1, "outcomes": {"up": 1}}], "expected 1 integers >= 0, one per episode"),
+    ],
+)
+def test_corrupt_agent_entries_name_the_test(tmp_path, episodes, message):
+    path = tmp_path / "main.json"
+    agent = {"agent": "a", "name": "n", "spec": "s", "settings": SETTINGS, "episodes": episodes}
+    path.write_text(json.dumps({"format": 4, "goals": {}, "agents": {"t": agent}}))
+    with pytest.raises(BaselineError, match=re.escape(message)):
+        load_baseline(path)

@@ -260,7 +260,7 @@ def test_save_then_compare_gates_regressions(pytester):
     saved.assert_outcomes(passed=1)
     stored = json.loads((baselines / "main.json").read_text())
     key = "test_specs.py::test_gate::pendulum/stabilization"
-    assert stored["format"] == 3 and stored["goals"][key]["seeds"] == [0, 1, 2, 3]  # more seeds than the spec's 2
+    assert stored["format"] == 4 and stored["goals"][key]["seeds"] == [0, 1, 2, 3]  # more seeds than the spec's 2
     assert len(stored["goals"][key]["runs"]) == 4 and len(stored["goals"][key]["spec"]) == 64
     same = run(pytester, "--goal-specs", "--goal-specs-compare", *opts)
     same.assert_outcomes(passed=1)

@@ -172,7 +172,7 @@ def test_undecided_agent_goals_follow_the_sessions_undecided_option(pytester):
     run(pytester, "--goal-specs", "--goal-specs-undecided=fail").assert_outcomes(failed=1)
 
 
-def test_agent_items_are_left_out_of_baselines_saying_so_and_their_falsify_item_searches_the_agent(pytester):
+def test_an_agent_items_falsify_item_searches_the_agent_and_is_left_out_of_its_saved_entry(pytester):
     write(
         pytester,
         """
@@ -189,14 +189,16 @@ def test_agent_items_are_left_out_of_baselines_saying_so_and_their_falsify_item_
             "falsified:",
             "*seed 0: missed (no counterexample)*",
             "*missed: balance*",
-            "*test_lean*balance:edges*passed*not compared or saved: an agent judged by check_agent is left out*",
+            "*wrote baseline*main.json: replaced none, added 1 spec (test_agent_checks.py::test_lean), kept none",
         ]
     )
     compared = run(pytester, "--goal-specs", "--goal-specs-compare=main", "-k", "not falsify")
     compared.assert_outcomes(passed=1, deselected=1)
-    compared.stdout.fnmatch_lines(["*test_lean*balance:edges*passed*not compared or saved*"])
-    baselines = list((pytester.path / "cache").parent.rglob("main.json"))
-    assert all("test_lean" not in path.read_text() for path in baselines)
+    compared.stdout.fnmatch_lines(["*test_lean*balance:edges*passed*unchanged: the same agent as baseline 'main'*"])
+    (path,) = (pytester.path / "cache").parent.rglob("main.json")
+    assert list(
+        json.loads(path.read_text())["agents"]["test_agent_checks.py::test_lean"]["episodes"][0]["outcomes"]
+    ) == ["balance:edges"]
 
 
 def test_xdist_judges_agents_on_the_workers_and_reports_on_the_controller(pytester):

@@ -66,6 +66,8 @@ __all__ = [
     "agent_episodes",
     "agent_stages",
     "check_agent",
+    "evaluation_identity",
+    "seed_base",
     "spec_agent",
 ]
 
@@ -179,7 +181,7 @@ def _evaluate(
     env = agent_envs(spec, observation, wrap)()
     try:
         check_fits(agent, env.observation_space, env.action_space)  # before any episode
-        base = EVAL_SEED_BASE + seed * EVAL_SEED_STRIDE
+        base = seed_base(seed)
         started_in: list[bool] = []
         terminated: list[bool] = []
         capped: list[bool] = []
@@ -219,19 +221,30 @@ def _cache_entry(
     if cache_dir is None:
         return None, ""
     try:
-        fingerprint = fingerprint_spec(spec)
-        parts = {
-            "agent": agent.identity,
-            "spec": fingerprint.spec_key,
-            "wrap": None if wrap is None else digest(wrap, "wrap"),
-            "evaluation": settings,
-        }
+        parts, reproducible = evaluation_identity(spec, agent, wrap)
     except (FingerprintError, AgentError) as e:
         warnings.warn(f"specguard cache: agent {agent.name!r} evaluated, not cached: {e}", stacklevel=3)
         return None, ""
-    if not fingerprint.reproducible:
+    if not reproducible:
         return None, ""
-    return Cache(Path(cache_dir)), digest(parts, "evaluation")
+    return Cache(Path(cache_dir)), digest({**parts, "evaluation": settings}, "evaluation")
+
+
+def evaluation_identity(spec: Spec, agent: Agent, wrap: Callable[[Any], Any] | None) -> tuple[dict[str, Any], bool]:
+    """What an agent's evaluation episodes depend on beyond their settings: ``{"agent": its identity, "spec": the
+    spec's key, "wrap": wrap's digest or None}``, and whether the env repeats a fixed-seed rollout (else no two
+    evaluations of it are the same episodes).
+
+    Raises:
+        FingerprintError: the spec or ``wrap`` cannot be fingerprinted exactly. AgentError: the agent has no identity.
+    """
+    fingerprint = fingerprint_spec(spec)
+    parts = {
+        "agent": agent.identity,
+        "spec": fingerprint.spec_key,
+        "wrap": None if wrap is None else digest(wrap, "wrap"),
+    }
+    return parts, fingerprint.reproducible
 
 
 @dataclasses.dataclass(frozen=True)
@@ -274,8 +287,11 @@ class AgentCheck:
         if self.algorithm is not None and not isinstance(self.algorithm, (str, type)):
             raise InvalidSpec(where, f"expected algorithm to be a name, a class or None, got {shown(self.algorithm)}")
 
-    def run(self, *, cache_dir: str | Path | None = DEFAULT_CACHE_DIR) -> SpecResult:
-        """The agent judged against the spec: :func:`check_agent` with these settings (and ``cache_dir``)."""
+    def run(
+        self, *, cache_dir: str | Path | None = DEFAULT_CACHE_DIR, outcomes: list[dict[str, int]] | None = None
+    ) -> SpecResult:
+        """The agent judged against the spec: :func:`check_agent` with these settings (and ``cache_dir`` and
+        ``outcomes``)."""
         return check_agent(
             self.spec,
             self.agent,
@@ -286,7 +302,18 @@ class AgentCheck:
             seed=self.seed,
             algorithm=self.algorithm,
             cache_dir=cache_dir,
+            outcomes=outcomes,
         )
+
+
+def seed_base(seed: int) -> int:
+    """The env seed of evaluation episode 0 of ``seed`` (episode ``i`` takes this plus ``i``), as a trained run's.
+
+    Example:
+        >>> seed_base(0), seed_base(1) - seed_base(0) > 10_000
+        (1000000, True)
+    """
+    return EVAL_SEED_BASE + seed * EVAL_SEED_STRIDE
 
 
 def agent_stages(where: str, spec: Spec, episodes: int | None, max_episodes: int | None) -> list[int]:
@@ -319,9 +346,7 @@ def agent_episodes(
     try:
         check_fits(agent, env.observation_space, env.action_space)
         with _threads(agent):
-            _episodes(
-                where, agent, env, EVAL_SEED_BASE + seed * EVAL_SEED_STRIDE, start, count, None, None, None, outcomes
-            )
+            _episodes(where, agent, env, seed_base(seed), start, count, None, None, None, outcomes)
     finally:
         env.close()
     return outcomes

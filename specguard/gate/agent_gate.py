@@ -22,9 +22,11 @@ Example:
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from specguard.agents.agent import Agent
 from specguard.engine.check_agent import AGENT_OBSERVATIONS, agent_episodes, agent_stages, check_agent, spec_agent
 from specguard.engine.spec_result import SpecResult
 from specguard.error import InvalidSpec
@@ -35,7 +37,18 @@ from specguard.stats.sequential import DEFAULT_ALPHA, DEFAULT_MARGIN, GateState
 from specguard.utils.text import shown
 from specguard.validation import check_choice, check_natural, check_open_fraction
 
-__all__ = ["AgentComparison", "KeyComparison", "compare_agents"]
+__all__ = [
+    "AgentComparison",
+    "Figures",
+    "KeyComparison",
+    "compare_agents",
+    "key_comparison",
+    "paired_figures",
+    "played",
+]
+
+Figures = tuple[int, int, int, int]
+"""One key on paired episodes: the old agent's successes, the new one's, the pairs lost (``b``) and gained (``c``)."""
 
 
 @dataclass(frozen=True)
@@ -105,6 +118,42 @@ class AgentComparison:
         }
 
 
+def played(
+    spec: Spec, agent: Agent, outcomes: list[dict[str, int]], total: int, **options: Any
+) -> list[dict[str, int]]:
+    """The outcomes of the agent's first ``total`` episodes: ``outcomes`` (those its check played, each episode's
+    own), extended in place by the episodes beyond them that the pairs need (``options``: ``observation``, ``wrap``
+    and ``seed``, as :func:`~specguard.engine.check_agent.agent_episodes` takes them)."""
+    have = len(outcomes)
+    if have < total:
+        outcomes += agent_episodes(spec, agent, have, total - have, **options)
+    return outcomes[:total]
+
+
+def paired_figures(old: Sequence[Mapping[str, int]], new: Sequence[Mapping[str, int]], key: str) -> Figures:
+    """``(old, new, lost, gained)`` on ``key`` over paired episodes (each episode's outcomes, as
+    :func:`~specguard.engine.check_agent.check_agent` gives them): each side's successes, and the discordant pairs.
+
+    Example:
+        >>> paired_figures([{"up": 1}, {"up": 1}, {"up": 0}], [{"up": 0}, {"up": 1}, {"up": 0}], "up")
+        (2, 1, 1, 0)
+    """
+    old_k = [bool(o[key]) for o in old]
+    new_k = [bool(o[key]) for o in new]
+    b, c = discordant(old_k, new_k)
+    return sum(old_k), sum(new_k), b, c
+
+
+def key_comparison(figures: Figures, episodes: int, p_value: float, *, dropped: bool, margin: float) -> KeyComparison:
+    """One key's comparison from its :func:`paired_figures` on ``episodes`` pairs and its p-value of a drop: dropped
+    where the family's procedure flags it (``dropped``), else fine once the drop's upper bound is under ``margin``,
+    else open."""
+    old, new, b, c = figures
+    bound = drop_upper_bound(b, c, episodes)
+    state = GateState.DROPPED if dropped else GateState.FINE if bound < margin else GateState.OPEN
+    return KeyComparison(old, new, episodes, b, c, p_value, bound, state)
+
+
 def compare_agents(
     spec: Spec,
     new: Any,
@@ -151,27 +200,18 @@ def compare_agents(
     looks: list[int] = []
     keys: dict[str, KeyComparison] = {}
     for total in stages:
-        for side, agent in agents.items():  # episodes beyond those the verdicts needed, for the pairs
-            have = len(outcomes[side])
-            if have < total:
-                outcomes[side] += agent_episodes(spec, agent, have, total - have, **options)
+        for side, agent in agents.items():
+            played(spec, agent, outcomes[side], total, **options)
         looks.append(total)
-        figures = {}
-        for key in paths:
-            old_k = [bool(o[key]) for o in outcomes["old"][:total]]
-            new_k = [bool(o[key]) for o in outcomes["new"][:total]]
-            b, c = discordant(old_k, new_k)
+        figures = {key: paired_figures(outcomes["old"][:total], outcomes["new"][:total], key) for key in paths}
+        for key, (_, _, b, c) in figures.items():
             p_values[key].append(drop_p_value(b, c))
-            figures[key] = (sum(old_k), sum(new_k), b, c)
         repeated = {key: repeated_p_value(p_values[key], len(stages)) for key in paths}
         flagged = holm(repeated, level)
-        keys = {}
-        for key, (old_n, new_n, b, c) in figures.items():
-            bound = drop_upper_bound(b, c, total)
-            state = (
-                GateState.DROPPED if flagged[key] is not None else GateState.FINE if bound < margin else GateState.OPEN
-            )
-            keys[key] = KeyComparison(old_n, new_n, total, b, c, repeated[key], bound, state)
+        keys = {
+            key: key_comparison(figures[key], total, repeated[key], dropped=flagged[key] is not None, margin=margin)
+            for key in paths
+        }
         states = {k.state for k in keys.values()}
         if GateState.DROPPED in states or GateState.OPEN not in states:
             break

@@ -15,6 +15,7 @@ from specguard.engine.spec_result import SpecResult
 from specguard.extend import SHAPING, Node, until_end
 from specguard.spec.spec import Spec
 from specguard.stats.intervals import run_verdict, success_interval
+from specguard.stats.sequential import GateState
 from specguard.stats.verdicts import OUTCOME_VERBS, GoalOutcome, RunVerdict
 from specguard.tree.keys import GOAL, SAFETY, kind, require_thresholds, resolve_goal
 from specguard.tree.nodes import keeps_to_horizon
@@ -24,6 +25,7 @@ from specguard.utils.text import interval_text
 if TYPE_CHECKING:
     from specguard.gate.baseline import Baseline
     from specguard.gate.comparison import SpecGate
+    from specguard.gate.saved_agent import SavedAgentGate
 
 __all__ = ["GoalCheck", "check_item", "judge_goal", "with_thresholds"]
 
@@ -43,6 +45,8 @@ class GoalCheck:
         gate: the comparison's figures (repeated p-values, state, seeds at each look, the seeds of
             each side, the level it was judged at), for the session's family-wise procedure.
         baseline_runs: ``[seed, successes, episodes]`` per run a saved baseline stores for this goal.
+        agent_baseline: an agent item's entry a saved baseline stores for its test (the stored form of
+            :class:`~specguard.gate.baseline.AgentEntry`).
         notes: the spec's facts about its evaluation episodes (:attr:`SpecResult.notes
             <specguard.engine.spec_result.SpecResult.notes>`), shown under the table as ``specguard run`` shows them.
     """
@@ -69,6 +73,7 @@ class GoalCheck:
     kind: str = GOAL
     gate: dict[str, Any] | None = None
     baseline_runs: list[list[int]] | None = None
+    agent_baseline: dict[str, Any] | None = None
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -271,6 +276,7 @@ def check_item(
     group: str,
     baseline: tuple[Baseline, str] | None = None,
     gate: SpecGate | None = None,
+    agent_gate: SavedAgentGate | None = None,
 ) -> list[GoalCheck]:
     """Check the goals of one test item, failing a passing goal whose success dropped against ``baseline``.
 
@@ -283,13 +289,17 @@ def check_item(
         gate: the spec's comparisons with it (:func:`specguard.gate.comparison.compare_spec`, extra seeds
             included); without one, the spec's own runs are compared at one look, at the level of
             a family of the baseline's size.
+        agent_gate: an agent item's comparison with the agent the baseline saved for its test
+            (:func:`specguard.gate.saved_agent.compare_saved`), in place of ``gate``.
     """
-    if baseline is not None and gate is None:
+    if baseline is not None and gate is None and agent_gate is None:
         gate = _one_look(result, spec, group, baseline[0])
     checks = []
     for path in paths:
         check = judge_goal(result, spec, path, group)
-        if baseline is not None and gate is not None:
+        if baseline is not None and agent_gate is not None:
+            _compare_agent(check, agent_gate, baseline[1])
+        elif baseline is not None and gate is not None:
             _compare(check, gate, *baseline)
         checks.append(check)
     return checks
@@ -328,6 +338,23 @@ def _compare(check: GoalCheck, gate: SpecGate, baseline: Baseline, name: str) ->
         check.hint = f"{rate} {check.comparison} against baseline {name!r}"
 
 
+def _compare_agent(check: GoalCheck, gate: SavedAgentGate, name: str) -> None:
+    """Judge one goal of an agent item against the saved agent: its text and figures; a drop fails a goal that
+    passed its threshold, as a trained spec's does."""
+    if gate.reason is not None:
+        check.comparison = gate.reason
+        return
+    if check.goal not in gate.keys:
+        check.comparison = f"not compared: baseline {name!r} has no figures for it"
+        return
+    check.comparison = gate.describe(check.goal)
+    check.gate = gate.figures(check.goal)
+    if gate.keys[check.goal].state is GateState.DROPPED and check.outcome is GoalOutcome.PASSED:
+        check.outcome = GoalOutcome.FAILED
+        rate = "safety rate" if check.kind == SAFETY else "success"
+        check.hint = f"{rate} {check.comparison} against baseline {name!r}"
+
+
 def _one_look(result: SpecResult, spec: Spec, group: str, baseline: Baseline) -> SpecGate:
     """The spec's comparisons at one look, on its own runs (nothing more is trained)."""
     from specguard.engine.spec_result import SpecResult as Empty
@@ -341,7 +368,7 @@ def _one_look(result: SpecResult, spec: Spec, group: str, baseline: Baseline) ->
         result,
         baseline,
         keys,
-        level=first_level(DEFAULT_ALPHA, max(1, len(baseline.runs))),
+        level=first_level(DEFAULT_ALPHA, baseline.family),
         ceiling=len(result.runs),
         train=lambda seeds: Empty(spec=spec.label, runs=[], goals={}),
     )

@@ -26,11 +26,13 @@ from specguard.pytest_plugin.items import GoalMissed, falsify_check, group_of, o
 from specguard.pytest_plugin.options import add_options, baseline_path, parse_options
 from specguard.pytest_plugin.recorder import PROPERTY, Recorder
 from specguard.pytest_plugin.session import (
-    NOT_IN_BASELINES,
     Session,
+    agent_gate_of,
+    baseline_name,
     gate_of,
     judge_agent,
     run,
+    saved_agent,
     saved_runs,
     scaled,
     terminal_progress,
@@ -167,21 +169,24 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
         return True
     with one_line_errors(pyfuncitem):
         spec, paths, agent = spec_of(pyfuncitem, marker.kwargs.get("expect"))
-        if agent is not None:  # an agent trained elsewhere: judged, not trained; no baseline yet
+        agent_gate, entry = None, None
+        if agent is not None:  # an agent trained elsewhere: judged, not trained; compared on the saved episodes
             agent, result = judge_agent(state, agent, pyfuncitem, group)
             trained, gate, stored = agent.spec, None, None
+            agent_gate = agent_gate_of(state, agent, group)
+            entry = saved_agent(state, agent, group) if state.options.save else None
         else:
             trained = scaled(state, spec)
             result = run(state, trained, pyfuncitem)
             gate = gate_of(state, trained, result, group)
             stored = saved_runs(state, trained, result, gate) if state.options.save else None
-    baseline = (
-        (state.baseline, state.options.compare or "latest") if state.baseline is not None and agent is None else None
-    )
-    checks = check_item(result, spec, paths, group, baseline=baseline, gate=gate)
+    baseline = (state.baseline, baseline_name(state)) if state.baseline is not None else None
+    checks = check_item(result, spec, paths, group, baseline=baseline, gate=gate, agent_gate=agent_gate)
     for check in checks:
-        if agent is not None and (state.baseline is not None or state.options.save):
-            check.comparison = NOT_IN_BASELINES
+        if isinstance(entry, str):  # nothing to save: say why, after any comparison
+            check.comparison = f"{check.comparison}; {entry}" if check.comparison else entry
+        elif entry is not None:
+            check.agent_baseline = entry.to_dict()
         if stored is not None:
             check.baseline_runs = [[r.seed, r.successes[check.goal], r.episodes] for r in stored.runs]
         row = check.to_row()
@@ -216,7 +221,7 @@ def pytest_runtest_call(item: pytest.Item) -> None:
     state = item.config.stash[_SESSION]
     if not state.options.enabled or marker.kwargs.get("error"):
         return  # skipped without --goal-specs; a malformed @goal_spec fails as usual
-    from specguard.report.show import SHOW_PROPERTY, SHOWN, plan_text, render_spec
+    from specguard.report.show import SHOW_PROPERTY, SHOWN, agent_plan_text, plan_text, render_spec
 
     group = group_of(item)
     shown = item.config.stash.setdefault(_SHOWN_GROUPS, set())
@@ -226,18 +231,18 @@ def pytest_runtest_call(item: pytest.Item) -> None:
         spec, _, agent = spec_of(item, marker.kwargs.get("expect"))
         trained = scaled(state, spec) if agent is None else spec
         texts = [render_spec(trained, group)] if show else []
+        # without a baseline: the session's goal items, and at least this spec's own thresholds (an item
+        # asserting a spec's own thresholds is one item for several comparisons)
+        family = state.baseline.family if state.baseline is not None else state.goal_items
+        family = max(1, family, len(trained.thresholds))
         if plan and agent is not None:
-            texts.append(f"{group}: an agent trained elsewhere (AgentCheck), judged by check_agent: nothing to train")
+            texts.append(agent_plan_text(agent, group, family=family, baseline=state.baseline))
         elif plan:
-            # without a baseline: the session's goal items, and at least this spec's own thresholds (an item
-            # asserting a spec's own thresholds is one item for several comparisons)
-            family = len(state.baseline.runs) if state.baseline is not None else state.goal_items
-            family = max(family, len(trained.thresholds))
             texts.append(
                 plan_text(
                     trained,
                     group,
-                    family=max(1, family),
+                    family=family,
                     compare_seeds=state.options.compare_seeds,
                     baseline=state.baseline,
                 )

@@ -141,19 +141,22 @@ def _write_report(state: Session, directory: Path) -> list[str]:
 
 
 def _save_baseline(state: Session, name: str) -> str:
-    """Merge the session's runs into baseline ``name``: the line saying what it replaced, or why it was not saved."""
+    """Merge the session's runs (and its agents' episodes) into baseline ``name``: the line saying what it replaced,
+    or why it was not saved."""
     from specguard.error import BaselineError
-    from specguard.gate.baseline import save_baseline
+    from specguard.gate.baseline import AgentEntry, save_baseline
 
     path = state.options.baseline_dir / f"{name}.json"
     rows = [r for r in state.rows if r.get("baseline_runs")]
     key = "{0[group]}::{0[goal]}".format
+    agents = {r["group"]: r["agent_baseline"] for r in state.rows if r.get("agent_baseline")}  # one per test
     try:
         saved = save_baseline(
             path,
             {key(r): [(k, n) for _, k, n in r["baseline_runs"]] for r in rows},
             {key(r): r["spec_key"] for r in rows if r.get("spec_key")},
             {key(r): [seed for seed, _, _ in r["baseline_runs"]] for r in rows},
+            {group: AgentEntry.from_dict(group, entry) for group, entry in agents.items()},
         )
     except BaselineError as e:
         return f"{WARNING} baseline {name!r} was not saved: {e}"

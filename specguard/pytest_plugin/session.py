@@ -16,27 +16,27 @@ if TYPE_CHECKING:
     from specguard.engine.check_agent import AgentCheck
     from specguard.engine.run_spec import RunOptions
     from specguard.engine.spec_result import SpecResult
-    from specguard.gate.baseline import Baseline
+    from specguard.gate.baseline import AgentEntry, Baseline
     from specguard.gate.comparison import SpecGate
+    from specguard.gate.saved_agent import SavedAgentGate
     from specguard.parallel.executors import Executor
     from specguard.spec.spec import Spec
     from specguard.training.progress import ProgressEvent
 
 __all__ = [
-    "NOT_IN_BASELINES",
     "Session",
+    "agent_gate_of",
+    "baseline_name",
     "gate_of",
     "judge_agent",
     "run",
     "run_options",
+    "saved_agent",
     "saved_runs",
     "scaled",
     "terminal_lines",
     "terminal_progress",
 ]
-
-NOT_IN_BASELINES = "not compared or saved: an agent judged by check_agent is left out of baselines for now"
-"""An :class:`~specguard.engine.check_agent.AgentCheck` item's comparison under ``--goal-specs-save/-compare``."""
 
 
 @dataclasses.dataclass
@@ -55,6 +55,9 @@ class Session:
     gates: dict[str, SpecGate] = dataclasses.field(default_factory=dict)  # spec key -> its comparisons
     saved: dict[str, SpecGate] = dataclasses.field(default_factory=dict)  # spec key -> the runs a saved baseline stores
     goal_items: int = 0  # goal-spec items collected: a plan's family of comparisons when no baseline gives one
+    agent_outcomes: dict[str, list[dict[str, int]]] = dataclasses.field(default_factory=dict)  # group -> episodes'
+    agent_gates: dict[str, SavedAgentGate] = dataclasses.field(default_factory=dict)  # group -> vs the saved agent
+    agent_entries: dict[str, AgentEntry | str] = dataclasses.field(default_factory=dict)  # group -> saved, or why not
 
 
 def run_options(state: Session) -> RunOptions:
@@ -161,9 +164,54 @@ def judge_agent(state: Session, check: AgentCheck, item: pytest.Item, group: str
     trained spec's (``pytest_goal_spec_result``)."""
     check = dataclasses.replace(check, spec=check.spec.as_run(undecided=state.options.undecided))
     if group not in state.agents:
-        result = state.agents[group] = check.run(cache_dir=state.options.cache_dir)
+        # each episode's outcomes where a baseline saves or pairs them (the evaluation cache keeps counts only)
+        paired = state.options.save or (state.baseline is not None and group in state.baseline.agents)
+        outcomes = state.agent_outcomes.setdefault(group, []) if paired else None
+        result = state.agents[group] = check.run(cache_dir=state.options.cache_dir, outcomes=outcomes)
         item.config.hook.pytest_goal_spec_result(item=item, spec=check.spec, result=result)
     return check, state.agents[group]
+
+
+def baseline_name(state: Session) -> str:
+    """The name of the baseline compared with, as the comparisons' lines say it."""
+    return state.options.compare or "latest"
+
+
+def agent_gate_of(state: Session, check: AgentCheck, group: str) -> SavedAgentGate | None:
+    """The agent's comparison with the agent the session's baseline saved for its test (None without a baseline),
+    once per test, on the baseline's own episodes (:func:`specguard.gate.saved_agent.compare_saved`), each key
+    judged at Holm's first step over the baseline's comparisons."""
+    if state.baseline is None:
+        return None
+    if group not in state.agent_gates:
+        from specguard.gate.saved_agent import compare_saved
+        from specguard.stats.family import first_level
+        from specguard.stats.sequential import DEFAULT_ALPHA
+
+        state.agent_gates[group] = compare_saved(
+            check,
+            state.agent_outcomes.setdefault(group, []),
+            state.baseline,
+            group,
+            baseline_name(state),
+            level=first_level(DEFAULT_ALPHA, state.baseline.family),
+        )
+    return state.agent_gates[group]
+
+
+def saved_agent(state: Session, check: AgentCheck, group: str) -> AgentEntry | str:
+    """What ``--goal-specs-save`` stores for the agent's test (:func:`specguard.gate.saved_agent.saved_entry`), or
+    the line saying why nothing is (an agent, spec or ``wrap`` without an exact identity), once per test."""
+    if group not in state.agent_entries:
+        from specguard.error import AgentError, FingerprintError
+        from specguard.gate.saved_agent import saved_entry
+
+        try:
+            entry: AgentEntry | str = saved_entry(check, state.agent_outcomes.setdefault(group, []))
+        except (FingerprintError, AgentError) as e:
+            entry = f"not saved: {e}"
+        state.agent_entries[group] = entry
+    return state.agent_entries[group]
 
 
 def _train(state: Session, spec: Spec) -> Callable[[list[int]], SpecResult]:
@@ -195,7 +243,7 @@ def gate_of(state: Session, spec: Spec, result: SpecResult, group: str) -> SpecG
             result,
             state.baseline,
             {path: f"{group}::{path}" for path in spec.thresholds},
-            level=first_level(DEFAULT_ALPHA, max(1, len(state.baseline.runs))),
+            level=first_level(DEFAULT_ALPHA, state.baseline.family),
             ceiling=gate_ceiling(spec, state.options.compare_seeds),
             train=_train(state, spec),
         )

@@ -91,8 +91,8 @@ def table_lines(rows: Sequence[Row]) -> list[str]:
 
 
 def family_lines(rows: Sequence[Row]) -> list[str]:
-    """The comparison with a baseline in words: the family-wise procedure and its level, what it flagged, and the
-    seeds the comparisons trained (none without a comparison)."""
+    """The comparison with a baseline in words: the family-wise procedure and its level, what it flagged, the
+    seeds the comparisons trained and the saved episodes agents were paired on (none without a comparison)."""
     from specguard.stats.family import procedure_text
     from specguard.stats.sequential import DEFAULT_ALPHA
 
@@ -101,20 +101,29 @@ def family_lines(rows: Sequence[Row]) -> list[str]:
         return []
     flagged = [f"{r['group']}::{r['goal']}" for r in compared if r["gate"].get("holm") is not None]
     specs: dict[str, tuple[int, int]] = {}  # per spec: seeds compared, seeds of its own
+    agents: dict[str, int] = {}  # per agent test: the saved episodes it was paired on
     for r in compared:
-        specs.setdefault(r["group"], (len(r["gate"]["seeds"]), len(r.get("per_seed") or [])))
+        if "episodes" in r["gate"]:  # an agent's, on paired episodes (specguard.gate.saved_agent)
+            agents.setdefault(r["group"], r["gate"]["episodes"])
+        else:
+            specs.setdefault(r["group"], (len(r["gate"]["seeds"]), len(r.get("per_seed") or [])))
     extra = sum(max(0, seeds - own) for seeds, own in specs.values())
     level = compared[0]["gate"]["level"]
     stored = round(DEFAULT_ALPHA / level)
     lines = [
-        f"{procedure_text(DEFAULT_ALPHA, len(compared))}; each comparison was judged at {level:.2g} while its "
-        f"seeds trained (Holm's first step over the {stored} goal{'s' if stored != 1 else ''} and safety "
-        f"rate{'s' if stored != 1 else ''} of the baseline)",
+        f"{procedure_text(DEFAULT_ALPHA, len(compared))}; each comparison was judged at {level:.2g}"
+        f"{' while its seeds trained' if specs else ''} (Holm's first step over the {stored} goal"
+        f"{'s' if stored != 1 else ''} and safety rate{'s' if stored != 1 else ''} of the baseline)",
         f"dropped: {', '.join(flagged) if flagged else 'none'}",
-        "seeds compared per spec: "
-        + ", ".join(f"{group} {seeds}" for group, (seeds, _) in specs.items())
-        + f" ({extra} beyond the specs' own)",
     ]
+    if specs:
+        lines.append(
+            "seeds compared per spec: "
+            + ", ".join(f"{group} {seeds}" for group, (seeds, _) in specs.items())
+            + f" ({extra} beyond the specs' own)"
+        )
+    if agents:
+        lines.append("saved episodes paired per agent: " + ", ".join(f"{group} {n}" for group, n in agents.items()))
     return lines
 
 

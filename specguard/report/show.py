@@ -179,3 +179,42 @@ def plan_text(spec: Spec, group: str, *, family: int, compare_seeds: int, baseli
         runs = {path: baseline.runs[key] for path, key in keys.items() if key in baseline.runs}
     plan = plan_spec(spec, family=family, compare_seeds=compare_seeds, baseline=runs, label=group)
     return "\n".join(plan_lines(plan))
+
+
+def agent_plan_text(check: Any, group: str, *, family: int, baseline: Any = None) -> str:
+    """What an agent item's gate can see (``--goal-specs-plan``), playing nothing: the episodes it is paired on (the
+    agent its baseline saved, :mod:`specguard.gate.saved_agent`), the level of each comparison, and the smallest
+    bound on a drop those pairs give (none discordant), which must be under the margin for a comparison to be fine.
+
+    Example:
+        >>> import specguard as sg
+        >>> cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+        >>> spec = sg.Spec(cartpole, sg.Goal("right", theta=(0.1, None)), budget=sg.Budget(timesteps=1), expect=0.3)
+        >>> text = agent_plan_text(sg.AgentCheck(spec, print, max_episodes=40), "t.py::test", family=4)
+        >>> text.splitlines()[1].split(";")[0]
+        'comparison with a baseline: a saved baseline stores its 40 episodes'
+        >>> "with no discordant pair a drop is at most 10 points, under the margin of 20" in text
+        True
+    """
+    from specguard.engine.check_agent import agent_stages
+    from specguard.stats.family import first_level
+    from specguard.stats.paired import TEST, drop_upper_bound
+    from specguard.stats.sequential import DEFAULT_ALPHA, DEFAULT_MARGIN
+
+    head = f"{group}: an agent trained elsewhere (AgentCheck), judged by check_agent: nothing to train"
+    saved = baseline.agents.get(group) if baseline is not None else None
+    if baseline is not None and saved is None:
+        return f"{head}\ncomparison with a baseline: none, the baseline holds no agent saved for this test"
+    if saved is None:
+        n = agent_stages("AgentCheck", check.spec, check.episodes, check.max_episodes)[-1]
+        where = f"a saved baseline stores its {n} episodes; a new agent is paired on them"
+    else:
+        n = len(saved.seeds)
+        where = f"paired on {n} saved episodes (agent {saved.name!r}, env seeds {saved.seeds[0]}..{saved.seeds[-1]})"
+    bound = drop_upper_bound(0, 0, n)
+    fine = "under" if bound < DEFAULT_MARGIN else "not under: no comparison can be fine, only dropped or undecided"
+    return (
+        f"{head}\ncomparison with a baseline: {where}; {TEST}, each judged at "
+        f"{first_level(DEFAULT_ALPHA, family):.2g} (5% over {family} comparisons, Holm's first step); with no "
+        f"discordant pair a drop is at most {bound * 100:.0f} points, {fine} the margin of {DEFAULT_MARGIN * 100:.0f}"
+    )

@@ -87,6 +87,7 @@ __all__ = [
     "Look",
     "boundaries",
     "compare_seeds",
+    "describe_change",
     "drop_bounds",
     "look_levels",
     "permutation_p_values",
@@ -416,21 +417,58 @@ class Look:
 
     def describe(self) -> str:
         """One line: the verdict, success before and after, the p-value or the bound, and the seeds it took."""
-        change = f"{self.before:.0%} -> {self.after:.0%}"
         seeds = f"{self.seeds[-1]} seeds vs {self.baseline_seeds} in the baseline"
         if len(self.seeds) > 1:
             seeds += f", looks at {', '.join(map(str, self.seeds))}"
-        if self.state is GateState.DROPPED:
-            return f"dropped: {change} (p = {self.p_drop:.2g} <= {self.alpha:.2g}; {seeds})"
-        if self.improved:
-            return f"improved: {change} (p = {self.p_rise:.2g} <= {self.alpha:.2g}; {seeds})"
-        bound = f"a drop of {math.ceil(max(self.upper, 0.0) * 100)} points at most"
-        if self.state is GateState.FINE:
-            return f"unchanged within chance: {change} ({bound}, under the margin of {self.margin * 100:.0f}; {seeds})"
-        return (
-            f"undecided: {change} (p = {self.p_drop:.2g} > {self.alpha:.2g}, {bound} is not under the margin of "
-            f"{self.margin * 100:.0f}; {seeds}, the most allowed)"
+        return describe_change(
+            self.state,
+            self.before,
+            self.after,
+            p_drop=self.p_drop,
+            p_rise=self.p_rise,
+            alpha=self.alpha,
+            upper=self.upper,
+            margin=self.margin,
+            sample=seeds,
+            most="the most allowed",
         )
+
+
+def describe_change(
+    state: GateState,
+    before: float,
+    after: float,
+    *,
+    p_drop: float,
+    p_rise: float,
+    alpha: float,
+    upper: float,
+    margin: float,
+    sample: str,
+    most: str,
+) -> str:
+    """A comparison's line, for any comparison with a baseline (a spec's seeds, an agent's paired episodes): the
+    verdict (dropped; improved, a rise at ``p_rise <= alpha``; unchanged within chance; undecided), success before
+    and after, the p-value or the bound, and ``sample``, what it was measured on (``most``: why an undecided one
+    stopped there).
+
+    Example:
+        >>> describe_change(GateState.FINE, 0.9, 0.85, p_drop=0.9, p_rise=0.8, alpha=0.025, upper=0.12, margin=0.2,
+        ...                 sample="20 paired episodes", most="all of them")
+        'unchanged within chance: 90% -> 85% (a drop of 12 points at most, under the margin of 20; 20 paired episodes)'
+    """
+    change = f"{before:.0%} -> {after:.0%}"
+    if state is GateState.DROPPED:
+        return f"dropped: {change} (p = {p_drop:.2g} <= {alpha:.2g}; {sample})"
+    if p_rise <= alpha:
+        return f"improved: {change} (p = {p_rise:.2g} <= {alpha:.2g}; {sample})"
+    bound = f"a drop of {math.ceil(max(upper, 0.0) * 100)} points at most"
+    if state is GateState.FINE:
+        return f"unchanged within chance: {change} ({bound}, under the margin of {margin * 100:.0f}; {sample})"
+    return (
+        f"undecided: {change} (p = {p_drop:.2g} > {alpha:.2g}, {bound} is not under the margin of "
+        f"{margin * 100:.0f}; {sample}, {most})"
+    )
 
 
 def compare_seeds(
