@@ -221,9 +221,10 @@ def test_auto_weights_are_refused_with_a_trainer():
         sg.Spec(SHORT, tree, budget=BUDGET, trainer=improving)
 
 
-def test_the_doors_tensorboard_folder_leaves_a_trainer_spec_as_it_is(tmp_path):
+def test_the_doors_tensorboard_folder_leaves_a_trainer_spec_as_it_is_and_says_so(tmp_path):
     s = spec()
-    assert s.as_run(tensorboard_log=tmp_path) is s
+    with pytest.warns(sg.SpecWarning, match=r"trains with its own trainer \(.*improving.*\): the TensorBoard folder"):
+        assert s.as_run(tensorboard_log=tmp_path) is s
 
 
 # -- identity, cache, workers ----------------------------------------------------------------------------------

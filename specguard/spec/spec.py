@@ -26,6 +26,7 @@ import functools
 import importlib.util
 import inspect
 import os
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from numbers import Real
@@ -33,7 +34,7 @@ from typing import Any, cast
 
 from specguard.construction.env import OBSERVATIONS, BaselineEnv, EnvFactory, SpecEnv
 from specguard.construction.initial_env import InitialEnv
-from specguard.error import InvalidSpec
+from specguard.error import InvalidSpec, SpecWarning
 from specguard.spec.algorithms import check_hyperparameters, check_policy, default_policy, resolve_algorithm
 from specguard.spec.budget import Budget
 from specguard.spec.zoo import SCHEDULED, LinearSchedule
@@ -350,7 +351,14 @@ class Spec:
         changes: dict[str, Any] = {}
         if undecided is not None and undecided != spec.undecided:
             changes["undecided"] = undecided
-        if tensorboard_log is not None and spec.trainer is None and os.fspath(tensorboard_log) != spec.tensorboard_log:
+        if tensorboard_log is not None and spec.trainer is not None:  # kept as it is, but not in silence
+            warnings.warn(
+                f"Spec {spec.label!r} trains with its own trainer ({function_text(spec.trainer)}): the TensorBoard "
+                f"folder {os.fspath(tensorboard_log)!r} gets nothing from it (a trainer logs where it likes)",
+                SpecWarning,
+                stacklevel=2,
+            )
+        elif tensorboard_log is not None and os.fspath(tensorboard_log) != spec.tensorboard_log:
             changes["tensorboard_log"] = os.fspath(tensorboard_log)
         return dataclasses.replace(spec, **changes) if changes else spec
 
