@@ -1,4 +1,5 @@
-"""Opt-in markers: ``paper`` (the paper's negative results, full budgets) and ``highway`` (highway-env, slow).
+"""Opt-in markers: ``paper`` (the paper's negative results, full budgets), ``long`` (passing specs that train for
+many minutes) and ``highway`` (highway-env, slow).
 
 Their specs run only when ``-m`` names the marker. ``highway.py`` needs the ``highway`` extra, which
 README's first command does not install: without it, the main job collects neither it nor
@@ -14,6 +15,7 @@ import pytest
 
 OPT_IN = {
     "paper": "a spec the main job leaves out (it trains its whole budget); opt in with -m paper",
+    "long": "a passing spec the main job leaves out (many minutes per seed on 2 cores); opt in with -m long",
     "highway": "a highway-env spec the main job leaves out (minutes per seed); opt in with -m highway",
 }
 

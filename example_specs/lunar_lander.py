@@ -66,6 +66,9 @@ ppo_kwargs: dict[str, object] = {
     "gae_lambda": 0.98,
     "gamma": 0.999,
     "ent_coef": 0.01,
+    # Adam's fused CPU kernel: the same update in one call per step instead of a Python loop over the network's
+    # tensors (32k steps: 15.6 s against 18.3 s on the 2-core development machine).
+    "policy_kwargs": {"optimizer_kwargs": {"fused": True}},
 }
 BUDGET = sg.Budget(timesteps=1_000_000, min_seeds=2, eval_episodes=30)
 COMMON: dict[str, Any] = dict(budget=BUDGET, hyperparameters=ppo_kwargs, n_envs=16)

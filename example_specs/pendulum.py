@@ -38,6 +38,9 @@ ZOO_PPO: dict[str, object] = {
     "learning_rate": 1e-3,
     "use_sde": True,
     "sde_sample_freq": 4,
+    # Adam's fused CPU kernel (one call per update, not a loop over the tensors): 12k steps of (w) 9.1 s against
+    # 11.0 s on the 2-core development machine.
+    "policy_kwargs": {"optimizer_kwargs": {"fused": True}},
 }
 BUDGET = sg.Budget(timesteps=100_000, min_seeds=2, eval_episodes=30)
 COMMON: dict[str, Any] = dict(budget=BUDGET, hyperparameters=ZOO_PPO, n_envs=4)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+import pickle
 import re
 
 import gymnasium as gym
@@ -311,6 +313,26 @@ def test_envs_of_one_factory_share_the_compiled_tree_but_not_the_episode(build_c
     assert second.step(torque)[1] == again.step(torque)[1] != step[1]
 
 
+def test_info_dicts_deep_copy_in_one_call_and_stay_independent(monkeypatch):
+    # SB3's DummyVecEnv deep-copies every info at every step; the goals/safe/reward-term dicts hold scalars only,
+    # so their deep copy is a shallow one (no walk over their items), and still a copy a consumer may change.
+    env = sg.make_env(lunar_lander.initial_env, lunar_lander.trees["w"])
+    env.reset(seed=0)
+    info = env.step(env.action_space.sample())[4]
+    walked: list[object] = []
+    atomic = copy._deepcopy_dispatch[bool]
+    for kind in (bool, float):
+        monkeypatch.setitem(copy._deepcopy_dispatch, kind, lambda x, memo: walked.append(x) or atomic(x, memo))
+    copied = copy.deepcopy(info)
+    assert walked == [info["base_reward"]]  # the top-level float only
+    for key in ("goals", "safe", "reward_terms"):
+        assert copied[key] == info[key] and copied[key] is not info[key]
+        copied[key]["mutated"] = True
+        assert "mutated" not in info[key]
+    assert pickle.loads(pickle.dumps(info)) == info  # SubprocVecEnv sends infos between processes
+    env.close()
+
+
 @pytest.mark.parametrize("tree", [lunar_lander.trees["c"], sg.Goal("legs", leg1=1.0)], ids=["own-state", "passthrough"])
 def test_what_a_step_returns_is_never_changed_by_a_later_step(tree):
     # Consumers keep references (SB3's DummyVecEnv keeps the last observation as info["terminal_observation"]
@@ -325,8 +347,8 @@ def test_what_a_step_returns_is_never_changed_by_a_later_step(tree):
         info["goals"]["mutated"] = True  # a consumer writing into its info changes nothing that follows
         if terminated or truncated:
             obs, info = env.reset(seed=1)
-    for obs, copy, info, snapshot in kept:
-        assert np.array_equal(obs, copy)
+    for obs, kept_obs, info, snapshot in kept:
+        assert np.array_equal(obs, kept_obs)
         assert {k: v for k, v in info["goals"].items() if k != "mutated"} == snapshot["goals"]
         assert info["safe"] == snapshot["safe"]
     assert len({id(o) for o, *_ in kept}) == len(kept)

@@ -44,6 +44,29 @@ from specguard.utils.text import shown
 from specguard.validation import check_choice
 
 _FLOAT32 = np.dtype(np.float32)
+
+
+class ScalarDict(dict[str, Any]):
+    """A dict of immutable scalars (``info["goals"]``, ``["safe"]``, ``["reward_terms"]``): its deep copy is a
+    shallow one, made in one call.
+
+    SB3's ``DummyVecEnv`` deep-copies every env's info at every step; ``copy.deepcopy`` walks a plain dict item
+    by item in Python (about 3 us a call), which on LunarLander cost more than the env's own step. The values
+    are bools and floats, so a shallow copy is a deep one. It is a plain ``dict`` in every other respect::
+
+        >>> import copy
+        >>> d = ScalarDict(a=True)
+        >>> c = copy.deepcopy(d)
+        >>> c == d, c is d, type(c).__name__
+        (True, False, 'ScalarDict')
+    """
+
+    __slots__ = ()
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> ScalarDict:
+        return ScalarDict(self)
+
+
 _isfinite = math.isfinite
 
 __all__ = [
@@ -378,8 +401,8 @@ class SpecEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         f = self._read(obs, info, self.env, 0)
         ev = self.evaluator
         ev.reset(f)
-        info["goals"] = ev.goals
-        info["safe"] = ev.safe_info() if self._safety_keys else {}
+        info["goals"] = ScalarDict(ev.goals)
+        info["safe"] = ScalarDict(ev.safe_info() if self._safety_keys else ())
         observation = obs if self._passthrough else np.array(f + ev.own_state, _FLOAT32)
         return (self._beside(obs, observation) if self._with_env else observation), info
 
@@ -409,9 +432,9 @@ class SpecEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         ev = self.evaluator
         # The last state is judged too; a termination by the initial env is one before the horizon.
         result = ev.step(action, f, terminated or truncated, terminated)
-        info["goals"] = ev.goals  # a new dict each step, as are the others
-        info["safe"] = ev.safe_info() if self._safety_keys else {}
-        info["reward_terms"] = result.terms
+        info["goals"] = ScalarDict(ev.goals)  # a new dict each step, as are the others
+        info["safe"] = ScalarDict(ev.safe_info() if self._safety_keys else ())
+        info["reward_terms"] = ScalarDict(result.terms)
         info["base_reward"] = float(base_reward)
         # A new array each step (a consumer may keep it, e.g. SB3's terminal_observation); or, when
         # nothing is added or converted, the base env's own observation untouched.
@@ -475,8 +498,8 @@ class BaselineEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         self._t = 0
 
     def _info(self, info: dict[str, Any], members: tuple[bool, ...]) -> dict[str, Any]:
-        info["goals"] = dict(zip(self.evaluator.paths, members))
-        info["safe"] = dict(zip(self.evaluator.safety_keys, self.evaluator.safe))
+        info["goals"] = ScalarDict(zip(self.evaluator.paths, members))
+        info["safe"] = ScalarDict(zip(self.evaluator.safety_keys, self.evaluator.safe))
         return info
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
