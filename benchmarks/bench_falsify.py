@@ -40,8 +40,12 @@ asked for are trained (``train_seeds``). Also printed:
 the cost per episode of the falsifier's runner against a plain rollout. Exits
 0 whatever the figures (targets are reported, not asserted).
 
+``--score episode`` runs the search with the score over the whole episode
+(``EpisodeRunner(score="episode")``) instead of the default, the last state's.
+
 Usage:
     python benchmarks/bench_falsify.py [--seeds 12 13 14 15 16] [--searches 20] [--budget 600] [--case CartPole]
+        [--score {last,episode}]
 """
 
 from __future__ import annotations
@@ -61,6 +65,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the case stud
 import specguard as sg
 from specguard.engine.falsify_run import batch_policy, property_keys
 from specguard.engine.run_spec import RunOptions, train_seeds
+from specguard.falsify.robustness import SCORES
 from specguard.falsify.search import EpisodeRunner, falsify
 from specguard.starts.space import StartSpace
 from specguard.training.policy import one_torch_thread, policy
@@ -171,6 +176,12 @@ def main() -> int:
     parser.add_argument("--case", default="", help="only cases whose name contains this")
     parser.add_argument("--seeds", type=int, nargs="+", default=[12, 13, 14, 15, 16], help="the agents (their seeds)")
     parser.add_argument("--workers", type=int, default=2, help="training processes")
+    parser.add_argument(
+        "--score",
+        choices=SCORES,
+        default="last",
+        help="the search's score: last (the falsifier's default) or episode (over the whole episode)",
+    )
     args = parser.parse_args()
     with one_torch_thread():  # as the falsifier's own runs are
         run_suite(args)
@@ -180,7 +191,7 @@ def main() -> int:
 def run_suite(args: argparse.Namespace) -> None:
     machine = platform.processor() or platform.machine()
     print(f"machine: {machine}, {platform.system()}, Python {platform.python_version()}")
-    print(f"{args.searches} guided searches per agent, at most {args.budget} episodes each\n")
+    print(f"{args.searches} guided searches per agent, at most {args.budget} episodes each, score={args.score!r}\n")
     header = f"{'case':27s} {'run':>3s} {'failure rate':>20s} {'guided found':>12s} {'guided ERT':>10s}"
     header += f" {'random found':>12s} {'random ERT':>10s} {'ratio':>6s} {'cost/ep':>8s} {'seconds':>7s}"
     print(header, flush=True)
@@ -194,7 +205,7 @@ def run_suite(args: argparse.Namespace) -> None:
             began = time.perf_counter()
             model, normalizer = sg.load_model(result, seed), sg.load_normalizer(result, seed)
             act = batch_policy(model, normalizer, spec.deterministic)
-            runner = EpisodeRunner(spec.make_env, act, space, property_keys(spec))
+            runner = EpisodeRunner(spec.make_env, act, space, property_keys(spec), score=args.score)
             found: list[int | None] = []
             drawn_by: list[dict[str, int]] = []
             found_by: list[str | None] = []

@@ -2,9 +2,7 @@
 
 The falsifier's property is the spec's own: the root goal, each asserted goal
 and each asserted safety annotation, judged as the env judges them. Its search
-is steered by a *robustness score*, the smallest margin over those keys,
-computed over the whole episode as signal temporal logic (STL) computes its
-quantitative semantics:
+is steered by a *robustness score*, the smallest margin over those keys:
 
 * a goal that is a box (:meth:`Node.box`) has the box's margin: per feature,
   the distance to the box's nearer side in units of the feature's scale
@@ -14,10 +12,18 @@ quantitative semantics:
   its children's; the default signs the children's smallest margin by
   membership, so a new operator has one without writing anything;
 * a safety annotation says its own (:meth:`specguard.extend.Annotation.margin`),
-  by default ``1`` without a violation and minus the violations with; one that
-  avoids a region of states (:meth:`specguard.extend.Annotation.avoids`, as
-  ``Avoid``) has, without a violation, the state's distance from the region
-  (the region's margin, negated; 0 inside it, where no step entered it);
+  by default ``1`` without a violation and minus the violations with.
+
+That is the default score, ``score="last"`` (:data:`SCORES`): each key's margin
+in the episode's last state. ``score="episode"`` opts in to the score over the
+whole episode, as signal temporal logic (STL) computes its quantitative
+semantics (measured in docs/guide/falsify.md: not better on held-out agents,
+and dearer per episode, hence not the default); it changes two things:
+
+* a safety annotation that avoids a region of states
+  (:meth:`specguard.extend.Annotation.avoids`, as ``Avoid``) has, without a
+  violation, the state's distance from the region (the region's margin,
+  negated; 0 inside it, where no step entered it);
 * a key whose meaning is *throughout the episode* (:func:`over_episode`: a node
   that holds until the end, as ``Always``, and every safety annotation) has the
   **minimum of its margin over the episode's states** (:class:`EpisodeMinimum`,
@@ -25,25 +31,24 @@ quantitative semantics:
   the minimum over time of phi's, ``rho(G phi, w, 0) = min_t rho(phi, w, t)``.
   Taken from rtamt's discrete-time offline semantics (``AlwaysSemantics``: a
   minimum carried over the samples, whose value at time 0 is the whole trace's;
-  a predicate ``x <= c`` scores ``c - x``, which a box's margin is per side). A kept
-  ``Avoid`` is scored by its closest approach to its region, a balanced pole by
-  its deepest dip, not by where the episode happened to end;
-* the root goal, where reaching it ended the episode, has how early it was
-  reached instead (:func:`reached_early`): every such episode ends just inside
-  it, so its margin there says nothing, while an episode that needed most of
-  its steps was close to running out of them (STL's time robustness, Donzé and
-  Maler 2010). A reach goal otherwise keeps its last state's margin (``F phi``
-  judged where the episode ends).
+  a predicate ``x <= c`` scores ``c - x``, which a box's margin is per side). A
+  kept ``Avoid`` is scored by its closest approach to its region, a balanced
+  pole by its deepest dip, not by where the episode happened to end. Where an
+  operator's goal at the end does not imply its goal at every state before (a
+  union of an ``Always`` and a reach goal, met by the reach goal at the end), a
+  met key keeps its last state's margin. FalStar (Ernst, Sedwards, Zhang, Hasuo)
+  steers its adaptive search by the robustness of the trace so far.
 
-The verdict is never the score's: a key is missed exactly as the env reports it
-(``info["goals"]``, ``info["safe"]``), and the score only steers the search. They
-agree in sign: a missed key's margin is ``< 0`` and a met key's ``>= 0``. Where an
-operator's goal at the end does not imply its goal at every state before (a
-union of an ``Always`` and a reach goal, met by the reach goal at the end), a met
-key keeps its last state's margin. FalStar (Ernst, Sedwards, Zhang, Hasuo) steers
-its adaptive search by the robustness of the trace so far, never of its last state
-alone; the portfolio (:mod:`~specguard.falsify.portfolio`) is steered by this score
-the same way.
+With either score, the root goal, where reaching it ended the episode, has how
+early it was reached instead (:func:`reached_early`): every such episode ends
+just inside it, so its margin there says nothing, while an episode that needed
+most of its steps was close to running out of them (STL's time robustness,
+Donzé and Maler 2010); a reach goal otherwise keeps its last state's margin
+(``F phi`` judged where the episode ends). The verdict is never the score's: a
+key is missed exactly as the env reports it (``info["goals"]``,
+``info["safe"]``), and the score only steers the search (the portfolio,
+:mod:`~specguard.falsify.portfolio`). They agree in sign: a missed key's margin
+is ``< 0`` and a met key's ``>= 0``.
 
 Example:
     >>> import specguard as sg
@@ -67,6 +72,7 @@ from specguard.extend import SAFETY, Annotation, Box, Context, Node, annotation_
 from specguard.utils.node_paths import child_path
 
 __all__ = [
+    "SCORES",
     "EpisodeMinimum",
     "Judgement",
     "box_margin",
@@ -82,6 +88,10 @@ __all__ = [
 
 SCORE_LIMIT = 1e6
 """Margins are clipped to ``+-SCORE_LIMIT`` (an open box is infinitely far inside)."""
+
+SCORES = ("last", "episode")
+"""The falsifier's scores (its ``score`` argument): ``"last"``, each key's margin in the episode's last state (the
+default); ``"episode"``, over the whole episode (:class:`EpisodeMinimum`)."""
 
 
 def feature_scales(features: Sequence[str], low: np.ndarray, high: np.ndarray) -> dict[str, float]:
@@ -108,6 +118,8 @@ def margins(
     own: Mapping[str, tuple[float, ...]],
     goals: Mapping[str, bool],
     scales: Mapping[str, float],
+    *,
+    regions: bool = False,
 ) -> dict[str, float]:
     """Every node's margin (by path) and every safety annotation's (by ``path:name``) in one state.
 
@@ -117,9 +129,11 @@ def margins(
         own: the own states by key (node path or annotation key), as the env kept them.
         goals: every node's membership of the state (``info["goals"]``).
         scales: per feature, the unit of its margins.
+        regions: a safety annotation without a violation by its distance from the region it avoids
+            (:func:`safety_margin`, ``score="episode"``); ``False``: by its own margin alone.
     """
     out: dict[str, float] = {}
-    _visit(tree, tree.name, s, own, goals, scales, out)
+    _visit(tree, tree.name, s, own, goals, scales, out, regions)
     return out
 
 
@@ -131,24 +145,28 @@ def _visit(
     goals: Mapping[str, bool] | None,
     scales: Mapping[str, float],
     out: dict[str, float],
+    regions: bool,
 ) -> tuple[Box | None, bool]:
     """``node``'s subtree's margins into ``out``; its box and membership (``goals``: as the env reported them;
-    ``None``: from :meth:`Node.contains`, for a region without own state)."""
+    ``None``: from :meth:`Node.contains`, for a region without own state); ``regions``: as :func:`margins`."""
     kids = [(c, child_path(path, c.name)) for c in node.children]
-    visited = [_visit(c, p, s, own, goals, scales, out) for c, p in kids]
+    visited = [_visit(c, p, s, own, goals, scales, out, regions) for c, p in kids]
     inside = tuple(bool(goals[p]) for _, p in kids) if goals is not None else tuple(v[1] for v in visited)
     ctx = Context(s, own.get(path, ()), inside)
     box = node.box([v[0] for v in visited])
-    if box is not None:
-        m = box_margin(box, s, scales)
-    else:
-        m = float(np.clip(node.margin(ctx, tuple(out[p] for _, p in kids)), -SCORE_LIMIT, SCORE_LIMIT))
-    out[path] = m
+    out[path] = (
+        box_margin(box, s, scales) if box is not None else _clipped(node.margin(ctx, tuple(out[p] for _, p in kids)))
+    )
     for a in node.annotations:
         if a.role == SAFETY:
             key = annotation_key(path, a)
-            out[key] = safety_margin(a, s, own.get(key, ()), scales)
+            q = own.get(key, ())
+            out[key] = safety_margin(a, s, q, scales) if regions else _clipped(a.margin(s, q))
     return box, (bool(goals[path]) if goals is not None else bool(node.contains(ctx)))
+
+
+def _clipped(margin: float) -> float:
+    return float(np.clip(margin, -SCORE_LIMIT, SCORE_LIMIT))
 
 
 def region_margin(region: Node, s: Any, scales: Mapping[str, float]) -> float:
@@ -162,7 +180,7 @@ def region_margin(region: Node, s: Any, scales: Mapping[str, float]) -> float:
         -0.5
     """
     out: dict[str, float] = {}
-    _visit(region, region.name, s, {}, None, scales, out)
+    _visit(region, region.name, s, {}, None, scales, out, True)
     return out[region.name]
 
 
@@ -170,7 +188,7 @@ def safety_margin(annotation: Annotation, s: Any, q: tuple[float, ...], scales: 
     """A safety annotation's margin in ``(s, q)``: its own (:meth:`Annotation.margin`); where it has no violation
     and avoids a region (:meth:`Annotation.avoids`), how far ``s`` lies from that region (0 inside it).
     """
-    m = float(np.clip(annotation.margin(s, q), -SCORE_LIMIT, SCORE_LIMIT))
+    m = _clipped(annotation.margin(s, q))
     region = annotation.avoids()
     if region is None or m < 0:
         return m
@@ -235,7 +253,7 @@ class EpisodeMinimum:
         low = self.rows[row]
         out: dict[str, float] = {}
         for key, node in self._nodes:
-            _visit(node, key, s, own, goals, self.scales, out)
+            _visit(node, key, s, own, goals, self.scales, out, True)
             low[key] = min(low[key], out[key])
         for key, a in self._annotations:
             low[key] = min(low[key], safety_margin(a, s, own.get(key, ()), self.scales))
@@ -276,11 +294,13 @@ def judge_end(
 ) -> Judgement:
     """The property at an episode's end: each of ``keys`` (goal paths, safety keys) met, with margins.
 
-    ``lowest``: the keys judged over the whole episode and their lowest margins over its states
-    (:class:`EpisodeMinimum`); each such key's margin is the lower of that and its last state's, unless the key
-    was met and that is negative (a goal met at the end that did not hold before: its last state's margin).
+    ``lowest``: ``None`` (``score="last"``, the default), each key's margin in the last state; else
+    (``score="episode"``) the keys judged over the whole episode and their lowest margins over its states
+    (:class:`EpisodeMinimum`): each such key's margin is the lower of that and its last state's, unless the key
+    was met and that is negative (a goal met at the end that did not hold before: its last state's margin), and a
+    kept safety annotation that avoids a region is graded by its distance from it (:func:`safety_margin`).
     """
-    every = margins(tree, s, own, goals, scales)
+    every = margins(tree, s, own, goals, scales, regions=lowest is not None)
     missed = tuple(k for k in keys if not (goals[k] if k in goals else safe[k]))
     asserted = {k: every[k] for k in keys}
     for k, low in (lowest or {}).items():

@@ -6,9 +6,12 @@ test; one that carries something per env, an :class:`~specguard.construction.epi
 when episodes start and which rows still run) on the spec's env from chosen starts, several starts in lockstep so
 the policy is asked once per step for all of them, and judges each
 episode by the spec's property: the verdict at its end, as the env reports it, and
-a robustness score over the whole episode (:mod:`specguard.falsify.robustness`:
-signal temporal logic's, the keys that hold throughout the episode by their
-lowest margin over its states, kept per row as the batch steps).
+a robustness score that steers the search (:mod:`specguard.falsify.robustness`):
+by default each key's margin in the last state (``score="last"``); with
+``score="episode"``, signal temporal logic's over the whole episode, the keys
+that hold throughout it by their lowest margin over its states, kept per row as
+the batch steps (dearer per episode, and not better on the held-out agents of
+docs/guide/falsify.md).
 
 :func:`falsify` searches a start space:
 
@@ -58,6 +61,7 @@ from specguard.error import InvalidSpec
 from specguard.extend import until_end
 from specguard.falsify.portfolio import Portfolio
 from specguard.falsify.robustness import (
+    SCORES,
     EpisodeMinimum,
     Judgement,
     feature_scales,
@@ -68,7 +72,7 @@ from specguard.falsify.robustness import (
 from specguard.starts.setter import env_label
 from specguard.starts.space import START_OPTION, Starts, StartSpace, starts_of
 from specguard.stats.intervals import failure_upper_bound, success_interval
-from specguard.validation import check_count, check_flag, check_natural, check_open_fraction
+from specguard.validation import check_choice, check_count, check_flag, check_natural, check_open_fraction
 
 __all__ = ["EpisodeRunner", "Falsification", "Outcome", "falsify", "judged_env", "start_text"]
 
@@ -94,7 +98,7 @@ class Outcome:
 
     Attributes:
         start: the start, by variable.
-        judgement: the property: the keys missed at the episode's end, the margins over the episode, the score.
+        judgement: the property: the keys missed at the episode's end, the margins (as the runner's ``score``).
         steps: the episode's length.
         ended: ``"terminated"`` or ``"truncated"``.
         last: the last state's features, by name.
@@ -132,6 +136,12 @@ class EpisodeRunner:
         space: the start space.
         keys: the asserted goal paths and safety keys (the property).
         batch: starts run in lockstep.
+        score: the robustness score that steers the search (:data:`~specguard.falsify.robustness.SCORES`):
+            ``"last"``, each key's margin in the episode's last state (the default); ``"episode"``, over the whole
+            episode (:class:`~specguard.falsify.robustness.EpisodeMinimum`: margins at every step).
+
+    Raises:
+        InvalidSpec: ``score`` is not one of ``SCORES``, naming it and the choices.
     """
 
     def __init__(
@@ -142,7 +152,9 @@ class EpisodeRunner:
         keys: Sequence[str],
         *,
         batch: int = 8,
+        score: str = "last",
     ) -> None:
+        self.score = check_choice("EpisodeRunner", "score", score, SCORES)
         self._make_env = make_env
         self.space = space
         self.act = act
@@ -163,8 +175,9 @@ class EpisodeRunner:
         """The episode's step limit (``None``: the env has no ``TimeLimit``)."""
         self.episodes = 0
         """Episodes run so far."""
-        self.lowest = EpisodeMinimum(self.tree, self.keys, self.scales)
-        """The running minimum of the margins of the keys judged over the whole episode, per row of a batch."""
+        self.lowest = EpisodeMinimum(self.tree, self.keys, self.scales) if self.score == "episode" else None
+        """The running minimum of the margins of the keys judged over the whole episode, per row of a batch
+        (``None``: ``score="last"``, no margins before an episode's end)."""
 
     def _ready(self, k: int) -> list[Any]:
         while len(self._envs) < k:
@@ -189,8 +202,9 @@ class EpisodeRunner:
         if isinstance(act, EpisodePolicy):
             act.start(envs)
         lowest = self.lowest
-        lowest.start(len(envs))
-        watch = bool(lowest.keys)
+        if lowest is not None:
+            lowest.start(len(envs))
+        watch = lowest if lowest is not None and lowest.keys else None  # margins at every step: score="episode"
         while active:
             rows = stack_observations([obs[i] for i in active])
             actions = act(rows, active) if isinstance(act, EpisodePolicy) else act(rows)
@@ -198,11 +212,12 @@ class EpisodeRunner:
                 action = int(actions[j]) if self.discrete else actions[j]
                 obs[i], _, terminated, truncated, info = envs[i].step(action)
                 steps[i] += 1
-                if watch:
+                if watch is not None:
                     ev = judged_env(envs[i]).evaluator
-                    lowest.update(i, ev.state, own_states(ev.slots, ev.own_state), info["goals"])
+                    watch.update(i, ev.state, own_states(ev.slots, ev.own_state), info["goals"])
                 if terminated or truncated:
-                    results[i] = self._outcome(envs[i], starts[i], info, steps[i], bool(terminated), lowest.rows[i])
+                    low = lowest.rows[i] if lowest is not None else None
+                    results[i] = self._outcome(envs[i], starts[i], info, steps[i], bool(terminated), low)
             active = [i for i in active if results[i] is None]
         self.episodes += len(envs)
         return [r for r in results if r is not None]
@@ -214,7 +229,7 @@ class EpisodeRunner:
         info: dict[str, Any],
         steps: int,
         terminated: bool,
-        lowest: dict[str, float],
+        lowest: dict[str, float] | None,
     ) -> Outcome:
         ev = judged_env(env).evaluator
         s = ev.state
