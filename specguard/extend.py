@@ -234,6 +234,14 @@ class Annotation:
         n = self.violations(q)
         return 1.0 if n == 0 else -float(n)
 
+    def avoids(self) -> Node | None:
+        """Safety annotations: the region of states whose entering is a violation, where there is one (``None``).
+
+        The falsifier grades an episode without a violation by its closest approach to that region over the
+        episode (:mod:`specguard.falsify.robustness`), instead of :meth:`margin`'s flat ``1``. Default: ``None``.
+        """
+        return None
+
     def fast_form(self) -> ShapingForm | CounterForm | None:
         """A declared closed form the flat evaluator compiles to straight-line code, or ``None``.
 

@@ -130,6 +130,10 @@ class Avoid(Annotation):
             _test=test,
         )
 
+    def avoids(self) -> Node:
+        """The region: the falsifier grades a kept ``Avoid`` by its closest approach to it over the episode."""
+        return self.region
+
     # The membership test is derived from ``region``: not pickled, rebuilt on load.
     def __getstate__(self) -> dict[str, Any]:
         return {k: v for k, v in vars(self).items() if k != "_test"}

@@ -435,6 +435,8 @@ def _add_check(sub: Any) -> None:
 
 
 def _add_falsify(sub: Any) -> None:
+    from specguard.falsify.robustness import SCORES
+
     fz = sub.add_parser(
         "falsify",
         help="search a spec's start space for starts from which its trained agents (or --agent) miss the spec",
@@ -448,6 +450,13 @@ def _add_falsify(sub: Any) -> None:
         type=_natural("uniform draws"),
         default=100,
         help="uniform draws for the failure rate, 0 for none (default: 100)",
+    )
+    fz.add_argument(
+        "--score",
+        choices=SCORES,
+        default="last",
+        help="the score that steers the search: last, each key's margin in the episode's last state (default), or "
+        "episode, over the whole episode (signal temporal logic's; dearer per episode)",
     )
     fz.add_argument(
         "--starts",
@@ -503,6 +512,7 @@ def _falsify(args: argparse.Namespace) -> int:
                 progress=say,
                 observation=args.observation,
                 algorithm=args.algorithm,
+                score=args.score,
             )
             print(f"== {name} agent {args.agent}: {'COUNTEREXAMPLE' if f.found else 'none found'}")
             print(f.report())
@@ -512,7 +522,13 @@ def _falsify(args: argparse.Namespace) -> int:
         quiet = args.quiet
         result = run_spec(spec, cache_dir=args.cache_dir, progress=None if quiet else print_event)
         found = falsify_runs(
-            result, starts, examples=args.examples, uniform=args.uniform, search_seed=args.seed, progress=say
+            result,
+            starts,
+            examples=args.examples,
+            uniform=args.uniform,
+            search_seed=args.seed,
+            progress=say,
+            score=args.score,
         )
         for seed, f in found.items():
             print(f"== {name} seed {seed}: {'COUNTEREXAMPLE' if f.found else 'none found'}")

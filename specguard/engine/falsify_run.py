@@ -28,10 +28,12 @@ import numpy as np
 
 from specguard.engine.spec_result import SpecResult
 from specguard.engine.trained import load_run
+from specguard.falsify.robustness import SCORES
 from specguard.falsify.search import EpisodeRunner, Falsification, falsify
 from specguard.spec.spec import Spec
 from specguard.starts.space import StartSpace
 from specguard.training.policy import one_torch_thread
+from specguard.validation import check_choice
 
 __all__ = [
     "batch_policy",
@@ -94,6 +96,7 @@ def falsify_runs(
     search_seed: int = 0,
     database: str | Path | None = None,
     progress: Callable[[str], None] | None = None,
+    score: str = "last",
 ) -> dict[int, Falsification]:
     """Search ``starts`` for starts from which each of ``result``'s cached policies misses the spec (no retraining).
 
@@ -106,12 +109,16 @@ def falsify_runs(
         database: the Hypothesis example database directory counterexamples are stored in and
             replayed from; default ``<cache_dir>/falsify``.
         progress: called with a line per round of the search; ``None`` for silence.
+        score: the robustness score that steers the search: ``"last"``, each key's margin in the episode's last
+            state (the default), or ``"episode"``, over the whole episode (signal temporal logic's; dearer per
+            episode, not better on docs/guide/falsify.md's held-out agents).
 
     Returns:
         Per seed, what was found (:class:`~specguard.falsify.search.Falsification`).
 
     Raises:
         SpecError: a run was not cached (:func:`specguard.engine.trained.load_run`).
+        InvalidSpec: ``score`` is not one of ``SCORES`` (:data:`specguard.falsify.robustness.SCORES`).
 
     Example:
         >>> import specguard as sg
@@ -119,6 +126,7 @@ def falsify_runs(
         >>> for seed, found in sg.falsify_runs(result, sg.StartSpace({"theta": (-0.2, 0.2)})).items():  # doctest: +SKIP
         ...     print(seed, found.report())
     """
+    check_choice("falsify_runs", "score", score, SCORES)
     found = {}
     for seed in seeds if seeds is not None else [r.seed for r in result.runs]:
         spec, model, normalizer = load_run(result, seed)
@@ -134,6 +142,7 @@ def falsify_runs(
             search_seed=search_seed,
             database=database if database is not None else (Path(result.cache_dir or ".") / "falsify"),
             progress=progress,
+            score=score,
         )
     return found
 
@@ -151,6 +160,7 @@ def falsify_run(
     search_seed: int = 0,
     database: str | Path | None = None,
     progress: Callable[[str], None] | None = None,
+    score: str = "last",
 ) -> Falsification:
     """Search the start space of run ``seed`` of ``spec`` for a start from which its policy misses the spec.
 
@@ -168,10 +178,10 @@ def falsify_run(
             f"Spec {spec.label!r}: falsify needs a spec trained on the constructed env, not a baseline spec",
             hint="falsify the spec itself; a baseline's episodes end as the initial env says",
         )
+    check_choice(f"falsify_run({spec.label!r})", "score", score, SCORES)
     space = start_space(spec, starts)
-    runner = EpisodeRunner(
-        spec.make_env, batch_policy(model, normalizer, spec.deterministic), space, property_keys(spec)
-    )
+    act = batch_policy(model, normalizer, spec.deterministic)
+    runner = EpisodeRunner(spec.make_env, act, space, property_keys(spec), score=score)
     db = DirectoryBasedExampleDatabase(str(database)) if database is not None and spec_key else None
     key = database_key(spec_key, seed, space) if spec_key else ""
     label = f"{spec.label} seed {seed}"
@@ -191,6 +201,7 @@ def falsify_agent(
     observation: str = "env",
     wrap: Callable[[Any], Any] | None = None,
     algorithm: str | type | None = None,
+    score: str = "last",
 ) -> Falsification:
     """Search ``starts`` for a start from which ``agent``, trained elsewhere, misses ``spec`` (training nothing).
 
@@ -206,12 +217,13 @@ def falsify_agent(
         starts: the start space; ``None``: :func:`start_space`'s (the spec's own, else the env's).
         database: the directory of the Hypothesis example database; ``None``: nothing stored or replayed.
         observation, wrap, algorithm: what the agent sees and how it is loaded, as for ``check_agent``.
+        score: the robustness score that steers the search, as for :func:`falsify_runs`.
         Others: as :func:`specguard.falsify.search.falsify`.
 
     Raises:
         AgentError: the agent cannot be loaded or raised; :class:`~specguard.error.AgentMismatch` before any
             episode when its spaces do not fit the env's.
-        InvalidSpec: an argument is out of range.
+        InvalidSpec: an argument is out of range or not one of its choices.
 
     Example:
         >>> import specguard as sg
@@ -230,15 +242,15 @@ def falsify_agent(
     from specguard.engine.check_agent import AGENT_OBSERVATIONS, agent_envs, spec_agent
     from specguard.error import InvalidSpec
     from specguard.utils.text import function_text, shown
-    from specguard.validation import check_choice
 
     if not isinstance(spec, Spec):
         raise InvalidSpec("falsify_agent", f"expected a Spec, got {shown(spec)}", hint="falsify_agent(spec, agent)")
     where = f"falsify_agent({spec.label!r})"
     check_choice(where, "observation", observation, AGENT_OBSERVATIONS)
+    check_choice(where, "score", score, SCORES)
     acting = spec_agent(spec, agent, algorithm=algorithm, batch=True)
     space = start_space(spec, starts)
-    runner = EpisodeRunner(agent_envs(spec, observation, wrap), acting, space, property_keys(spec))
+    runner = EpisodeRunner(agent_envs(spec, observation, wrap), acting, space, property_keys(spec), score=score)
     check_fits(acting, runner.observation_space, runner.action_space)  # before any episode
     db, key = None, ""
     if database is not None:

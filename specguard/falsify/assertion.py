@@ -37,11 +37,12 @@ from dataclasses import dataclass
 from typing import Any
 
 from specguard.error import InvalidSpec
+from specguard.falsify.robustness import SCORES
 from specguard.falsify.search import Falsification
 from specguard.starts.space import StartSpace, as_start_space
 from specguard.stats.intervals import run_verdict
 from specguard.stats.verdicts import RunVerdict
-from specguard.validation import check_count, check_natural, check_open_fraction
+from specguard.validation import check_choice, check_count, check_natural, check_open_fraction
 
 __all__ = ["Falsify", "as_falsify", "falsify_verdict", "rule_text", "verdict_lines"]
 
@@ -59,6 +60,8 @@ class Falsify:
             draws can bound a rate away from a positive number, never from 0; ``None``: no failing
             start at all (any counterexample fails).
         seed: the search's seed, an integer >= 0.
+        score: the robustness score that steers the search: ``"last"`` (the default) or ``"episode"``
+            (:data:`~specguard.falsify.robustness.SCORES`, as for :func:`~specguard.engine.falsify_run.falsify_runs`).
     """
 
     starts: StartSpace | None
@@ -66,6 +69,7 @@ class Falsify:
     uniform: int
     max_rate: float | None
     seed: int
+    score: str
 
     def __init__(
         self,
@@ -75,6 +79,7 @@ class Falsify:
         uniform: int = 100,
         max_rate: float | None = None,
         seed: int = 0,
+        score: str = "last",
     ) -> None:
         where = "Falsify"
         starts = as_start_space(where, starts)
@@ -86,15 +91,17 @@ class Falsify:
             if uniform < 1:
                 raise InvalidSpec(where, f"max_rate={max_rate!r} needs uniform draws: expected uniform >= 1, got 0")
         seed = check_natural(where, "seed", seed, "the search's seed")
+        score = check_choice(where, "score", score, SCORES)
         object.__setattr__(self, "starts", starts)
         object.__setattr__(self, "examples", examples)
         object.__setattr__(self, "uniform", uniform)
         object.__setattr__(self, "max_rate", max_rate)
         object.__setattr__(self, "seed", seed)
+        object.__setattr__(self, "score", score)
 
     def kwargs(self) -> dict[str, Any]:
         """The keyword arguments of :func:`specguard.engine.falsify_run.falsify_runs` this check runs with."""
-        return {"examples": self.examples, "uniform": self.uniform, "search_seed": self.seed}
+        return {"examples": self.examples, "uniform": self.uniform, "search_seed": self.seed, "score": self.score}
 
 
 def falsify_verdict(found: Falsification, max_rate: float | None, confidence: float = 0.95) -> RunVerdict:

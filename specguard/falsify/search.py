@@ -5,7 +5,13 @@ observations to a batch of actions: a trained model, or a planted policy in a
 test; one that carries something per env, an :class:`~specguard.construction.episode_policy.EpisodePolicy`, is told
 when episodes start and which rows still run) on the spec's env from chosen starts, several starts in lockstep so
 the policy is asked once per step for all of them, and judges each
-episode's end by the spec's property (:mod:`specguard.falsify.robustness`).
+episode by the spec's property: the verdict at its end, as the env reports it, and
+a robustness score that steers the search (:mod:`specguard.falsify.robustness`):
+by default each key's margin in the last state (``score="last"``); with
+``score="episode"``, signal temporal logic's over the whole episode, the keys
+that hold throughout it by their lowest margin over its states, kept per row as
+the batch steps (dearer per episode, and not better on the held-out agents of
+docs/guide/falsify.md).
 
 :func:`falsify` searches a start space:
 
@@ -41,6 +47,7 @@ database: the counterexample replayed first.
 from __future__ import annotations
 
 import json
+from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -53,11 +60,19 @@ from specguard.construction.episode_policy import EpisodePolicy
 from specguard.error import InvalidSpec
 from specguard.extend import until_end
 from specguard.falsify.portfolio import Portfolio
-from specguard.falsify.robustness import Judgement, feature_scales, judge_end, own_states, reached_early
+from specguard.falsify.robustness import (
+    SCORES,
+    EpisodeMinimum,
+    Judgement,
+    feature_scales,
+    judge_end,
+    own_states,
+    reached_early,
+)
 from specguard.starts.setter import env_label
 from specguard.starts.space import START_OPTION, Starts, StartSpace, starts_of
 from specguard.stats.intervals import failure_upper_bound, success_interval
-from specguard.validation import check_count, check_flag, check_natural, check_open_fraction
+from specguard.validation import check_choice, check_count, check_flag, check_natural, check_open_fraction
 
 __all__ = ["EpisodeRunner", "Falsification", "Outcome", "falsify", "judged_env", "start_text"]
 
@@ -83,7 +98,7 @@ class Outcome:
 
     Attributes:
         start: the start, by variable.
-        judgement: the property at the episode's end (missed keys, score, margins).
+        judgement: the property: the keys missed at the episode's end, the margins (as the runner's ``score``).
         steps: the episode's length.
         ended: ``"terminated"`` or ``"truncated"``.
         last: the last state's features, by name.
@@ -121,6 +136,12 @@ class EpisodeRunner:
         space: the start space.
         keys: the asserted goal paths and safety keys (the property).
         batch: starts run in lockstep.
+        score: the robustness score that steers the search (:data:`~specguard.falsify.robustness.SCORES`):
+            ``"last"``, each key's margin in the episode's last state (the default); ``"episode"``, over the whole
+            episode (:class:`~specguard.falsify.robustness.EpisodeMinimum`: margins at every step).
+
+    Raises:
+        InvalidSpec: ``score`` is not one of ``SCORES``, naming it and the choices.
     """
 
     def __init__(
@@ -131,7 +152,9 @@ class EpisodeRunner:
         keys: Sequence[str],
         *,
         batch: int = 8,
+        score: str = "last",
     ) -> None:
+        self.score = check_choice("EpisodeRunner", "score", score, SCORES)
         self._make_env = make_env
         self.space = space
         self.act = act
@@ -152,6 +175,9 @@ class EpisodeRunner:
         """The episode's step limit (``None``: the env has no ``TimeLimit``)."""
         self.episodes = 0
         """Episodes run so far."""
+        self.lowest = EpisodeMinimum(self.tree, self.keys, self.scales) if self.score == "episode" else None
+        """The running minimum of the margins of the keys judged over the whole episode, per row of a batch
+        (``None``: ``score="last"``, no margins before an episode's end)."""
 
     def _ready(self, k: int) -> list[Any]:
         while len(self._envs) < k:
@@ -175,6 +201,10 @@ class EpisodeRunner:
         act = self.act
         if isinstance(act, EpisodePolicy):
             act.start(envs)
+        lowest = self.lowest
+        if lowest is not None:
+            lowest.start(len(envs))
+        watch = lowest if lowest is not None and lowest.keys else None  # margins at every step: score="episode"
         while active:
             rows = stack_observations([obs[i] for i in active])
             actions = act(rows, active) if isinstance(act, EpisodePolicy) else act(rows)
@@ -182,20 +212,29 @@ class EpisodeRunner:
                 action = int(actions[j]) if self.discrete else actions[j]
                 obs[i], _, terminated, truncated, info = envs[i].step(action)
                 steps[i] += 1
+                if watch is not None:
+                    ev = judged_env(envs[i]).evaluator
+                    watch.update(i, ev.state, own_states(ev.slots, ev.own_state), info["goals"])
                 if terminated or truncated:
-                    results[i] = self._outcome(envs[i], starts[i], info, steps[i], bool(terminated))
+                    low = lowest.rows[i] if lowest is not None else None
+                    results[i] = self._outcome(envs[i], starts[i], info, steps[i], bool(terminated), low)
             active = [i for i in active if results[i] is None]
         self.episodes += len(envs)
         return [r for r in results if r is not None]
 
     def _outcome(
-        self, env: Any, start: dict[str, float], info: dict[str, Any], steps: int, terminated: bool
+        self,
+        env: Any,
+        start: dict[str, float],
+        info: dict[str, Any],
+        steps: int,
+        terminated: bool,
+        lowest: dict[str, float] | None,
     ) -> Outcome:
         ev = judged_env(env).evaluator
         s = ev.state
-        judgement = judge_end(
-            self.tree, self.keys, s, own_states(ev.slots, ev.own_state), info["goals"], info["safe"], self.scales
-        )
+        own = own_states(ev.slots, ev.own_state)
+        judgement = judge_end(self.tree, self.keys, s, own, info["goals"], info["safe"], self.scales, lowest)
         if terminated and self.max_steps and self.reach:  # a reach goal: how early it was reached
             judgement = reached_early(judgement, self.tree.name, steps, self.max_steps)
         last = {f: float(v) for f, v in zip(s._fields, s, strict=True)}
@@ -218,6 +257,11 @@ class Falsification:
         interval: the failure rate's interval over the uniform draws.
         confidence: the interval's confidence, and the bound's where no uniform draw failed.
         key: the database key the counterexample is stored under.
+        drawn_by: the guided search's episodes (up to and including its first failure, else all of them) by the
+            sampler that drew each start: ``"uniform"`` (the exploration's draws among them), ``"middle"`` (the
+            middle of the space), ``"trend"``, ``"local"`` (:data:`~specguard.falsify.portfolio.ARMS`); they sum to
+            ``episodes_to_first`` where the search found the failure.
+        found_by: the sampler whose start failed first (``None``: the search found none, or it was replayed).
     """
 
     starts: Starts
@@ -233,6 +277,8 @@ class Falsification:
     confidence: float = 0.95
     key: str = ""
     notes: list[str] = field(default_factory=list)
+    drawn_by: dict[str, int] = field(default_factory=dict)
+    found_by: str | None = None
 
     @property
     def found(self) -> bool:
@@ -307,6 +353,8 @@ class Falsification:
             "uniform_episodes": self.uniform_episodes,
             "interval": list(self.interval),
             "rate": self.rate_text,
+            "drawn_by": dict(self.drawn_by),
+            "found_by": self.found_by,
         }
 
 
@@ -354,8 +402,18 @@ def _time_limit(env: Any) -> int | None:
     return None
 
 
-def _guided(runner: EpisodeRunner, examples: int, rng: np.random.Generator) -> tuple[Outcome, np.ndarray, int] | None:
-    """The first failing start of the guided search, its point and the episodes run up to it; ``None``: none.
+@dataclass
+class _Search:
+    """What the guided search ran: by sampler, its episodes (to the first failure), and the first failure."""
+
+    drawn_by: Counter[str] = field(default_factory=Counter)
+    hit: tuple[Outcome, np.ndarray, int] | None = None
+    found_by: str | None = None
+
+
+def _guided(runner: EpisodeRunner, examples: int, rng: np.random.Generator) -> _Search:
+    """The guided search: its first failing start with its point and the episodes run up to it (``hit``; ``None``:
+    none), and which sampler drew each episode.
 
     ``EXPLORE`` uniform draws with the middle of the space after the first ``MIDDLE_AFTER`` of them, then rounds
     of the portfolio's proposals
@@ -366,28 +424,35 @@ def _guided(runner: EpisodeRunner, examples: int, rng: np.random.Generator) -> t
     seeds = starts.how == "reset seeds"
     half = (starts.high - starts.low) / 2.0
     portfolio = Portfolio(len(starts.names), rng)
+    search = _Search()
     done = 0
     while done < examples:
-        arms: list[str] = []
         if done == 0:
             n = min(examples, EXPLORE + (0 if seeds else 1))
             drawn = starts.uniform(rng, n - (0 if seeds else 1))
             middle = [] if seeds else [starts.center[None, :]]
             points = np.concatenate([drawn[:MIDDLE_AFTER], *middle, drawn[MIDDLE_AFTER:]])
+            arms = ["uniform"] * len(points)
+            if middle:
+                arms[min(MIDDLE_AFTER, len(drawn))] = "middle"
         elif seeds:
             points = starts.uniform(rng, min(runner.batch, examples - done))
+            arms = ["uniform"] * len(points)
         else:
             unit, arms = portfolio.propose(min(runner.batch, examples - done))
             points = np.clip(starts.center + unit * half, starts.low, starts.high)
         outcomes = runner.run(points)
-        for i, (outcome, point) in enumerate(zip(outcomes, points, strict=True)):
+        for i, (outcome, point, arm) in enumerate(zip(outcomes, points, arms, strict=True)):
+            search.drawn_by[arm] += 1
             if outcome.failed:
-                return outcome, point, done + i + 1
+                search.hit, search.found_by = (outcome, point, done + i + 1), arm
+                return search
         if not seeds:
             unit = np.divide(points - starts.center, half, out=np.zeros_like(points), where=half > 0)
-            portfolio.observe(unit, np.array([o.judgement.score for o in outcomes]), arms or ["uniform"] * len(points))
+            observed = ["uniform" if a == "middle" else a for a in arms]
+            portfolio.observe(unit, np.array([o.judgement.score for o in outcomes]), observed)
         done += len(points)
-    return None
+    return search
 
 
 def _load(database: Any, key: str) -> list[dict[str, float]]:
@@ -506,9 +571,10 @@ def falsify(
 
     if result.counterexample is None:
         say(f"guided search: up to {examples} episodes")
-        hit = _guided(runner, examples, np.random.default_rng([seed, 1]))
-        if hit is not None:
-            outcome, point, result.episodes_to_first = hit
+        search = _guided(runner, examples, np.random.default_rng([seed, 1]))
+        result.drawn_by, result.found_by = dict(search.drawn_by), search.found_by
+        if search.hit is not None:
+            outcome, point, result.episodes_to_first = search.hit
             result.first = outcome
             moving = "shrinking: moving each variable towards the middle of its range while it still fails"
             result.counterexample = _kept(
