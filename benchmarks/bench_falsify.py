@@ -8,7 +8,8 @@ agent per training seed (``--seeds``), trained (or found in ``--cache-dir``) by
 
 Per agent:
 
-* **failure rate**: ``--rate-draws`` uniform starts (10,000 by default);
+* **failure rate**: ``--rate-draws`` uniform starts (10,000 by default); where none failed, the most
+  it can be at 95% (the one-sided exact binomial bound), never a bare 0%;
 * **guided**: ``--searches`` searches of the falsifier (seeds 0, 1, ...; no
   shrinking: each stops at its first failing start or after ``--budget``
   episodes), with the share that found a failure;
@@ -68,6 +69,7 @@ from specguard.engine.run_spec import RunOptions, train_seeds
 from specguard.falsify.robustness import SCORES
 from specguard.falsify.search import EpisodeRunner, falsify
 from specguard.starts.space import StartSpace
+from specguard.stats.intervals import failure_upper_bound
 from specguard.training.policy import one_torch_thread, policy
 from specguard.training.rollout import episode
 
@@ -156,10 +158,25 @@ def episode_cost(spec: sg.Spec, model: Any, normalizer: Any, runner: EpisodeRunn
     return ours / plain
 
 
-def verdict(name: str, seed: int, rate: float, ratio: float) -> str:
+def rate_cell(failures: int, draws: int) -> str:
+    """The failure-rate column: the rate over the draws, or where none failed the most it can be at 95%.
+
+    >>> rate_cell(3, 1000), rate_cell(0, 3000)
+    ('0.30% (3/1000)', '<= 0.10% (0/3000)')
+    """
+    if failures or not draws:
+        return f"{failures / draws if draws else 0.0:.2%} ({failures}/{draws})"
+    return f"<= {failure_upper_bound(draws):.2%} ({failures}/{draws})"
+
+
+def verdict(name: str, seed: int, rate: float, ratio: float, draws: int) -> str:
     """One agent against the target: ``met``/``MISSED`` for rare failures, worse than random anywhere."""
     if rate == 0:
-        return f"{name} run {seed}: no failure in the rate draws (outside the target)"
+        bound = failure_upper_bound(draws) if draws else 1.0
+        return (
+            f"{name} run {seed}: no failure in {draws} rate draws: failure rate at most {bound:.2%} at 95% "
+            "(one-sided exact binomial bound; outside the target)"
+        )
     if math.isnan(ratio):
         return f"{name} run {seed}: the guided search found none"
     if rate <= RARE:
@@ -223,13 +240,13 @@ def run_suite(args: argparse.Namespace) -> None:
             cost = episode_cost(spec, model, normalizer, runner)
             share = f"{sum(f is not None for f in found)}/{len(found)}"
             print(
-                f"{name:27s} {seed:3d} {f'{rate:.2%} ({drawn.uniform_failures}/{drawn.uniform_episodes})':>20s}"
+                f"{name:27s} {seed:3d} {rate_cell(drawn.uniform_failures, drawn.uniform_episodes):>20s}"
                 f" {share:>12s} {guided:10.1f} {random_share:12.0%} {random:10.1f} {ratio:6.2f} {cost:7.2f}x"
                 f" {time.perf_counter() - began:7.0f}",
                 flush=True,
             )
             print(sampler_line(drawn_by, found_by), flush=True)
-            verdicts.append(verdict(name, seed, rate, ratio))
+            verdicts.append(verdict(name, seed, rate, ratio, drawn.uniform_episodes))
     print("\nsummary:\n  " + "\n  ".join(verdicts))
 
 
