@@ -14,6 +14,7 @@ from specguard.stats.sequential import (
     GateState,
     boundaries,
     compare_seeds,
+    describe_change,
     drop_bounds,
     look_levels,
     permutation_p_values,
@@ -170,8 +171,18 @@ def test_a_drop_in_success_is_never_bounded_beyond_100_points(before, after):
     """A success rate moves 100 points at most: the drop's bound is clipped to the difference of two rates."""
     look = compare_seeds(before, after, DESIGN, [len(after)])
     assert -1.0 <= look.upper <= 1.0
-    points = int(look.describe().split("a drop of ")[1].split(" points")[0])
+    points = float(look.describe().split("a drop of ")[1].split(" points")[0])
     assert 0 <= points <= 100
+
+
+@pytest.mark.parametrize("upper", [0.12, 0.19, 0.1901, 0.197, 0.1999])
+def test_a_fine_comparison_never_reads_as_a_bound_at_the_margin(upper):
+    """'unchanged within chance' says the drop's bound lies under the margin: its rounded-up figure must too."""
+    line = describe_change(
+        GateState.FINE, 0.9, 0.85, p_drop=0.9, p_rise=0.8, alpha=0.025, upper=upper, margin=0.2, sample="s", most="m"
+    )
+    points = float(line.split("a drop of ")[1].split(" points")[0])
+    assert upper * 100 <= points < 20, line
 
 
 def test_the_drop_bound_lies_in_minus_one_to_one_for_every_outcome_of_few_seeds():

@@ -462,13 +462,31 @@ def describe_change(
         return f"dropped: {change} (p = {p_drop:.2g} <= {alpha:.2g}; {sample})"
     if p_rise <= alpha:
         return f"improved: {change} (p = {p_rise:.2g} <= {alpha:.2g}; {sample})"
-    bound = f"a drop of {math.ceil(max(upper, 0.0) * 100)} points at most"
+    bound = f"a drop of {_points_at_most(upper, margin if state is GateState.FINE else None)} points at most"
     if state is GateState.FINE:
         return f"unchanged within chance: {change} ({bound}, under the margin of {margin * 100:.0f}; {sample})"
     return (
         f"undecided: {change} (p = {p_drop:.2g} > {alpha:.2g}, {bound} is not under the margin of "
         f"{margin * 100:.0f}; {sample}, {most})"
     )
+
+
+def _points_at_most(upper: float, below: float | None) -> str:
+    """A bound on a drop in percentage points, rounded up (a bound stays one), with the fewest decimals that keep it
+    under ``below`` where it lies under it (a 0.197 bound under a margin of 0.2 reads 19.7, not 20).
+
+    >>> _points_at_most(0.12, 0.2), _points_at_most(0.197, 0.2), _points_at_most(0.19991, 0.2)
+    ('12', '19.7', '19.991')
+    >>> _points_at_most(0.3, None)  # not under a margin: whole points
+    '30'
+    """
+    points = max(upper, 0.0) * 100
+    for decimals in range(4):
+        scale = 10**decimals
+        shown = math.ceil(round(points * scale, 9)) / scale
+        if below is None or shown < below * 100:
+            return f"{shown:.{decimals}f}"
+    return f"{points:.4f}"
 
 
 def compare_seeds(
