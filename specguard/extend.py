@@ -78,6 +78,7 @@ __all__ = [
     "Node",
     "ShapingForm",
     "Slot",
+    "StagesForm",
     "adapted_annotations",
     "annotation_key",
     "check_child_weights",
@@ -264,6 +265,27 @@ class Annotation:
 # ---------------------------------------------------------------------------
 
 
+class StagesForm(NamedTuple):
+    """Declares a node a stage counter over its children (``Sequence``), which the flat evaluator compiles to
+    straight-line code.
+
+    The node has one own-state slot ``q``, a whole number in ``[0, N]`` for ``N`` children: ``q_0`` counts
+    the leading children whose goals hold in the first state, in order, and a step advances ``q`` while
+    ``q < N`` and the goal of child ``q`` (counted from 0) holds in the next state. The node's goal is
+    ``q = N``; its core reward is the default potential difference, with
+    ``Phi(s, q) = stage[q] + (0.0 + w * -(fn(s) / scale) + ...)`` summed in order over ``shapers[q]``
+    (nothing for ``q = N``), each ``fn(s)`` a finite distance ``>= 0``; its termination and
+    :meth:`Node.terminated_state` are the defaults.
+
+    Attributes:
+        stage: ``stage[q]`` for ``q = 0 .. N``.
+        shapers: per child, its ``(fn, scale, w)`` triples.
+    """
+
+    stage: tuple[float, ...]
+    shapers: tuple[tuple[tuple[Callable[[Any], float], float, float], ...], ...]
+
+
 class Node:
     """Base of goal-tree nodes: leaves and operators.
 
@@ -372,6 +394,14 @@ class Node:
         nothing; ``Always`` (``until="horizon"``) answers not held, since the episode did not reach its end.
         """
         return after.q
+
+    def fast_form(self) -> StagesForm | None:
+        """A declared closed form the flat evaluator compiles to straight-line code, or ``None``.
+
+        It must agree with the methods above; ``specguard.testing`` checks that it does
+        (``check_flat_matches_reference``).
+        """
+        return None
 
     # -- core reward and termination ----------------------------------------
 

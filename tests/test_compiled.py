@@ -303,7 +303,7 @@ def test_a_compiled_tree_shares_its_generated_code_and_pickles_without_it():
     tree = sg.All(sg.Goal("g", a=(0.0, 1.0)).annotate(sg.Distance(_distance_to_a, scale=2.0)), name="root")
     compiled = compile_tree(tree, FEATURES)
     first, second = compiled.evaluator(), compiled.evaluator()
-    assert first._step.__code__ is second._step.__code__ and first._step is not second._step
+    assert first.step.__code__ is second.step.__code__ and first.step is not second.step
     for again in (pickle.loads(pickle.dumps(compiled)), copy.deepcopy(compiled)):
         assert "code" not in again.__dict__ and again.source == compiled.source
         ev = again.evaluator()
@@ -345,3 +345,23 @@ def test_a_constraint_returning_bools_of_either_kind_counts_each_true_as_one_vio
     for x in range(1, 6):
         ev.step(0, [float(x), 0.0, 0.0])
     assert ev.own_state == [6.0]
+
+
+@pytest.mark.parametrize("how", ["copy", "deepcopy"])
+def test_a_copied_evaluator_steps_its_own_episode(how):
+    # The generated step writes the episode state of the evaluator it was made for: a copy needs a step of its
+    # own, or stepping the copy would move the original (and leave the copy where it was).
+    import copy
+
+    tree = sg.Goal("far", a=(10.0, None)).annotate(sg.Constraint(lambda s, a: s.a < 0, budget=3, name="neg"))
+    original = compile_tree(tree, FEATURES).evaluator()
+    original.reset([1.0, 0.0, 0.0])
+    original.step(0, [-1.0, 0.0, 0.0])
+    twin = getattr(copy, how)(original)
+    assert twin.own_state == original.own_state == [3.0] and twin.goals == original.goals
+    twin.step(0, [-2.0, 0.0, 0.0])
+    assert original.own_state == [3.0] and twin.own_state == [2.0]  # a constraint judges (s, a)
+    assert original.state.a == -1.0 and twin.state.a == -2.0
+    original.step(0, [-2.0, 0.0, 0.0])
+    twin.step(0, [-2.0, 0.0, 0.0])
+    assert original.own_state == [2.0] and twin.own_state == [1.0]

@@ -29,7 +29,18 @@ from itertools import accumulate
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from specguard.error import InvalidSpec
-from specguard.extend import SHAPING, Annotation, ChildWeights, Context, Node, Slot, check_child_weights, set_fields
+from specguard.extend import (
+    SHAPING,
+    Annotation,
+    ChildWeights,
+    Context,
+    Node,
+    ShapingForm,
+    Slot,
+    StagesForm,
+    check_child_weights,
+    set_fields,
+)
 from specguard_plugins._checks import weights_text
 
 if TYPE_CHECKING:
@@ -198,6 +209,20 @@ class Sequence(Node):
     def potential(self, ctx: Context) -> float:
         q = int(ctx.q[0])
         return self._stage[q] + self.shaping_potential(ctx.s, q)  # type: ignore[attr-defined, no-any-return]
+
+    def fast_form(self) -> StagesForm | None:
+        """The stage counter compiled to straight-line code, when every shaper declares a distance.
+
+        Each shaper's weight is its stage's times its own (:meth:`shaping_potential`); a shaper without a
+        :class:`~specguard.extend.ShapingForm` leaves the node evaluated from its methods.
+        """
+        shapers = []
+        for stage in self._shapers:  # type: ignore[attr-defined]
+            forms = [(a.fast_form(), w) for a, w in stage]
+            if not all(isinstance(form, ShapingForm) for form, _ in forms):
+                return None
+            shapers.append(tuple((form.fn, form.scale, w) for form, w in forms))
+        return StagesForm(self._stage, tuple(shapers))  # type: ignore[attr-defined]
 
     def describe(self) -> str:
         return f"Sequence {self.name!r}{weights_text(self.weights)}"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections import namedtuple
 
 import pytest
@@ -13,7 +14,8 @@ import specguard as sg
 from specguard import strategies as sgst
 from specguard.construction.reference import ReferenceEvaluator
 from specguard.error import InvalidSpec
-from specguard.extend import SHAPING, Annotation, ChildWeights, Context, Slot
+from specguard.extend import SHAPING, Annotation, ChildWeights, Context, Slot, StagesForm
+from specguard.testing import ReplayEnv
 
 from .helpers import both_checkers, replay, rewards
 
@@ -261,3 +263,72 @@ def test_constructed_envs_pass_both_checkers():
         name="cartpole",
     )
     both_checkers(tree)
+
+
+def _to_minus_1(s):
+    return abs(s.a + 1.0)
+
+
+def _flat_source(tree):
+    return sg.compile_tree(tree, FEATURES).source
+
+
+def test_a_sequence_compiles_to_its_stage_form_and_a_shaper_without_a_closed_form_to_its_methods():
+    a, b = sg.Goal("a", a=(None, -1.0)), sg.Goal("b", a=(2.0, None))
+    fast = Sequence(a.annotate(sg.Distance(_to_minus_1, scale=4.0)), b, name="seq")
+    form = fast.fast_form()
+    assert form is not None and form.stage == (0.0, 0.5, 1.0)
+    assert form.shapers == (((_to_minus_1, 4.0, 0.5),), ())
+    assert "_node0" not in _flat_source(fast) and "_sh0_0_0(s2)" in _flat_source(fast)
+
+    class Opaque(sg.Distance):  # a shaping annotation that declares no closed form
+        def fast_form(self):  # type: ignore[override]
+            return None
+
+    general = Sequence(a.annotate(Opaque(_to_minus_1, scale=4.0)), b, name="seq")
+    assert general.fast_form() is None and "_node0" in _flat_source(general)
+    trajectory = [[0.0, 0, 0], [-0.5, 0, 0], [-2.0, 0, 0], [1.0, 0, 0], [3.0, 0, 0]]
+    fast_rewards = rewards(replay(fast, trajectory, FEATURES)[1])
+    assert fast_rewards == rewards(replay(general, trajectory, FEATURES)[1])
+    assert fast_rewards == [0.0625, 0.5 + 0.0625, 0.0, 0.5]  # the distance shaped stage 0 only, then the stages
+
+
+@pytest.mark.parametrize("evaluator", ["flat", "reference"])
+@pytest.mark.parametrize(
+    "bad, message",
+    [(-1.0, "expected a finite distance >= 0, got -1.0"), (None, "the distance function raised TypeError")],
+    ids=["negative", "raises"],
+)
+def test_a_bad_distance_of_the_active_stage_is_one_error_naming_the_sequence(evaluator, bad, message):
+    tree = Sequence(
+        sg.Goal("a", a=(None, -1.0)).annotate(sg.Distance(lambda s: 1.0 if s.a < 0.55 else bad + 0.0, scale=4.0)),
+        sg.Goal("b", a=(2.0, None)),
+        name="seq",
+    )
+    initial = sg.InitialEnv(lambda: ReplayEnv([[0.0, 0, 0], [0.5, 0, 0], [0.6, 0, 0]]), features=FEATURES)
+    env = sg.make_env(initial, tree, evaluator=evaluator)
+    env.reset(seed=0)
+    env.step(0)
+    # The flat evaluator names the sequence (whose potential asked the distance), the reference its key.
+    with pytest.raises(sg.EvaluationError, match=f"^seq{'' if evaluator == 'flat' else '/a:distance'}: {message}"):
+        env.step(0)
+
+
+@pytest.mark.parametrize(
+    "form, message",
+    [
+        ("stages", "fast_form\\(\\) must return a StagesForm or None, got 'stages'"),
+        (StagesForm((0.0, 1.0), ((),)), "N \\+ 1 stage values and N shaper tuples for N = 2 children"),
+        (StagesForm((0.0, 0.5, math.inf), ((), ())), "must be finite numbers"),
+        (StagesForm((0.0, 0.5, 1.0), (((_to_minus_1, 0.0, 1.0),), ())), "scales must be > 0"),
+    ],
+    ids=["not a form", "sizes", "not finite", "scale"],
+)
+def test_a_malformed_stage_form_is_refused_naming_the_node(form, message):
+    class Declares(Sequence):
+        def fast_form(self):  # type: ignore[override]
+            return form
+
+    tree = Declares(sg.Goal("a", a=(None, -1.0)), sg.Goal("b", a=(2.0, None)), name="seq")
+    with pytest.raises(InvalidSpec, match=f"seq.*{message}"):
+        sg.compile_tree(tree, FEATURES)

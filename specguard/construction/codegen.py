@@ -7,11 +7,13 @@ reward term, with the weights folded into constants:
   feature namedtuple and the distances of a first state; with ``init`` it also
   writes the initial own state into the list ``z`` (otherwise it reads it, to
   restore an observation);
-* ``step(f, m, s, q, z, a, last)``: one transition to features ``f`` from the
-  previous memberships ``m``, namedtuple ``s``, distances ``q``, own state
-  ``z`` (updated in place) and action ``a``; when the episode ends at ``f``
-  (the spec ends it, or ``last``), the last state is judged too, never
-  with ``last`` None;
+* ``step(a, f, last, terminated)``: the evaluator's own ``step``
+  (``FlatEvaluator.step``),
+  one transition by action ``a`` to features ``f`` from the episode state the
+  evaluator ``_ev`` holds (previous memberships, namedtuple, distances, own
+  state), which it writes back once the step succeeded; when the episode ends
+  at ``f`` (the spec ends it, or ``last``), the last state is judged too,
+  never with ``last`` None. One Python call a step: no wrapper around it;
 * ``safe(z)``: per safety annotation, whether the episode is free of
   violations; ``safe_info(z)``: the same as a dict by key.
 
@@ -29,12 +31,13 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from functools import partial
-from typing import Any, Protocol
+from typing import Any, NoReturn, Protocol
 
 import numpy as np
 
 from specguard.construction.reference import FLOAT_MAX, call_definition
-from specguard.extend import Annotation, Context, Node, Slot
+from specguard.error import EvaluationError
+from specguard.extend import Annotation, Context, Node, Slot, StagesForm
 from specguard.validation import check_truth
 
 __all__ = ["FlatTree", "build_namespace", "number", "source_of", "text"]
@@ -70,6 +73,8 @@ class FlatTree(Protocol):
     def slot_start(self) -> tuple[int, ...]: ...
     @property
     def reach(self) -> bool: ...
+    @property
+    def stages(self) -> tuple[StagesForm | None, ...]: ...
 
 
 def number(x: float) -> str:
@@ -127,6 +132,8 @@ def _member_lines(tree: FlatTree, *, stepping: bool) -> list[str]:
         if tree.fast[i]:
             expr = " and ".join(f"m{k}" for k in tree.children[i]) if _is_intersection(tree, i) else _box_test(tree, i)
             lines.append(f"    m{i} = {expr}{comment}")
+        elif tree.stages[i] is not None:
+            lines += _stage_lines(tree, i, stepping=stepping)
         elif stepping:
             lines.append(
                 f"    m{i}, g{i} = _node{i}(s, a, s2, z, {_inside(tree, i, True)}, {_inside(tree, i, False)}){comment}"
@@ -136,10 +143,71 @@ def _member_lines(tree: FlatTree, *, stepping: bool) -> list[str]:
     return lines
 
 
-def _members(tree: FlatTree) -> str:
-    """The memberships as a tuple, then as a dict by path."""
-    goals = ", ".join(f"{text(path)}: m{i}" for i, path in enumerate(tree.paths))
-    return f"{_tuple([f'm{i}' for i in range(len(tree.paths))])}, {{{goals}}}"
+def _stage_nodes(tree: FlatTree) -> list[int]:
+    """The nodes compiled from a :class:`~specguard.extend.StagesForm`, in path order."""
+    return [i for i, form in enumerate(tree.stages) if form is not None]
+
+
+def _stage_lines(tree: FlatTree, i: int, *, stepping: bool) -> list[str]:
+    """Node ``i``'s :class:`~specguard.extend.StagesForm` written out: ``k<i>`` its stage, ``m<i>`` its
+    membership, ``p<i>`` its potential in ``s2`` and, stepping, ``g<i>`` its reward (the potential difference,
+    the previous potential read from ``q`` after the distances)."""
+    form = tree.stages[i]
+    assert form is not None
+    n, slot, k = len(tree.children[i]), tree.slot_start[i], f"k{i}"
+    advance = [
+        f"    i{i} = {_inside(tree, i, False)}",
+        f"    while {k} < {n} and i{i}[{k}]:",
+        f"        {k} += 1",
+        f"    z[{slot}] = float({k})",
+    ]
+    if stepping:  # from the stage before the step
+        lines = [f"    {k} = int(z[{slot}])  # {text(tree.paths[i])}", *advance]
+    else:  # the leading children met, or (restoring) the stage the own state says
+        lines = [f"    if init:  # {text(tree.paths[i])}", f"        {k} = 0"]
+        lines += ["    " + line for line in advance]
+        lines += ["    else:", f"        {k} = int(z[{slot}])"]
+    lines.append(f"    m{i} = {k} >= {n}")
+    # Phi = stage[k] + (0.0 + w * (-d / scale) + ...) over the active child's shapers, in order; a distance
+    # that raised or is not finite and >= 0 is named by the node's own potential() (_bad<i>).
+    branch = "if"
+    for j, shapers in enumerate(form.shapers):
+        if not shapers:
+            continue
+        lines.append(f"    {branch} {k} == {j}:")
+        branch = "elif"
+        total = ["0.0"]
+        for h, (_, scale, w) in enumerate(shapers):
+            v = f"v{i}_{j}_{h}"
+            lines += [
+                "        try:",
+                f"            {v} = _float(_sh{i}_{j}_{h}(s2))",
+                "        except Exception:",
+                f"            _bad{i}(s2, {k})",
+                f"        if not (0.0 <= {v} <= {number(FLOAT_MAX)}):",
+                f"            _bad{i}(s2, {k})",
+            ]
+            total.append(f"{number(w)} * (-{v} / {number(scale)})")
+        lines.append(f"        h{i} = {' + '.join(total)}")
+    if branch == "if":
+        lines.append(f"    h{i} = 0.0")
+    else:
+        lines += ["    else:", f"        h{i} = 0.0"]
+    lines.append(f"    p{i} = _stage{i}[{k}] + h{i}")
+    if stepping:
+        previous = len([t for t in tree.terms if t.kind == "distance"]) + _stage_nodes(tree).index(i)
+        lines.append(f"    g{i} = p{i} - q[{previous}]")
+    return lines
+
+
+def _member_tuple(tree: FlatTree) -> str:
+    """The memberships as a tuple, in path order."""
+    return _tuple([f"m{i}" for i in range(len(tree.paths))])
+
+
+def _member_dict(tree: FlatTree) -> str:
+    """The memberships as a dict by path."""
+    return "{" + ", ".join(f"{text(path)}: m{i}" for i, path in enumerate(tree.paths)) + "}"
 
 
 def _distance_lines(tree: FlatTree, target: str) -> tuple[list[str], list[str]]:
@@ -168,12 +236,13 @@ def _start_source(tree: FlatTree) -> str:
         lines += ["    if init:", *init]
     distance_lines, names = _distance_lines(tree, "d")
     lines += distance_lines
-    lines.append(f"    return {_members(tree)}, s2, {_tuple(names)}")
+    names += [f"p{i}" for i in _stage_nodes(tree)]  # the stage nodes' potentials, after the distances
+    lines.append(f"    return {_member_tuple(tree)}, {_member_dict(tree)}, s2, {_tuple(names)}")
     return "\n".join(lines) + "\n"
 
 
 def _step_source(tree: FlatTree) -> str:
-    lines = ["def step(f, m, s, q, z, a, last):", *_member_lines(tree, stepping=True)]
+    lines = _member_lines(tree, stepping=True)
     ends = ["m0"] if tree.reach else []  # the root goal reached ends the episode, unless it holds until the end
     names: list[str] = []
     distances = 0
@@ -222,6 +291,7 @@ def _step_source(tree: FlatTree) -> str:
         lines += [f"    e = {end}", "    if last or (e and last is not None):", *judged]
         end = "e"
     distance_names = [f"d{j}" for j in range(distances)]
+    previous = distance_names + [f"p{i}" for i in _stage_nodes(tree)]  # what the next step reads from q
     if distance_names:
         checks = " and ".join(f"0.0 <= {d} <= {number(FLOAT_MAX)}" for d in distance_names)
         lines += [f"    if not ({checks}):", "        raise ValueError('invalid distance')"]
@@ -230,8 +300,48 @@ def _step_source(tree: FlatTree) -> str:
     added = [name for name in names if name != "0.0"]
     lines.append(f"    r = {' + '.join((['0.0'] if len(added) < len(names) else []) + added) or '0.0'}")
     pairs = ", ".join(f"{text(t.key)}: {name}" for t, name in zip(tree.terms, names))
-    lines.append(f"    return r, {end}, {_members(tree)}, s2, {_tuple(distance_names)}, {{{pairs}}}")
-    return "\n".join(lines) + "\n"
+    if end != "e":
+        lines.append(f"    e = {end}")
+    lines.append(f"    terms = {{{pairs}}}")
+    return "\n".join(_evaluator_step(tree, lines, previous)) + "\n"
+
+
+def _evaluator_step(tree: FlatTree, body: list[str], previous: list[str]) -> list[str]:
+    """``step(a, f, last, terminated)``: the evaluator's step itself, reading and writing its episode state.
+
+    ``body`` computes the transition (``r``, ``e``, ``m<i>``, ``s2``, ``terms``, and ``previous``: the distances
+    and stage potentials the next step reads) from the previous memberships ``m``, namedtuple ``s``, ``q`` and
+    a copy ``z`` of the own state; the episode state
+    (``_ev``'s) changes only once it succeeded, so a checked re-run (``_ev._diagnose``) sees the same state.
+    """
+    # fell[0]: the initial env terminated the episode in s2 and the root goal holds until the end; set for this
+    # step only where a general node asks terminated_state() (_GeneralNode).
+    fell = not tree.reach and any(
+        not tree.fast[i] and tree.stages[i] is None and type(node).terminated_state is not Node.terminated_state
+        for i, node in enumerate(tree.nodes)
+    )
+    lines = [
+        "def step(a, f, last=False, terminated=False):",
+        "    m, s, q = _ev._m, _ev._s, _ev._q",
+        "    z = _ev.own_state[:]" if tree.slots else "    z = _ev.own_state",
+    ]
+    if fell:
+        lines.append("    _fell[0] = bool(terminated)")
+    lines += ["    try:", *("    " + line for line in body)]
+    lines += ["    except _EvaluationError:", "        raise", "    except Exception as error:"]
+    lines.append("        _ev._diagnose(a, f, error)")
+    if fell:
+        lines += ["    finally:", "        _fell[0] = False"]
+    return [
+        *lines,
+        "    if not _isfinite(r):",
+        "        _ev._non_finite(r, terms)",
+        f"    _ev._m = {_member_tuple(tree)}",
+        f"    _ev.goals = {_member_dict(tree)}",
+        f"    _ev._s, _ev._q = s2, {_tuple(previous)}",
+        *(["    _ev.own_state = z"] if tree.slots else []),
+        "    return _result(_StepResult, (r, e, _ev._m, terms))",
+    ]
 
 
 def _last_state_lines(tree: FlatTree) -> list[str]:
@@ -468,6 +578,12 @@ class _GeneralAnnotation:
         return int(call_definition(self.key, "violations()", self.a.violations, tuple(z[self.start : self.stop]))) == 0
 
 
+def _bad_potential(path: str, node: Node, s: Any, k: int) -> NoReturn:
+    """A stage node's shaper distance raised or was invalid: the node's own ``potential()`` names the error."""
+    call_definition(path, "potential()", node.potential, Context(s, (float(k),), ()))
+    raise EvaluationError(f"{path}: a shaping distance of stage {k} was invalid, but potential() gave a number")
+
+
 def build_namespace(tree: FlatTree, make: Callable[..., Any]) -> dict[str, Any]:
     """The globals the generated code runs with: user functions and general nodes by index."""
     fell = [False]  # set by the evaluator for a step the initial env terminated (_GeneralNode)
@@ -476,7 +592,14 @@ def build_namespace(tree: FlatTree, make: Callable[..., Any]) -> dict[str, Any]:
     for key, _ in tree.slots:
         slot_counts[key] = slot_counts.get(key, 0) + 1
     for i, node in enumerate(tree.nodes):
-        if not tree.fast[i]:
+        form = tree.stages[i]
+        if form is not None:
+            namespace[f"_stage{i}"] = tuple(float(x) for x in form.stage)
+            namespace[f"_bad{i}"] = partial(_bad_potential, tree.paths[i], node)
+            for j, shapers in enumerate(form.shapers):
+                for h, (fn, _, _) in enumerate(shapers):
+                    namespace[f"_sh{i}_{j}_{h}"] = fn
+        elif not tree.fast[i]:
             size = slot_counts.get(tree.paths[i], 0) if tree.slot_start[i] >= 0 else 0
             general = _GeneralNode(tree.paths[i], node, max(tree.slot_start[i], 0), size, fell)
             namespace[f"_node{i}"] = general.hot_step()

@@ -49,6 +49,7 @@ from specguard.extend import (
     Node,
     ShapingForm,
     Slot,
+    StagesForm,
     adapted_annotations,
     annotation_key,
     component_weights,
@@ -94,6 +95,8 @@ class CompiledTree:
         children: per node, the indices of its children in ``paths``.
         slots: the own-state slots (node or annotation key, slot), in observation order.
         slot_start: per node, the index of its first own-state slot (``-1``: none).
+        stages: per node, its :class:`~specguard.extend.StagesForm` when it declares one (a general node
+            compiled to straight-line code, ``Sequence``), else ``None``.
         weights: the adapted weights it was compiled with (``compile_tree(weights=...)``),
             by path; empty for the tree's own.
     """
@@ -109,6 +112,7 @@ class CompiledTree:
     children: tuple[tuple[int, ...], ...]
     slots: tuple[tuple[str, Slot], ...]
     slot_start: tuple[int, ...]
+    stages: tuple[StagesForm | None, ...]
     weights: tuple[tuple[str, tuple[float, ...]], ...] = ()
 
     def __getstate__(self) -> dict[str, Any]:
@@ -337,6 +341,29 @@ def _is_fast(node: Node, box: Box | None) -> bool:
     )
 
 
+def _stages_form(node: Node, path: str) -> StagesForm | None:
+    """The node's declared :class:`~specguard.extend.StagesForm`, checked against its children and slots."""
+    form = node.fast_form()
+    if form is None:
+        return None
+    n = len(node.children)
+    if not isinstance(form, StagesForm):
+        raise InvalidSpec(path, f"fast_form() must return a StagesForm or None, got {form!r}")
+    if len(node.state_slots()) != 1 or len(form.stage) != n + 1 or len(form.shapers) != n:
+        raise InvalidSpec(
+            path,
+            f"a StagesForm needs one own-state slot, N + 1 stage values and N shaper tuples for N = {n} "
+            f"children; got {len(node.state_slots())} slots, {len(form.stage)} stage values, "
+            f"{len(form.shapers)} shaper tuples",
+        )
+    numbers = [*form.stage, *(x for shapers in form.shapers for _, scale, w in shapers for x in (scale, w))]
+    if not all(isinstance(x, (int, float)) and math.isfinite(x) for x in numbers):
+        raise InvalidSpec(path, f"a StagesForm's stage values, scales and weights must be finite numbers: {form!r}")
+    if not all(scale > 0 for shapers in form.shapers for _, scale, _ in shapers):
+        raise InvalidSpec(path, f"a StagesForm's scales must be > 0: {form!r}")
+    return form
+
+
 def compile_tree(
     tree: Node, features: Sequence[str], *, weights: Mapping[str, Sequence[float]] | None = None
 ) -> CompiledTree:
@@ -367,6 +394,7 @@ def compile_tree(
     terms: list[_Term] = []
     slots: list[tuple[str, Slot]] = []
     slot_start: list[int] = []
+    stages: list[StagesForm | None] = []
 
     def visit(node: Node, path: str, coef: ChildWeights) -> tuple[int, Box | None]:
         me = len(paths)
@@ -377,6 +405,7 @@ def compile_tree(
         boxed.append(False)
         fast.append(False)
         slot_start.append(-1)
+        stages.append(None)
         core_w, ann_w = component_weights(node)
         kid_boxes = []
         kid_weights = node.child_weights()
@@ -393,6 +422,7 @@ def compile_tree(
         if node.state_slots():
             slot_start[me] = len(slots)
             slots.extend((path, s) for s in node.state_slots())
+        stages[me] = None if fast[me] else _stages_form(node, path)
         if node.own_reward:
             terms.append(_Term(path, "member" if fast[me] else "node", coef.core * core_w, node=me))
         for a, a_w in zip(node.annotations, ann_w):
@@ -424,6 +454,7 @@ def compile_tree(
         tuple(tuple(c) for c in children),
         tuple(slots),
         tuple(slot_start),
+        tuple(stages),
         tuple(sorted((path, tuple(float(w) for w in ws)) for path, ws in (weights or {}).items())),
     )
 
@@ -494,6 +525,16 @@ class FlatEvaluator:
     Attributes:
         goals: every node's membership of the last state reset or stepped to, by path: a new
             dict each time (the env hands it out as ``info["goals"]``).
+        step: ``step(action, f, last=False, terminated=False)``, the protocol's: advance by one transition to
+            features ``f``. When the episode ends at ``f`` (the spec ends it, or ``last``: the base env
+            terminated or truncated), the last state is judged too (docs/semantics.md, "The last state"), in
+            this step's terms; with ``last`` None never (the transition's own reward, as
+            :meth:`CompiledTree.reward_terms` gives it). ``terminated``: the base env terminated the episode
+            at ``f``; where the root goal holds until the end (:attr:`horizon`), the episode ended before its
+            horizon (:meth:`~specguard.extend.Node.terminated_state`). Returns the
+            :class:`~specguard.construction.evaluator.StepResult`. It is the generated code's own function
+            (no method around it: one Python call a step); the episode state changes only once the step
+            succeeded, and a failing user function is named by a checked re-run.
     """
 
     def __init__(self, tree: CompiledTree) -> None:
@@ -503,12 +544,15 @@ class FlatEvaluator:
         self.safety_keys = tree.safety_keys
         self._state_cls = state_type(tree.features)
         namespace = build_namespace(tree, self._state_cls)
+        # The generated step reads and writes this evaluator's episode state (one Python call a step).
+        namespace.update(
+            _ev=self, _result=_result, _StepResult=StepResult, _EvaluationError=EvaluationError, _isfinite=_isfinite
+        )
         exec(tree.code, namespace)
         self._start: Callable[..., Any] = namespace["start"]
-        self._step: Callable[..., Any] = namespace["step"]
+        self.step: Callable[..., StepResult] = namespace["step"]
         self._safe: Callable[[list[float]], tuple[bool, ...]] = namespace["safe"]
         self._safe_info: Callable[[list[float]], dict[str, bool]] = namespace["safe_info"]
-        self._fell: list[bool] = namespace["_fell"]
         self.horizon = not tree.reach
         """The root goal holds until the end: an episode the initial env terminates ended before its horizon."""
         self._m: tuple[bool, ...] = ()
@@ -557,36 +601,19 @@ class FlatEvaluator:
         """:attr:`safe` by safety key, a new dict (the env's ``info["safe"]``)."""
         return self._safe_info(self.own_state)
 
-    def step(self, action: Any, f: Sequence[float], last: bool | None = False, terminated: bool = False) -> StepResult:
-        """Advance by one transition to features ``f``.
+    def __copy__(self) -> FlatEvaluator:
+        """A new evaluator of the same tree, in the same episode state (its generated step is its own)."""
+        other = FlatEvaluator(self.tree)
+        other._m, other.goals, other._s, other._q = self._m, dict(self.goals), self._s, self._q
+        other.own_state = self.own_state[:]
+        return other
 
-        When the episode ends at ``f`` (the spec ends it, or ``last``: the base env terminated or truncated),
-        the last state is judged too (docs/semantics.md, "The last state"), in this step's terms; with
-        ``last`` None never (the transition's own reward, as :meth:`CompiledTree.reward_terms` gives it).
-        ``terminated``: the base env terminated the episode at ``f``; where the root goal holds until the
-        end (:attr:`horizon`), the episode ended before its horizon (:meth:`~specguard.extend.Node.terminated_state`).
+    def __deepcopy__(self, memo: dict[int, Any]) -> FlatEvaluator:
+        return self.__copy__()  # the episode state is immutable values and one list of floats, copied
 
-        Returns:
-            The :class:`~specguard.construction.evaluator.StepResult`: the reward, whether the spec ends the
-            episode (root goal reached, a counter at 0, or a node's own termination), every node's
-            membership of ``f`` and the weighted reward terms by key (Algorithm 1's processing order).
-        """
-        own = self.own_state[:]  # the episode state changes only once the step succeeded
-        fell = self._fell
-        fell[0] = bool(terminated) and self.horizon
-        try:
-            r, ended, m2, goals, s2, q2, terms = self._step(f, self._m, self._s, self._q, own, action, last)
-        except EvaluationError:
-            raise
-        except Exception as e:
-            self._diagnose(action, f, e)
-        finally:
-            fell[0] = False
-        if not _isfinite(r):
-            bad = {k: v for k, v in terms.items() if not math.isfinite(v)}
-            raise EvaluationError(f"non-finite reward {r}: the terms {bad} are not finite")
-        self._m, self.goals, self._s, self._q, self.own_state = m2, goals, s2, q2, own
-        return _result(StepResult, (float(r), ended, m2, terms))
+    def _non_finite(self, r: float, terms: dict[str, float]) -> NoReturn:
+        bad = {k: v for k, v in terms.items() if not math.isfinite(v)}
+        raise EvaluationError(f"non-finite reward {r}: the terms {bad} are not finite")
 
     def _diagnose(self, action: Any, f: Sequence[float], error: Exception) -> NoReturn:
         """Re-run the user functions one by one to name the one at fault."""
