@@ -17,7 +17,9 @@ Two kinds of node and annotation are compiled differently:
   Their goals are two arrays ``lo``/``hi`` of shape ``(nodes, features)``,
   tested in one vectorised comparison for batches (:meth:`CompiledTree.members`);
 * every other one is **general**: evaluated from its definition, by calling
-  its protocol methods (:mod:`specguard.extend`).
+  its protocol methods (:mod:`specguard.extend`), unless it declares a
+  :class:`~specguard.extend.StagesForm` (``Sequence``), whose stage counter and
+  potential the generated code writes out.
 
 For the single state of an env step, numpy's per-call overhead would exceed
 the whole budget of a Pendulum step, so each tree is also turned into small
