@@ -292,3 +292,17 @@ def test_the_reinforce_example_trains_cartpole_through_the_protocol_and_is_cache
     agent = sg.load_model(again, 0)
     obs, _ = one.make_env().reset(seed=0)
     assert agent(obs) in (0, 1)
+
+
+def test_an_agent_that_raises_in_evaluation_is_named_as_the_agent_not_the_environment():
+    def fails_to_act(obs):
+        raise ValueError("logits are NaN")
+
+    def trains(make_env, timesteps, seed):
+        yield 100, fails_to_act
+
+    with pytest.raises(TrainingError) as e:
+        train_run(spec(trains, expect={}), seed=3)
+    assert "evaluation episode 0: the agent raised ValueError: logits are NaN" in e.value.message
+    assert "environment" not in e.value.message.split("\nHint:")[0]
+    assert "weights went NaN" in str(e.value)

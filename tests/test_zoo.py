@@ -378,7 +378,7 @@ def test_a_schedule_that_is_not_finite_is_refused_naming_the_hyperparameter(tmp_
     ],
 )
 def test_a_spec_refuses_a_schedule_that_is_not_finite_naming_the_hyperparameter(key, value, message):
-    # It trained to NaN logits, reported as "the environment raised ValueError".
+    # It trained to NaN logits, which fail the agent at evaluation ("the agent raised ValueError"): refused first.
     with pytest.raises(sg.InvalidSpec, match=rf"^Spec 'right'.hyperparameters: {message}"):
         sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=64), hyperparameters={key: value})
 

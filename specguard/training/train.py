@@ -44,6 +44,10 @@ __all__ = ["EVAL_SEED_BASE", "EVAL_SEED_STRIDE", "evaluate", "train_run"]
 EVAL_SEED_BASE = 1_000_000
 EVAL_SEED_STRIDE = 100_000
 CURVE_POINTS = 10
+AGENT_FAILED = (
+    "the agent failed to act on an observation of the env: a trained model whose weights went NaN (a learning "
+    "rate or clip range too large), or a trainer's agent that raised; call it on env.reset(seed=...)[0] to see"
+)
 
 
 def _policy_action(space: gym.Space[Any], action: Any) -> Any:
@@ -75,6 +79,10 @@ def evaluate(
         Per node path, the number of episodes whose last state lies in the
         goal; then per safety key (``path:name``), the number of episodes
         without a violation (the last step's ``info["safe"]``).
+
+    Raises:
+        TrainingError: ``policy`` raised (specguard's own errors pass as they are); the env's errors propagate
+            unchanged, for the caller to name.
     """
     counts: dict[str, int] = {}
     for i in range(episodes):
@@ -85,7 +93,15 @@ def evaluate(
             started.append(bool(next(iter(info["goals"].values()))))
         ended = cut = False
         while not (ended or cut):
-            obs, _, ended, cut, info = env.step(_policy_action(env.action_space, policy(obs)))
+            try:
+                action = policy(obs)
+            except SpecError:
+                raise
+            except Exception as e:  # the policy's failure, not the env's (a NaN network, a trainer's agent)
+                raise TrainingError(
+                    f"the agent raised {type(e).__name__}: {elide(str(e), MAX_SHOWN)}", hint=AGENT_FAILED
+                ) from e
+            obs, _, ended, cut, info = env.step(_policy_action(env.action_space, action))
         if terminated is not None:
             terminated.append(bool(ended))
         if capped is not None:
