@@ -9,6 +9,7 @@ failing example into one readable :class:`AssertionError` (:func:`fail`).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple, NoReturn
 
@@ -28,7 +29,17 @@ from specguard.tree.builtin_annotations import Constraint, Distance
 from specguard.tree.nodes import All, Goal
 from specguard.utils.node_paths import child_path
 
-__all__ = ["FEATURES", "Broken", "Example", "cases", "fail", "refinement_cases", "run_property", "trees_with"]
+__all__ = [
+    "FEATURES",
+    "Broken",
+    "Example",
+    "cases",
+    "fail",
+    "refinement_cases",
+    "run_property",
+    "trees_with",
+    "visiting_cases",
+]
 
 
 class Broken(Exception):
@@ -129,6 +140,35 @@ def cases(draw: st.DrawFn, cls: type, max_size: int = 10) -> Example:
     # Trajectories of odd length end by the base env's termination, the others by truncation: both ends are
     # covered with no draw of their own, which would change every example the checks are tuned to find.
     return Example(tree, trajectory, actions, terminate=n % 2 == 0)
+
+
+def _inside(goal: Goal, state: list[float]) -> list[float]:
+    """``state`` moved into ``goal``'s box: each bounded feature set to a value inside its range (float32)."""
+    moved = list(state)
+    for f, lo, hi in goal.bounds:
+        i = FEATURES.index(f)
+        v = lo if math.isinf(hi) else hi if math.isinf(lo) else (lo + hi) / 2
+        moved[i] = float(np.clip(np.float32(v), lo, hi))  # the float32 of a range's middle can fall past a bound
+    return moved
+
+
+@st.composite
+def visiting_cases(draw: st.DrawFn, cls: type, max_size: int = 10) -> Example:
+    """:func:`cases` whose states are often moved into one of the tree's goal leaves (any, in any order).
+
+    Random states rarely enter a box goal, and more rarely its siblings' in
+    their order, so an operator whose episode state is wrong only once a child's
+    goal has been reached (a stage kept at module level) would pass on them. Each
+    state is moved into a leaf drawn for it, or kept (what it shrinks to).
+    """
+    case = draw(cases(cls, max_size))
+    leaves = [node for _, node in case.tree.walk() if isinstance(node, Goal)]
+    assert case.trajectory is not None
+    trajectory = []
+    for state in case.trajectory:
+        k = draw(st.integers(0, len(leaves)))  # 0: the state as drawn
+        trajectory.append(state if k == 0 else _inside(leaves[k - 1], state))
+    return case._replace(trajectory=f32(trajectory))
 
 
 @st.composite
