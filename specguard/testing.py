@@ -109,7 +109,8 @@ def check_operator(cls: type, max_examples: int | None = None) -> None:
 
     Args:
         cls: the operator or annotation class.
-        max_examples: examples per check; ``None`` for the default (40, ``specguard.contract.trees.MAX_EXAMPLES``).
+        max_examples: examples per check; ``None`` for each check's default (40,
+            ``specguard.contract.trees.MAX_EXAMPLES``; ``check_markov`` 100, ``MARKOV_EXAMPLES``).
 
     Raises:
         AssertionError: one or more checks failed; the message holds each

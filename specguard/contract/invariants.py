@@ -40,6 +40,7 @@ from specguard.construction.evaluator import Evaluator, StepResult
 from specguard.construction.reference import ReferenceEvaluator, process
 from specguard.contract.trees import (
     FEATURES,
+    MARKOV_EXAMPLES,
     MAX_EXAMPLES,
     Broken,
     Example,
@@ -175,7 +176,7 @@ def _telescopes(what: str, rewards: list[float], phi: list[float]) -> None:
         )
 
 
-def check_markov(cls: type, max_examples: int = MAX_EXAMPLES) -> None:
+def check_markov(cls: type, max_examples: int = MARKOV_EXAMPLES) -> None:
     """Each transition evaluated alone from its observation (step_batch) reproduces the env: the env is Markov.
 
     ``compile_tree(tree, F).step_batch(obs_t, a_t, features_t+1)``, on a fresh
