@@ -185,3 +185,16 @@ def test_rewards_check_catches_an_env_that_misreports(monkeypatch, wrong, says):
     monkeypatch.setattr(SpecEnv, "step", misreporting)
     with pytest.raises(AssertionError, match=says):
         contract.check_rewards_are_finite_sums_of_terms(sg.All, max_examples=10)
+
+
+def test_a_state_moved_into_a_goal_box_lies_in_it():
+    # check_markov's examples move states into the goals of the tree's nodes (contract.trees.visiting_cases).
+    import math
+
+    from specguard.contract.trees import _inside
+
+    box = {"a": (0.1, 0.3), "b": (-math.inf, -2.0), "c": (5.0, math.inf)}
+    moved = _inside(box, [9.0, 9.0, 9.0])
+    assert all(lo <= v <= hi for v, (lo, hi) in zip(moved, box.values(), strict=True))
+    assert moved[1:] == [-2.0, 5.0]  # a one-sided range: its bound
+    assert _inside({"b": (1.0, 2.0)}, [7.0, 0.0, 8.0]) == [7.0, 1.5, 8.0]  # the other features are kept
