@@ -186,9 +186,10 @@ def check_markov(cls: type, max_examples: int = MARKOV_EXAMPLES) -> None:
     wherever it is kept: on the node, on its class or at module level (which
     every copy of the tree shares). So the transitions are evaluated last to
     first, not in the order the env lived them, and each one twice: state that
-    follows the evaluations along cannot reproduce the env's. The trajectories
-    often step into the tree's goal leaves (:func:`~specguard.contract.trees.visiting_cases`),
-    so state that matters only once a child's goal was reached is exercised.
+    follows the evaluations along cannot reproduce the env's. The trajectories'
+    states often lie in the goal box of one of the tree's nodes
+    (:func:`~specguard.contract.trees.visiting_cases`), so state that matters
+    only once a child's goal was reached is exercised.
     """
 
     def body(case: Example) -> None:
