@@ -313,24 +313,57 @@ def test_envs_of_one_factory_share_the_compiled_tree_but_not_the_episode(build_c
     assert second.step(torque)[1] == again.step(torque)[1] != step[1]
 
 
-def test_info_dicts_deep_copy_in_one_call_and_stay_independent(monkeypatch):
-    # SB3's DummyVecEnv deep-copies every info at every step; the goals/safe/reward-term dicts hold scalars only,
-    # so their deep copy is a shallow one (no walk over their items), and still a copy a consumer may change.
+def test_info_deep_copies_without_walking_its_scalars_and_stays_independent(monkeypatch):
+    # SB3's DummyVecEnv deep-copies every info at every step; the goals/safe/reward-term dicts and the base reward
+    # hold scalars only, so the info's deep copy walks none of them (one call, no item-by-item copy), and is still
+    # a copy a consumer may change.
     env = sg.make_env(lunar_lander.initial_env, lunar_lander.trees["w"])
     env.reset(seed=0)
     info = env.step(env.action_space.sample())[4]
     walked: list[object] = []
     atomic = copy._deepcopy_dispatch[bool]
-    for kind in (bool, float):
+    for kind in (bool, float, str):
         monkeypatch.setitem(copy._deepcopy_dispatch, kind, lambda x, memo: walked.append(x) or atomic(x, memo))
     copied = copy.deepcopy(info)
-    assert walked == [info["base_reward"]]  # the top-level float only
+    assert walked == []
+    assert copied == info and type(copied) is type(info)
     for key in ("goals", "safe", "reward_terms"):
         assert copied[key] == info[key] and copied[key] is not info[key]
         copied[key]["mutated"] = True
         assert "mutated" not in info[key]
     assert pickle.loads(pickle.dumps(info)) == info  # SubprocVecEnv sends infos between processes
     env.close()
+
+
+def test_an_info_deep_copy_copies_what_is_not_scalar_as_deepcopy_does():
+    from specguard.construction.env import StepInfo
+
+    shared = {"x": [1.0]}
+    frame = np.zeros(3)
+    info = StepInfo(
+        goals={"a": True}, episode={"r": 1.0, "l": 5}, obs=frame, nested=shared, again=shared, terms={("k",): 1.0}
+    )
+    copied = copy.deepcopy(info)
+    assert copied.keys() == info.keys() and copied["goals"] == {"a": True} and copied["episode"] == info["episode"]
+    assert copied["obs"] is not frame and np.array_equal(copied["obs"], frame)
+    assert copied["nested"] is copied["again"] is not shared  # one copy of a shared object, as deepcopy makes
+    assert copied["nested"]["x"] is not shared["x"]
+    assert copied["terms"] == {("k",): 1.0}
+    info_of_env = {"raw": [1]}
+
+    class Env(gym.Env):
+        observation_space = gym.spaces.Box(-1.0, 1.0, (1,))
+        action_space = gym.spaces.Discrete(2)
+
+        def reset(self, *, seed=None, options=None):
+            return np.zeros(1, dtype=np.float32), info_of_env
+
+        def step(self, action):
+            return np.zeros(1, dtype=np.float32), 0.0, False, False, info_of_env
+
+    env = sg.SpecEnv(Env(), sg.Goal("g", x=(0.5, None)), ("x",))
+    assert "goals" in env.reset(seed=0)[1] and "goals" in env.step(0)[4]
+    assert info_of_env == {"raw": [1]}  # the initial env's own info is left as it was
 
 
 @pytest.mark.parametrize("tree", [lunar_lander.trees["c"], sg.Goal("legs", leg1=1.0)], ids=["own-state", "passthrough"])
