@@ -135,13 +135,32 @@ specs = {  # three different trees: identical specs would share one training run
 """
 
 
+_EXEC_WITH_SIGINT = (
+    "import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_DFL); "
+    "signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT}); os.execv(sys.argv[1], sys.argv[1:])"
+)
+
+
+def _signal_masks(pid: int) -> str:
+    """The process's blocked, ignored and caught signal masks (Linux), for a failure's message."""
+    try:
+        lines = Path(f"/proc/{pid}/status").read_text().splitlines()
+    except OSError as e:
+        return f"no signal masks: {e}"
+    return ", ".join(line.replace("\t", " ") for line in lines if line.startswith(("SigBlk", "SigIgn", "SigCgt")))
+
+
 def test_an_interruption_stops_the_running_specs_at_once_and_starts_no_other(tmp_path):
     case = tmp_path / "long_case.py"
     case.write_text(textwrap.dedent(LONG_CASE))
     cache = tmp_path / "cache"
     argv = ["reproduce", str(case), "--seeds", "1", "--workers", "2", "--cache-dir", str(cache)]
+    # The process starts as a terminal's would: SIGINT neither ignored nor blocked. A child inherits both from the
+    # test's process (an ignored SIGINT stays ignored: Python then installs no KeyboardInterrupt), which pytest and
+    # its xdist workers do not promise; they are set in the process itself, which then becomes reproduce (exec).
+    command = [sys.executable, "-m", "specguard", *argv, "--out", str(tmp_path / "r.md")]
     parent = subprocess.Popen(
-        [sys.executable, "-m", "specguard", *argv, "--out", str(tmp_path / "r.md")],
+        [sys.executable, "-c", _EXEC_WITH_SIGINT, *command],
         env={**os.environ, "PYTHONPATH": str(REPO)},
         stderr=subprocess.PIPE,
         text=True,
@@ -161,8 +180,9 @@ def test_an_interruption_stops_the_running_specs_at_once_and_starts_no_other(tmp
     try:
         rest = parent.communicate(timeout=30)[1]  # 200k steps take minutes: only the stop ends it this soon
     except subprocess.TimeoutExpired:
+        masks = _signal_masks(parent.pid)
         parent.kill()
-        pytest.fail("reproduce did not stop within 30 s of SIGINT")
+        pytest.fail(f"reproduce did not stop within 30 s of SIGINT ({masks})")
     assert time.monotonic() - start < 30
     assert parent.returncode == 130, rest
     assert "interrupted; finished runs are cached, unfinished ones were not stored" in rest
