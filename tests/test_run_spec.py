@@ -382,6 +382,20 @@ def test_a_worker_running_other_code_than_the_key_names_refuses_to_train(tmp_pat
     assert not list(tmp_path.rglob("result.json"))  # nothing stored under a key that does not describe the code
 
 
+def test_a_worker_whose_loaded_library_is_not_the_installed_one_refuses(monkeypatch):
+    # A process forked from a fork server that imported a library before it was upgraded runs the old code, while
+    # the installed version (what the key names) is the new one.
+    import cloudpickle
+
+    from specguard.cache.versions import check_versions, versions
+
+    keyed = versions()
+    check_versions(keyed, "seed 0")  # the loaded libraries are the installed ones
+    monkeypatch.setattr(cloudpickle, "__version__", "0.0.1")
+    with pytest.raises(sg.VersionMismatch, match=r"seed 0: .* cloudpickle 0\.0\.1 \(loaded\) != \S+ \(installed\)"):
+        check_versions(keyed, "seed 0")
+
+
 def test_a_worker_with_the_keyed_versions_trains():
     from specguard.cache.versions import versions
     from specguard.engine.train_task import train_task as _train_task

@@ -1,4 +1,4 @@
-"""specguard.parallel.workers: one spawned process per task, each failing alone, none left behind.
+"""specguard.parallel.workers: one process per task, each failing alone, none left behind.
 
 The task functions below live in this module. ``tests/`` is not a package, so the module is
 registered with cloudpickle to be pickled by value: the spawned children get the functions
@@ -126,6 +126,19 @@ def touch(path: str, *, report: Report) -> None:
     Path(path).write_text("ran")
 
 
+def read_environment(name: str, *, report: Report) -> str | None:
+    return os.environ.get(name)
+
+
+def write_to_stderr(text: str, *, report: Report) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
+def libraries_loaded(*, report: Report) -> dict[str, bool]:
+    """Which heavy libraries the process had imported before the task ran (the fork server's preload)."""
+    return {name: name in sys.modules for name in ("torch", "stable_baselines3", "gymnasium")}
+
+
 # ---------------------------------------------------------------------------------------------------------------------
 # Helpers (run in the test process)
 
@@ -232,6 +245,36 @@ def test_exception_that_cannot_be_unpickled_still_gives_cause_and_traceback() ->
     assert failure.cause == "UnpicklableError: a=1 b=2"
     assert "raise_unpicklable" in failure.traceback
     assert failure.exception is None
+
+
+def test_a_task_reads_the_environment_the_parent_has_when_it_starts(monkeypatch: pytest.MonkeyPatch) -> None:
+    run_tasks([Task(0, touch, (os.devnull,))], max_workers=1)  # the fork server, if any, started before the change
+    monkeypatch.setenv("SPECGUARD_TEST_VALUE", "set after the first task")
+    assert run_tasks([Task(1, read_environment, ("SPECGUARD_TEST_VALUE",))], max_workers=1) == {
+        1: Done(1, "set after the first task")
+    }
+    monkeypatch.delenv("SPECGUARD_TEST_VALUE")
+    assert run_tasks([Task(2, read_environment, ("SPECGUARD_TEST_VALUE",))], max_workers=1) == {2: Done(2, None)}
+
+
+def test_a_task_writes_to_the_parents_stderr_of_when_it_starts(tmp_path: Path) -> None:
+    run_tasks([Task(0, touch, (os.devnull,))], max_workers=1)  # the fork server, if any, holds other descriptors
+    saved = os.dup(2)
+    try:
+        with open(tmp_path / "stderr.txt", "w") as f:
+            os.dup2(f.fileno(), 2)
+            outcomes = run_tasks([Task(1, write_to_stderr, ("a line from the task",))], max_workers=1)
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+    assert outcomes == {1: Done(1, None)}
+    assert "a line from the task" in (tmp_path / "stderr.txt").read_text()
+
+
+@pytest.mark.skipif("forkserver" not in multiprocessing.get_all_start_methods(), reason="spawned: no fork server")
+def test_tasks_start_with_the_heavy_libraries_already_imported() -> None:
+    loaded = run_tasks([Task(0, libraries_loaded)], max_workers=1)[0]
+    assert loaded == Done(0, {"torch": True, "stable_baselines3": True, "gymnasium": True})
 
 
 def test_killed_worker_fails_alone_with_its_last_phase_and_step() -> None:

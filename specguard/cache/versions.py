@@ -88,6 +88,17 @@ def library_module(name: str) -> str | None:
     return _distribution_versions().get(top, "unversioned")
 
 
+def _loaded_versions() -> dict[str, str]:
+    """The versions of the libraries of :data:`_VERSIONED` this process has imported, as the modules state them."""
+    loaded = {}
+    for name in _VERSIONED:
+        module = sys.modules.get(name.replace("-", "_"))
+        version = getattr(module, "__version__", None)
+        if isinstance(version, str):
+            loaded[name] = version
+    return loaded
+
+
 def versions() -> dict[str, str]:
     """The versions that decide a run's outcome beside the spec: Python, specguard and the RL stack."""
     found = {"python": sys.version.split()[0], "specguard": _specguard_digest()}
@@ -102,10 +113,22 @@ def versions() -> dict[str, str]:
 def check_versions(expected: Mapping[str, str], where: str) -> None:
     """Refuse to go on in a process whose :func:`versions` differ from ``expected`` (the ones a key was made with).
 
+    The libraries this process has imported must also be the installed ones: a process forked from a server
+    that imported them before an upgrade (:mod:`specguard.parallel.workers`) runs the old code, while
+    :func:`versions` reads the installed one.
+
     Raises:
-        VersionMismatch: naming each version that differs, expected and found.
+        VersionMismatch: naming each version that differs, expected and found, or loaded and installed.
     """
     found = versions()
+    stale = [
+        f"{name} {loaded} (loaded) != {found[name]} (installed)"
+        for name, loaded in _loaded_versions().items()
+        if loaded != found.get(name)
+    ]
+    if stale:  # a process forked from a server that imported them before an upgrade (specguard.parallel.workers)
+        named = "; ".join(stale)
+        raise VersionMismatch(f"{where}: this process runs libraries other than the installed ones: {named}")
     differing = [
         f"{name} {expected.get(name, 'absent')!s} (keyed) != {found.get(name, 'absent')!s} (here)"
         for name in sorted(set(expected) | set(found))

@@ -6,7 +6,7 @@ outcome per task: :class:`~specguard.parallel.protocol.Done` or
 up before submitting, submits only missing seeds, and stores what comes back
 (results and model bytes), so cluster workers need no shared filesystem.
 
-* ``"local"``: :func:`specguard.parallel.workers.run_tasks`, one spawned process per
+* ``"local"``: :func:`specguard.parallel.workers.run_tasks`, one process per
   seed on this machine.
 * ``"tcp://host:8786"`` (any Dask scheduler address: ``tcp``, ``tls``, ``ws``,
   ``wss``, ``ucx``): the seeds run as tasks on that Dask cluster (a
@@ -89,7 +89,7 @@ def make_executor(address: str, *, workers: int) -> Executor:
 
 
 class LocalExecutor:
-    """One spawned process per task on this machine, at most ``workers`` at once."""
+    """One process per task on this machine (:func:`~specguard.parallel.workers.run_tasks`), at most ``workers``."""
 
     def __init__(self, workers: int) -> None:
         self.workers = workers

@@ -1,4 +1,4 @@
-"""Run tasks in spawned processes, one process per task, so that each task fails alone.
+"""Run tasks in processes of their own, one process per task, so that each task fails alone.
 
 Why not ``concurrent.futures.ProcessPoolExecutor`` (or loky): when one worker of
 such a pool dies (killed by the OOM killer, a segfault in a native library), the
@@ -20,6 +20,15 @@ pipe, so:
   killed if it does not stop, and reaped: no child is left behind;
 * a child whose parent dies (even by SIGKILL, where no cleanup can run) notices
   it on ``multiprocessing.parent_process().sentinel`` and exits.
+
+Each process starts as a spawned one does (a fresh interpreter's state: it imports the
+main script again, reads the parent's working directory, ``sys.path`` and environment),
+but where the platform has it (Linux, macOS) it is forked from a *fork server*, a process
+started once per parent that imported the heavy libraries every task needs
+(:data:`PRELOAD`: torch, stable-baselines3, gymnasium) before it forked anything: a task
+then starts in milliseconds instead of the seconds those imports take (Python 3.14 made the
+fork server Linux's default for the same reason). The server itself never runs a task, so no
+torch thread pool or task state is ever forked. Elsewhere (Windows) processes are spawned.
 
 Progress travels over the same pipe: the task calls ``report(phase, step, line)``
 and the parent prints, so lines of parallel tasks never interleave mid-line.
@@ -43,8 +52,9 @@ import traceback
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from multiprocessing import reduction
 from multiprocessing.connection import Connection, wait
-from multiprocessing.context import SpawnContext
+from multiprocessing.context import BaseContext
 from multiprocessing.process import BaseProcess
 from typing import Any
 
@@ -62,6 +72,15 @@ _STOP_GRACE_S = 2.0
 
 _EXIT_GRACE_S = 10.0
 """How long a child that has sent its outcome gets to exit on its own before it is terminated."""
+
+PRELOAD = ("torch", "stable_baselines3", "gymnasium")
+"""Libraries the fork server imports once, before it forks any task's process (one not installed is skipped).
+
+Installed libraries only: specguard's own modules load in each task's process, from the sources on disk when it
+starts, as a spawned process would (a run's cache key names a digest of those sources,
+:mod:`specguard.cache.versions`). A library upgraded while the server lives is caught by the task's version check,
+which compares the versions loaded with the ones installed.
+"""
 
 _MAX_MESSAGES_PER_WAKEUP = 64
 """Messages read from one live child before the others get their turn (a chatty task must not starve them)."""
@@ -125,9 +144,50 @@ def _exit_when_parent_dies() -> None:
     threading.Thread(target=watch, name="specguard-parent-watch", daemon=True).start()
 
 
-def _child_main(conn: Connection, payload: bytes) -> None:
-    """Process entry point: unpickle ``(fn, args)``, run it and send its reports and outcome to the parent."""
+class _ParentStdio:
+    """The parent's standard output and error as they are when a task starts, for the task's process to write to.
+
+    A spawned process inherits them. One forked by the fork server would write to the server's, which are the
+    parent's when the server started: under pytest, the capture of whichever test started it, so a task's
+    warnings and a native crash's last words would be lost. Pickled for the fork server, the two descriptors
+    travel with the task (``multiprocessing.reduction.DupFd``); :meth:`adopt` puts them in place.
+    """
+
+    def __init__(self, fds: tuple[Any, ...] = ()) -> None:
+        self.fds = fds
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        fds: list[Any] = []
+        for fd in (1, 2):
+            try:
+                os.fstat(fd)
+            except OSError:  # closed in the parent: the process keeps the server's
+                fds.append(None)
+            else:
+                fds.append(reduction.DupFd(fd))
+        return (_ParentStdio, (tuple(fds),))
+
+    def adopt(self) -> None:
+        for fd, dup in zip((1, 2), self.fds, strict=False):
+            if dup is not None:
+                new = dup.detach()
+                os.dup2(new, fd)
+                os.close(new)
+
+
+def _child_main(conn: Connection, payload: bytes, environ: dict[str, str], stdio: _ParentStdio | None) -> None:
+    """Process entry point: unpickle ``(fn, args)``, run it and send its reports and outcome to the parent.
+
+    ``environ`` and ``stdio`` are the parent's environment and standard streams when the task started (a
+    forked process has the fork server's, taken when the server started; ``stdio`` is ``None`` for a spawned
+    one, which inherits the parent's).
+    """
     _exit_when_parent_dies()
+    if stdio is not None:
+        stdio.adopt()
+    if os.environ != environ:
+        os.environ.clear()
+        os.environ.update(environ)
     runner = TaskRunner(conn.send)
     try:
         try:
@@ -216,10 +276,27 @@ def _release(children: Sequence[_Child]) -> None:
         child.process.close()
 
 
-def _start(context: SpawnContext, task: Task, payload: bytes) -> _Child:
+def _context() -> BaseContext:
+    """The fork server where the platform has one, with :data:`PRELOAD` (module docstring); else spawn."""
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return multiprocessing.get_context("spawn")
+    context = multiprocessing.get_context("forkserver")
+    context.set_forkserver_preload(list(PRELOAD))  # read when this process's server starts, at its first task
+    return context
+
+
+def _start(context: BaseContext, task: Task, payload: bytes) -> _Child:
     reader, writer = context.Pipe(duplex=False)
-    process = context.Process(
-        target=_child_main, args=(writer, payload), name=f"specguard-task-{task.key}", daemon=False
+    process = context.Process(  # type: ignore[attr-defined]
+        target=_child_main,
+        args=(
+            writer,
+            payload,
+            dict(os.environ),
+            _ParentStdio() if context.get_start_method() == "forkserver" else None,
+        ),
+        name=f"specguard-task-{task.key}",
+        daemon=False,
     )
     try:
         process.start()
@@ -239,7 +316,7 @@ def run_tasks(
     stop_on: Callable[[Failure], bool] | None = None,
     on_outcome: Callable[[int, TaskOutcome], None] | None = None,
 ) -> dict[int, TaskOutcome]:
-    """Run every task in a spawned process of its own, at most ``max_workers`` at once.
+    """Run every task in a process of its own (module docstring), at most ``max_workers`` at once.
 
     A task that raises, or whose process dies, becomes a :class:`Failure`; the others keep running.
     On any exception in the parent (SIGTERM in the main thread arrives as ``KeyboardInterrupt``),
@@ -272,7 +349,7 @@ def run_tasks(
         raise ValueError(f"task keys must be unique, got {keys}")
     payloads = {t.key: cloudpickle.dumps((t.fn, t.args)) for t in tasks}  # an unpicklable task fails before any start
 
-    context = multiprocessing.get_context("spawn")  # torch and forked state do not mix
+    context = _context()
     pending = deque(tasks)
     children: list[_Child] = []
     outcomes: dict[int, TaskOutcome] = {}
