@@ -396,6 +396,17 @@ def test_a_worker_whose_loaded_library_is_not_the_installed_one_refuses(monkeypa
         check_versions(keyed, "seed 0")
 
 
+def test_a_local_version_label_alone_is_the_installed_library(monkeypatch):
+    # PyPI's torch wheel is installed as 2.13.0 and says 2.13.0+cu130 itself: the same code, not an upgrade.
+    import cloudpickle
+
+    from specguard.cache.versions import check_versions, versions
+
+    keyed = versions()
+    monkeypatch.setattr(cloudpickle, "__version__", keyed["cloudpickle"] + "+local.build")
+    check_versions(keyed, "seed 0")
+
+
 def test_a_worker_with_the_keyed_versions_trains():
     from specguard.cache.versions import versions
     from specguard.engine.train_task import train_task as _train_task

@@ -99,6 +99,12 @@ def _loaded_versions() -> dict[str, str]:
     return loaded
 
 
+def _public(version: str) -> str:
+    """A version without its local label (PEP 440's ``+...``): PyPI's torch wheel is ``2.13.0`` installed and
+    ``2.13.0+cu130`` as ``torch.__version__`` says it, the same code; an upgrade changes the public part."""
+    return version.split("+", 1)[0]
+
+
 def versions() -> dict[str, str]:
     """The versions that decide a run's outcome beside the spec: Python, specguard and the RL stack."""
     found = {"python": sys.version.split()[0], "specguard": _specguard_digest()}
@@ -124,7 +130,7 @@ def check_versions(expected: Mapping[str, str], where: str) -> None:
     stale = [
         f"{name} {loaded} (loaded) != {found[name]} (installed)"
         for name, loaded in _loaded_versions().items()
-        if loaded != found.get(name)
+        if _public(loaded) != _public(found.get(name, ""))
     ]
     if stale:  # a process forked from a server that imported them before an upgrade (specguard.parallel.workers)
         named = "; ".join(stale)
