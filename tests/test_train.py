@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import re
+import tempfile
 
 import gymnasium as gym
 import pytest
@@ -35,6 +36,15 @@ def test_run_result_is_plain_data_and_deterministic_per_seed():
     assert first.timesteps == 128 and first.episodes in (2, 4)
     assert (first.successes, first.episodes) == (again.successes, again.episodes)
     assert hasattr(model, "predict")
+
+
+def test_a_run_leaves_no_logger_folder_in_the_temporary_directory(tmp_path, monkeypatch):
+    # SB3's learn() makes a quiet model's logger in a new empty folder, <tmp>/SB3-<time>, at every call
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    result, model = train_run(tiny_spec(expect={"position": 0.2}), seed=0)
+    assert result.timesteps > 0
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith("SB3-")] == []
+    assert model.logger.output_formats == []  # SB3's own logger writes nothing either
 
 
 def test_a_run_compiles_its_tree_once_for_all_its_envs(build_counts):

@@ -195,6 +195,7 @@ def _build(spec: Spec, seed: int) -> _Run:
         TrainingError: building the env failed.
     """
     from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.logger import Logger
     from stable_baselines3.common.vec_env import VecNormalize
 
     label = f"Spec {spec.label!r}"
@@ -233,6 +234,10 @@ def _build(spec: Spec, seed: int) -> _Run:
     except (TypeError, ValueError, AssertionError) as e:
         venv.close()
         raise InvalidSpec(f"{label}.hyperparameters", f"{name} rejected them: {e}") from e
+    if hyperparameters.get("tensorboard_log") is None:
+        # SB3's logger for a quiet model without a TensorBoard folder writes nothing, and learn() makes it in a
+        # new empty folder /tmp/SB3-<time> each call: one left behind per run. The same logger, without the folder.
+        model.set_logger(Logger(folder=None, output_formats=[]))
     normalizer = venv if isinstance(venv, VecNormalize) else None
     return _Run(spec, seed, model, normalizer, build())
 
