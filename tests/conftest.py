@@ -2,7 +2,12 @@ import os
 import sys
 
 import pytest
+import torch  # noqa: F401
 from hypothesis import HealthCheck, settings
+
+# torch is imported before any test runs: pytester takes sys.modules back to what it was before a test that uses it,
+# dropping what the test imported, and torch imported a second time into one process dies in a segmentation fault
+# (tests/test_doors.py's three runs of one test in a process crashed pytest so).
 
 pytest_plugins = ["pytester"]
 

@@ -105,6 +105,8 @@ def test_every_door_gives_the_same_figures_and_verdicts(spec_file: Path, tmp_pat
     }
 
     assert api == cli == plugin, (api, cli, plugin)
+    # each seed's own training time (the main job's benchmark sums each spec's slower seed)
+    assert all(s["train_seconds"] > 0 for row in rows for s in row["per_seed"]), rows
     # Judged at checkpoints, as every door does by default: met at the first one, training stopped there.
     assert all(steps < spec.budget.timesteps for figures, _ in api.values() for _, steps, _, _ in figures)
     assert code == (0 if result.passed else 1)

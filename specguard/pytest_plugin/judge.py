@@ -222,6 +222,7 @@ def judge_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalChe
             "verdict": v.value,
             "timesteps": r.timesteps,
             "met_early": r.met_early,
+            "train_seconds": r.train_seconds,
             "evaluated": sum(p.get("evaluation_episodes", 0) for p in r.curve) or r.episodes,
             **({"weights": r.weights} if r.weights else {}),
         }
