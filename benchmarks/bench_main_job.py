@@ -7,8 +7,8 @@ every threshold met), the evaluation episodes spent (interim checkpoints plus
 the final evaluation) and the training time; how much of the wall time is
 spent waiting, spec after spec, for its slower seed while a core idles (the
 seeds of one spec train in parallel, the specs one after another); then the
-totals against the targets: at most 3 million environment steps trained in all, at most 5
-minutes cold on 2 cores, under 10 s warm.
+totals against the targets: at most 3 million environment steps trained in
+all, at most 5 minutes cold on 2 cores, under 10 s warm.
 
 Exits with the main job's own exit status when it fails (so CI sees a failing
 main job); time and step figures are printed, never asserted (machines are
@@ -30,6 +30,8 @@ import xml.etree.ElementTree as ET
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
+
+from specguard.parallel.workers import resolve_workers
 
 ROOT = Path(__file__).resolve().parent.parent
 STEPS_TARGET = 3_000_000
@@ -86,7 +88,7 @@ def main() -> int:
         f"{totals['steps'] / STEPS_TARGET:.2f}x), {totals['evaluated']:.0f} evaluation episodes, "
         f"{totals['train']:.0f} s of training over all seeds"
     )
-    workers = os.cpu_count() or 1
+    workers = resolve_workers("auto")  # the main job's training processes, by the rule that sets them
     packed = max(totals["train"] / workers, totals["longest"])  # no seed splits over cores
     print(
         f"spec after spec, its seeds in parallel: the slower seed of each spec sums to {totals['slower']:.0f} s, "
