@@ -115,7 +115,8 @@ class SpecWarning(UserWarning):
     """A spec that trains, but may not test what it says (a goal met at some starts, or only at the bounds' edge).
 
     Issued before training, where the env is built; ``run_spec`` issues it once, in the caller's process. Also
-    issued by ``sg.zoo_settings`` for rl-zoo3 settings a spec cannot take (it trains without them).
+    issued by ``sg.zoo_settings`` for rl-zoo3 settings a spec cannot take (it trains without them), and while
+    training, in the run's process, for a callback of the spec's whose ``_on_step`` returned None (SB3 stops).
     """
 
 

@@ -39,6 +39,7 @@ __all__ = [
     "check_count",
     "check_finite",
     "check_flag",
+    "check_fraction",
     "check_name",
     "check_natural",
     "check_open_fraction",
@@ -50,6 +51,7 @@ __all__ = [
     "is_choice",
     "is_count",
     "is_finite",
+    "is_fraction",
     "is_natural",
     "is_open_fraction",
     "is_positive",
@@ -175,6 +177,31 @@ def check_open_fraction(where: str, argument: str, value: object, meaning: str =
     """
     if not is_open_fraction(value):
         raise InvalidSpec(where, f"expected {argument} to be a number in (0, 1){aside(meaning)}, got {value!r}")
+    return float(value)
+
+
+def is_fraction(value: object) -> TypeGuard[Real]:
+    """The one rule for a share that may be whole (a margin of rate points): a real number in ``(0, 1]``, never a
+    bool."""
+    return isinstance(value, Real) and not isinstance(value, bool) and 0.0 < float(value) <= 1.0
+
+
+def check_fraction(where: str, argument: str, value: object, meaning: str = "") -> float:
+    """A number in the half-open interval ``(0, 1]`` (:func:`is_fraction`) as a float.
+
+    Raises:
+        InvalidSpec: naming ``where``, ``argument`` and the value given (``nan``, ``0`` and a string included).
+
+    Example:
+        >>> check_fraction("compare_agents", "margin", 1)
+        1.0
+        >>> check_fraction("compare_agents", "margin", "x")
+        Traceback (most recent call last):
+        ...
+        specguard.error.InvalidSpec: compare_agents: expected margin to be a number in (0, 1], got 'x'...
+    """
+    if not is_fraction(value):
+        raise InvalidSpec(where, f"expected {argument} to be a number in (0, 1]{aside(meaning)}, got {value!r}")
     return float(value)
 
 

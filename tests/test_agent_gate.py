@@ -110,3 +110,69 @@ def test_check_against_exits_1_on_a_drop_0_without_and_2_on_bad_input(tmp_path, 
     assert main(["check", f"{spec_file}::keep", "--agent", "lean", "--against", str(tmp_path / "absent.zip")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("specguard: error: ") and "absent.zip" in err.splitlines()[0]
+
+
+# Random against random, both seeded alike, so nothing drops: the new agent's success (12 of 40) stays undecided
+# against 0.3 after its last stage.
+NEAR = sg.Spec(
+    SHORT,
+    sg.Always(sg.Goal("upright", theta=(-0.2, 0.2)), name="keep"),
+    budget=sg.Budget(timesteps=1, eval_episodes=20, max_eval_episodes=40),
+    expect=0.3,
+)
+
+
+@pytest.fixture
+def twins(monkeypatch):
+    """``--agent random`` and ``--agent twin``: two random policies seeded alike (they play alike on paired
+    episodes)."""
+    policies = {"random": random_policy(), "twin": random_policy()}
+    real = check_agent_module.load_agent
+    monkeypatch.setattr(check_agent_module, "load_agent", lambda agent, **kw: real(policies.get(agent, agent), **kw))
+
+
+@pytest.mark.parametrize("undecided", ["fail", "pass"])
+def test_one_pass_fail_for_a_comparison_at_the_python_object_and_the_cli(tmp_path, capsys, twins, undecided):
+    from specguard.cli.main import main
+
+    spec = NEAR.as_run(undecided=undecided)
+    comparison = compare_agents(spec, random_policy(), random_policy())
+    assert comparison.result.outcome("keep").value == "undecided"
+    assert all(k.state is not GateState.DROPPED for k in comparison.keys.values())
+    assert comparison.passed is comparison.result.as_expected is (undecided == "pass")
+    assert comparison.to_dict()["passed"] is comparison.passed
+    spec_file = tmp_path / "near_specs.py"
+    spec_file.write_text(SPEC_FILE.replace("max_eval_episodes=80), expect=0.1", "max_eval_episodes=40), expect=0.3"))
+    argv = ["check", f"{spec_file}::keep", "--agent", "random", "--against", "twin", "--undecided", undecided]
+    assert main(argv) == (0 if comparison.passed else 1)
+    assert "-- against twin: passed" in capsys.readouterr().out  # nothing dropped: the check's verdict decides
+
+
+def test_only_asserted_goals_are_compared_as_against_a_saved_baseline():
+    from specguard.gate.saved_agent import saved_entry
+
+    comparison = compare_agents(KEEP, lean, lean, max_episodes=20)
+    assert list(comparison.keys) == list(KEEP.thresholds) == ["keep"]  # not the unasserted leaf keep/upright
+    entry = saved_entry(sg.AgentCheck(KEEP, lean, max_episodes=20), [])
+    assert list(entry.outcomes) == list(comparison.keys)  # what --goal-specs-save stores, --goal-specs-compare gates
+    from specguard.gate.agent_gate import compared_keys
+
+    assert compared_keys(KEEP) == list(comparison.keys)
+
+
+@pytest.mark.parametrize(
+    ("options", "culprit"),
+    [
+        ({"margin": "x"}, "expected margin to be a number in (0, 1] (rate points), got 'x'"),
+        ({"margin": None}, "expected margin to be a number in (0, 1] (rate points), got None"),
+        ({"margin": True}, "expected margin to be a number in (0, 1] (rate points), got True"),
+        ({"margin": 0.0}, "expected margin to be a number in (0, 1] (rate points), got 0.0"),
+        ({"level": "x"}, "expected level to be a number in (0, 1)"),
+        ({"seed": "x"}, "expected seed to be an integer >= 0"),
+    ],
+)
+def test_bad_arguments_of_compare_agents_are_one_line_naming_them(options, culprit):
+    with pytest.raises(sg.InvalidSpec) as info:
+        compare_agents(KEEP, lean, lean, **options)
+    first = str(info.value).splitlines()[0]
+    assert first.startswith("compare_agents('keep'): ") and culprit in first

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import collections
 import shutil
+import warnings
 import zipfile
 
 import gymnasium as gym
@@ -13,7 +14,7 @@ import torch
 
 from specguard.agents.agent import Agent, check_fits
 from specguard.agents.sources import load_agent
-from specguard.error import AgentError, AgentMismatch
+from specguard.error import AgentError, AgentMismatch, SpecWarning
 
 yaml = pytest.importorskip("yaml")
 sb3 = pytest.importorskip("stable_baselines3")
@@ -115,7 +116,7 @@ def test_an_rl_zoo_run_folder_loads_its_final_model_statistics_and_settings(save
     )
     (run / "CartPole-v1" / "args.yml").write_text(yaml.dump(args))
     agent = load_agent(run)
-    assert agent.path == run / "CartPole-v1.zip" and agent.name == "PPO (CartPole-v1.zip)"
+    assert agent.path == run / "CartPole-v1.zip" and agent.name == "PPO (CartPole-v1_1/CartPole-v1.zip)"
     assert agent.config == dict(config) and agent.env_kwargs == {"sutton_barto_reward": True}
     obs = _observations()[5]
     assert agent(obs) == int(model.predict(norm.normalize_obs(obs), deterministic=True)[0])
@@ -234,11 +235,35 @@ def test_an_action_of_the_wrong_type_or_shape_is_refused_at_the_first_step(space
         agent(np.zeros(4))
 
 
-def test_a_box_action_outside_its_bounds_is_the_env_s_to_clip():
-    agent = load_agent(lambda obs: np.array([3.0, -3.0]))
+def test_a_box_action_outside_its_bounds_is_clipped_as_sb3_s_predict_clips_and_warned_once():
+    agent = load_agent(lambda obs: np.array([3.0, -0.5]) * (1 + obs[0]))
     check_fits(agent, CARTPOLE.observation_space, gym.spaces.Box(-1, 1, (2,)))
     agent.start([None])
-    assert agent(np.zeros(4)).tolist() == [3.0, -3.0]
+    with pytest.warns(SpecWarning, match=r"agent '<lambda>' gave the action .* outside Box.*clipped to the bounds"):
+        assert agent(np.zeros(4)).tolist() == [1.0, -0.5]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # once per agent
+        assert agent(np.ones(4)).tolist() == [1.0, -1.0]  # every action, not only the first
+
+
+@pytest.mark.parametrize("late", [np.array([np.nan, 0.0]), np.array([0.5])])
+def test_a_bad_action_after_the_first_step_names_the_agent(late):
+    actions = iter([np.array([0.5, 0.5]), late])
+    agent = load_agent(lambda obs: next(actions))
+    check_fits(agent, CARTPOLE.observation_space, gym.spaces.Box(-1, 1, (2,)))
+    agent.start([None])
+    agent(np.zeros(4))
+    with pytest.raises(AgentError, match=r"agent '<lambda>' gave the action .*which is not one of Box"):
+        agent(np.zeros(4))
+
+
+def test_a_policy_that_calls_sys_exit_is_the_agent_s_failure_not_the_end_of_the_process():
+    import sys
+
+    agent = load_agent(lambda obs: sys.exit(0))
+    agent.start([None])
+    with pytest.raises(AgentError, match=r"agent '<lambda>' called sys.exit\(0\) while acting"):
+        agent(np.zeros(4))
 
 
 # -- bad input, one line each -------------------------------------------------------------------------------------
@@ -254,6 +279,10 @@ def test_a_path_that_does_not_exist(tmp_path):
     assert (
         _message(lambda: load_agent(tmp_path / "nope.zip")) == f"{str(tmp_path / 'nope.zip')!r}: no such file or folder"
     )
+    with pytest.raises(AgentError) as info:
+        load_agent("sb3/ppo-CartPole-v1")
+    assert info.value.message == "'sb3/ppo-CartPole-v1': no such file or folder"
+    assert "Hugging Face Hub repo id? specguard downloads nothing" in info.value.hint
 
 
 def test_a_folder_without_a_model_and_one_with_two(saved, tmp_path):
@@ -327,3 +356,38 @@ def test_a_policy_defined_in_a_python_file_is_named_file_colon_colon_name(tmp_pa
     ]:
         with pytest.raises(AgentError, match="^agent .*" + culprit):
             load_agent(target)
+
+
+class _Actor(torch.nn.Module):
+    """A CleanRL- or TorchRL-style actor: a network on the observation tensor, its output as ``form`` says."""
+
+    def __init__(self, form: str) -> None:
+        super().__init__()
+        self.net, self.form = torch.nn.Linear(4, 2), form
+
+    def forward(self, obs):
+        out = torch.tanh(self.net(obs))  # requires grad unless asked without
+        if self.form == "tuple":
+            return out, out.sum()  # TorchRL's out_keys: (action, log_prob)
+        return {"action": out, "log_prob": out.sum()} if self.form == "mapping" else out
+
+
+@pytest.mark.parametrize("form", ["tensor", "tuple", "mapping"])
+def test_a_torch_actor_acts_without_gradients_and_its_action_is_taken_from_its_output(form):
+    actor = _Actor(form)
+    agent = load_agent(actor)
+    check_fits(agent, CARTPOLE.observation_space, gym.spaces.Box(-1, 1, (2,)))
+    agent.start([None])
+    obs = _observations()[3]
+    with torch.no_grad():
+        expected = torch.tanh(actor.net(torch.as_tensor(obs))).numpy()
+    assert np.allclose(agent(obs), expected)
+
+
+def test_a_file_colon_colon_name_that_names_another_name_is_refused_not_followed(tmp_path):
+    policies = tmp_path / "policies.py"
+    policies.write_text(f"me = {str(policies) + '::me'!r}\n")
+    message = _message(lambda: load_agent(f"{policies}::me"))
+    assert (
+        message == f"agent {str(policies) + '::me'!r}: me is the text {str(policies) + '::me'!r}, another FILE.py::NAME"
+    )

@@ -421,3 +421,91 @@ def test_specguard_run_and_pytest_write_tensorboard_logs(tmp_path, pytester, mon
     outcome.assert_outcomes(passed=1)
     assert list(scalars(tmp_path / "pytest")) == ["balance/seed_0_1"]
     assert "specguard/goal/balance" in scalars(tmp_path / "pytest")["balance/seed_0_1"]
+
+
+def scalar_events(folder, tag):
+    """``(step, value)`` of every event of scalar ``tag`` in the one run folder of TensorBoard logs under ``folder``."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    (events,) = {e.parent for e in Path(folder).rglob("events.out.tfevents.*")}
+    accumulator = EventAccumulator(str(events))
+    accumulator.Reload()
+    return [(e.step, e.value) for e in accumulator.Scalars(tag)] if tag in accumulator.Tags()["scalars"] else []
+
+
+def test_a_met_checkpoint_is_written_to_tensorboard_at_its_step(tmp_path):
+    # A look at step 128 meets every threshold (>= 0) and stops training in the middle of SB3's second rollout,
+    # after SB3's last write: the look is the run's result, and TensorBoard has it at its step.
+    budget = sg.Budget(timesteps=256, min_seeds=1, max_seeds=1, eval_episodes=4, max_eval_episodes=4, checkpoints=2)
+    spec = sg.Spec(CARTPOLE, BALANCE, budget=budget, expect=0.0, hyperparameters={"n_steps": 64, "batch_size": 32})
+    result = sg.run_spec(spec, workers=1, cache_dir=None, progress=None, tensorboard_log=tmp_path)
+    (run,) = result.runs
+    assert run.met_early and run.timesteps == 128
+    looked = run.successes["balance"] / run.episodes
+    assert scalar_events(tmp_path, "specguard/eval/goal/balance")[-1] == (128, pytest.approx(looked))
+    # The training episodes of the rollout cut short are written too: the training curve keeps its last point.
+    assert scalar_events(tmp_path, "specguard/goal/balance")[-1][0] == 128
+
+
+class Forgetful(BaseCallback):
+    """A callback whose ``_on_step`` forgot its ``return True``."""
+
+    def _on_step(self):
+        pass
+
+
+def test_a_users_callback_that_stops_training_is_recorded_and_one_that_returns_none_warns():
+    class Enough(BaseCallback):
+        def _on_step(self):
+            return self.num_timesteps < 3
+
+    enough = UserCallback(Enough(), "Spec 'x', seed 0")
+    step = stepped(enough)
+    assert step(1) is True and enough.stopped_at is None
+    assert step(3) is False and enough.stopped_at == 3 and not enough.returned_none
+    forgetful = UserCallback(Forgetful(), "Spec 'x', seed 0")
+    step = stepped(forgetful)
+    with pytest.warns(
+        sg.SpecWarning,
+        match=r"^Spec 'x', seed 0, callback Forgetful: its _on_step returned None at step 1, which SB3 takes as "
+        r"False: training stopped there",
+    ):
+        assert step(1) is False
+    assert forgetful.stopped_at == 1 and forgetful.returned_none
+
+
+def test_a_callback_that_stops_training_says_so_in_the_result_the_table_the_failure_and_junit(tmp_path):
+    from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
+
+    from specguard.pytest_plugin.judge import judge_goal
+    from specguard.report.table import table
+
+    one_episode = functools.partial(StopTrainingOnMaxEpisodes, max_episodes=1)
+    result = sg.run_spec(quick_spec(callbacks=[one_episode]), workers=1, cache_dir=None, progress=None)
+    for run in result.runs:
+        assert run.stop_reason == f"stopped by StopTrainingOnMaxEpisodes at {run.timesteps} of 256 steps"
+        assert 0 < run.timesteps < 256
+    tiny = {"n_steps": 64, "batch_size": 32}
+    spec = sg.Spec(CARTPOLE, BALANCE, budget=QUICK, expect=0.99, hyperparameters=tiny, callbacks=[Forgetful])
+    result = sg.run_spec(spec, workers=1, cache_dir=tmp_path, progress=None)
+    said = "stopped by Forgetful at 1 of 256 steps: its _on_step returned None, which SB3 takes as False"
+    assert [r.stop_reason for r in result.runs] == [said, said] and [r.timesteps for r in result.runs] == [1, 1]
+    assert f"seed 0: training {said}" in table(result).splitlines()
+    check = judge_goal(result, spec, "balance", "test_x")
+    assert f"  seed 1: training {said}" in check.message().splitlines()
+    assert dict(check.junit_properties())["stopped"] == f"seed 0: {said}; seed 1: {said}"
+    # The reason is the run's: kept in the cache, and read back from a result's JSON.
+    again = sg.run_spec(spec, workers=1, cache_dir=tmp_path, progress=None)
+    assert all(again.cached.values()) and [r.stop_reason for r in again.runs] == [said, said]
+    assert sg.SpecResult.from_dict(result.to_dict()).runs == result.runs
+
+
+def test_a_run_stored_before_stop_reasons_were_recorded_still_reads():
+    from specguard.training.result import RunResult
+
+    run = RunResult(spec="p", seed=0, timesteps=64, episodes=4, successes={"p": 1}, train_seconds=1.0)
+    old = run.to_dict()
+    del old["stop_reason"]
+    assert RunResult.from_dict(old, seed=0, paths=["p"]) == run
+    with pytest.raises(ValueError, match="stop_reason 3 is neither a string nor null"):
+        RunResult.from_dict({**old, "stop_reason": 3}, seed=0, paths=["p"])

@@ -69,7 +69,7 @@ def test_a_counterexample_fails_the_falsify_item_with_its_report(pytester):
             "*test_up[[]falsify[]] FAILED*",
             "*test_anywhere[[]falsify[]] PASSED*",
             "*falsified:*",
-            "*seed 0: missed (no counterexample)*",
+            "*seed 0: missed (a counterexample found)*",
             "*counterexample (*): theta=*, omega=*",
             "*missed: up*",
             "*failure rate over the start space: *(*/8 uniform draws), interval*",
@@ -219,10 +219,10 @@ def test_the_report_gets_a_gif_replaying_each_counterexample(pytester):
     # The Markdown report shows the counterexample with its GIF; the JSON keeps its exact start.
     markdown = (pytester.path / "report" / "goal-specs.md").read_text()
     assert "### Counterexamples" in markdown and f"]({gif.name})" in markdown
-    assert "**`test_specs.py::test_up`**, seed 0: missed (no counterexample): `theta=" in markdown
+    assert "**`test_specs.py::test_up`**, seed 0: missed (a counterexample found): `theta=" in markdown
     data = json.loads((pytester.path / "report" / "goal-specs.json").read_text())
     (found,) = data["counterexamples"]
-    assert found["gif"] == gif.name and found["missed"] and f"theta={found['start']['theta']:.6g}" in out
+    assert found["gif"] == gif.name and found["missed"] and f"theta={found['start']['theta']!r}" in out  # exact
 
 
 class _Reporter:

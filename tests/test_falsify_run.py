@@ -141,3 +141,80 @@ def test_the_command_line_falsifies_an_agent_exit_0_1_and_2(tmp_path, capsys):
         err = capsys.readouterr().err
         assert err.startswith("specguard: error: ") and culprit in err.splitlines()[0], err
         assert len(err.splitlines()) <= 2, err  # the line, and its hint
+
+
+# -- what the report says replays: the last state, the printed start, a stateful agent afresh -----------------------
+
+FALLEN_RIGHT = sg.Spec(CARTPOLE, sg.Goal("fallen_right", theta=(0.2, 1.0)), budget=sg.Budget(timesteps=1))
+"""A plain goal, no own state: judged in the episode's last state alone."""
+
+
+def test_a_goal_without_own_state_is_judged_in_the_last_state_a_raw_replay_reaches():
+    # Pushed toward its lean, the pole falls to the side it leans to: a start leaning left misses the goal at its
+    # last state. The falsifier once judged the baseline env's start instead (its evaluator never moved from it):
+    # every start missed, and the reported last state was the start.
+    found = sg.falsify_agent(FALLEN_RIGHT, lean, sg.StartSpace({"theta": (-0.15, 0.15)}), examples=8, uniform=0)
+    c = found.counterexample
+    assert c is not None and c.judgement.missed == ("fallen_right",) and c.start["theta"] < 0
+    states, _ = raw_episode(lean, c.start)
+    assert c.last == {k: float(v) for k, v in zip(("x", "v", "theta", "omega"), states[-1], strict=True)}
+    assert c.steps == len(states) - 1 and c.last["theta"] < -0.2
+
+
+def printed_start(report: str) -> dict[str, float]:
+    """The counterexample's start as the report prints it, read back."""
+    line = next(line for line in report.splitlines() if line.startswith("counterexample ("))
+    return {k: float(v) for k, v in (part.split("=") for part in line.partition("): ")[2].split(", "))}
+
+
+def test_the_printed_counterexample_replays_the_very_episode():
+    # A spin shrunk to the boundary of the failing spins (omega = 0.4015672...): steady drives the cart off the
+    # track after 345 steps. Printed to 6 digits, its replay ended elsewhere (v = 0.577 against 0.187).
+    found = sg.falsify_agent(BALANCE, steady, sg.StartSpace({"omega": (-2.0, 2.0)}), examples=16, uniform=0)
+    c = found.counterexample
+    assert c is not None and c.steps > 100
+    start = printed_start(found.report())
+    states, _ = raw_episode(steady, start)
+    assert {k: float(v) for k, v in zip(("x", "v", "theta", "omega"), states[-1], strict=True)} == c.last
+    assert len(states) - 1 == c.steps and start == c.start  # exact: each float's shortest text, not 6 digits
+
+
+def test_the_header_of_a_falsified_run_says_a_counterexample_was_found():
+    from specguard.falsify.assertion import falsify_verdict, verdict_lines
+    from specguard.report.session_report import counterexample_lines
+
+    found = sg.falsify_agent(BALANCE, lean, NARROW, examples=4, uniform=0)
+    clean = sg.falsify_agent(BALANCE, steady, NARROW, examples=2, uniform=0)
+    lines = verdict_lines(
+        {0: found, 1: clean}, {0: falsify_verdict(found, None), 1: falsify_verdict(clean, None)}, None
+    )
+    assert lines[0] == "seed 0: missed (a counterexample found)"
+    assert "seed 1: met (no counterexample found)" in lines
+    run = {"group": "t.py::test_up", "seed": 0, "verdict": "missed", "max_rate": None, **found.to_dict()}
+    assert counterexample_lines([run])[0].startswith(
+        "- **`t.py::test_up`**, seed 0: missed (a counterexample found): `"
+    )
+
+
+class Tiring:
+    """Steady for its first 600 actions, then pushing toward the lean: it fails only once it has acted enough,
+    whatever the start (a policy with state across episodes)."""
+
+    def __init__(self) -> None:
+        self.calls = 0
+
+    def __call__(self, obs):  # type: ignore[no-untyped-def]
+        self.calls += 1
+        return steady(obs) if self.calls <= 600 else lean(obs)
+
+
+def test_a_counterexample_a_fresh_copy_of_a_stateful_agent_does_not_fail_is_reported_not_reproduced():
+    tiring = Tiring()
+    with pytest.warns(UserWarning, match="NOT REPRODUCED: a fresh copy of the agent"):
+        found = sg.falsify_agent(BALANCE, tiring, NARROW, examples=4, uniform=0)
+    assert found.found and tiring.calls > 600  # the tired agent fails
+    assert "NOT REPRODUCED" in found.report() and found.notes[-1] in found.report()
+    fresh = found.counterexample.start
+    assert kept_upright(*raw_episode(Tiring(), fresh))  # and a fresh one does not
+    again = sg.falsify_agent(BALANCE, lean, NARROW, examples=4, uniform=0)  # a stateless agent's reproduces: no note
+    assert again.found and again.notes == []

@@ -187,7 +187,7 @@ def test_an_agent_items_falsify_item_searches_the_agent_and_is_left_out_of_its_s
         [
             "*test_lean[[]falsify[]]*",
             "falsified:",
-            "*seed 0: missed (no counterexample)*",
+            "*seed 0: missed (a counterexample found)*",
             "*missed: balance*",
             "*wrote baseline*main.json: replaced none, added 1 spec (test_agent_checks.py::test_lean), kept none",
         ]

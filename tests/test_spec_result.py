@@ -193,3 +193,76 @@ def test_spec_word_is_the_worst_goal_word():
     assert (
         spec_word([Word.UNDECIDED], crashed=False, undecided_counts_as=Word.XFAILED) == "undecided, counted as xfailed"
     )
+
+
+def _stored() -> dict:
+    run = RunResult(spec="s", seed=0, timesteps=1, episodes=10, successes={"g": 9}, train_seconds=0.0)
+    goal = GoalVerdict("g", 0.5, 1, [RunVerdict.MET], QuorumVerdict.PASSED, 9, 10, (0.555, 0.997))
+    return json.loads(json.dumps(SpecResult(spec="s", runs=[run], goals={"g": goal}, cached={0: True}).to_dict()))
+
+
+def _damaged(path: tuple, value: object) -> dict:
+    data = _stored()
+    where = data
+    for key in path[:-1]:
+        where = where[key]
+    if value is KeyError:
+        del where[path[-1]]
+    else:
+        where[path[-1]] = value
+    return data
+
+
+@pytest.mark.parametrize(
+    ("path", "value", "culprit"),
+    [
+        (("spec",), 3, "spec 3"),
+        (("runs",), 5, "runs 5"),
+        (("runs",), {"0": {}}, "runs {'0': {}}"),
+        (("goals",), ["g"], "goals ['g']"),
+        (("goals", "g"), "passed", "goal verdict 'g': expected an object, got 'passed'"),
+        (("goals", "g", "interval"), 0.5, "goal verdict 'g': interval 0.5"),
+        (("goals", "g", "interval"), [0.1, "x"], "goal verdict 'g': interval [0.1, 'x']"),
+        (("goals", "g", "runs"), None, "goal verdict 'g': runs None"),
+        (("goals", "g", "runs"), ["met", "maybe"], "goal verdict 'g': runs ['met', 'maybe']"),
+        (("goals", "g", "verdict"), "won", "goal verdict 'g': verdict 'won'"),
+        (("goals", "g", "threshold"), "0.5", "goal verdict 'g': threshold '0.5'"),
+        (("goals", "g", "required"), 1.5, "goal verdict 'g': required 1.5"),
+        (("goals", "g", "successes"), None, "goal verdict 'g': successes None"),
+        (("goals", "g", "episodes"), "10", "goal verdict 'g': episodes '10'"),
+        (("goals", "g", "path"), 7, "goal verdict 7: path 7 is not a string"),
+        (("errors",), ["seed 0 died"], "errors ['seed 0 died']"),
+        (("errors",), {"zero": "died"}, "errors {'zero': 'died'}"),
+        (("tracebacks",), {"0": 1}, "tracebacks {'0': 1}"),
+        (("cached",), {"0": "yes"}, "cached {'0': 'yes'}"),
+        (("cached",), 1, "cached 1"),
+        (("seconds",), "1s", "seconds '1s'"),
+        (("confidence",), None, "confidence None"),
+        (("spec_key",), 5, "spec_key 5"),
+        (("xfail",), 5, "xfail 5"),
+        (("xfail",), {"g": None}, "xfail {'g': None}"),
+        (("notes",), 5, "notes 5"),
+        (("notes",), "a note", "notes 'a note'"),
+        (("agent",), ["PPO"], "agent ['PPO']"),
+        (("undecided",), 3, "undecided"),
+    ],
+)
+def test_from_dict_on_damaged_data_is_one_value_error_naming_the_field(path, value, culprit):
+    with pytest.raises(ValueError) as info:
+        SpecResult.from_dict(_damaged(path, value))
+    assert type(info.value) is ValueError  # not a raw KeyError, TypeError or AttributeError
+    message = str(info.value)
+    assert "\n" not in message and message.startswith("spec result ") and culprit in message, message
+
+
+@pytest.mark.parametrize("data", [None, [], "result", 3, {"spec": "s", "runs": [], "goals": {"g": None}}])
+def test_from_dict_on_no_object_is_one_value_error(data):
+    with pytest.raises(ValueError) as info:
+        SpecResult.from_dict(data)
+    assert type(info.value) is ValueError and "\n" not in str(info.value)
+
+
+def test_from_dict_still_reads_what_to_dict_wrote_and_the_optional_fields_may_be_absent():
+    assert SpecResult.from_dict(_stored()).goals["g"].interval == (0.555, 0.997)
+    bare = {k: v for k, v in _stored().items() if k in ("spec", "runs", "goals")}
+    assert SpecResult.from_dict(bare).cached == {}

@@ -265,3 +265,16 @@ def test_waiting_for_a_lock_held_too_long_is_a_clear_error(tmp_path):
         holder.release()
     wait_for(waiter, "Spec 'x', seed 0", 0.2)
     waiter.release()
+
+
+@pytest.mark.parametrize("model", [True, False], ids=["trained run", "agent's evaluation"])
+def test_a_result_json_nested_too_deep_is_a_damaged_entry_discarded_not_a_crash(tmp_path, model):
+    cache, key = Cache(tmp_path), "cd" * 32
+    if model:
+        cache.store_files(key, RESULT, {"model.zip": b"model bytes"})
+    else:
+        cache.store_evaluation(key, RESULT)
+    (cache.folder(key) / "result.json").write_text("[" * 100_000 + "]" * 100_000)  # json.loads: RecursionError
+    with pytest.warns(UserWarning, match=r"specguard cache: discarded entry .*(recursion|nested|deep)"):
+        assert cache.load_key(key, seed=0, paths=["pendulum"], model=model) is None
+    assert not cache.folder(key).exists()  # removed, so that the run is trained (or evaluated) again in its place

@@ -20,12 +20,13 @@ Example:
 from __future__ import annotations
 
 import functools
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
-from specguard.error import AgentError, AgentMismatch, SpecError
+from specguard.error import AgentError, AgentMismatch, SpecError, SpecWarning
 from specguard.training.policy import observation_rows
 from specguard.utils.text import MAX_SHOWN, elide, shown
 
@@ -50,9 +51,10 @@ class Agent:
             policy applies its own).
         batch: take a batch of observations (rows, one per env) and give their actions; a callable for one
             observation is asked row by row.
-        check_actions: check the first action after each :meth:`start` against the action space
-            (:func:`check_fits` names it for an agent that does not say): for an agent whose actions may be of
-            another type or shape (a callable's, a ``predict`` of another library's).
+        check_actions: check every action against the action space (:func:`check_fits` names it for an agent that
+            does not say), and clip a ``Box`` action to its bounds as SB3's ``predict`` clips a model's (warned
+            once): for an agent whose actions may be of another type, shape or range (a callable's, a ``predict``
+            of another library's).
         model: the SB3 model (or ``predict`` object) behind the agent, if any.
         algorithm: its algorithm's class, if known.
         path: the file it was loaded from, if any.
@@ -98,6 +100,7 @@ class Agent:
         self._policy = act if isinstance(act, Policy) else None
         self._act = self._policy if self._policy is not None else self._callable_act(act)
         self._unchecked = check_actions
+        self._clipped = False  # a Box action was clipped (warned once)
 
     # -- what it is ----------------------------------------------------------------------------------------
 
@@ -146,7 +149,7 @@ class Agent:
 
     def start(self, envs: Sequence[Any]) -> None:
         """Episodes start on ``envs`` (one env, or one per row of a batch): a recurrent state starts afresh, and the
-        next action is checked (for an agent whose actions are checked)."""
+        actions are checked from the first (for an agent whose actions are checked)."""
         if self._policy is not None:
             self._policy.start(envs)
         self._unchecked = self._check_actions
@@ -156,18 +159,24 @@ class Agent:
         (a discrete one as a Python ``int`` unless batched).
 
         Raises:
-            AgentError: the agent raised (its exception chained), or its first action after :meth:`start` is not one
-                of the action space.
+            AgentError: the agent raised (its exception chained), called ``sys.exit``, or gave an action that is not
+                one of the action space (checked at every step for an agent whose actions are checked; a ``Box``
+                action out of its bounds is clipped instead, as SB3's ``predict`` clips a model's).
         """
         try:
             action = self._act(observations, rows)
         except SpecError:
             raise
+        except SystemExit as e:  # would end the judging process as if it had finished: the agent's failure
+            raise AgentError(
+                f"agent {self.name!r} called sys.exit({e.code!r}) while acting",
+                hint="a policy returns an action; it must not exit the process",
+            ) from e
         except Exception as e:
             first = str(e).strip().splitlines()[0] if str(e).strip() else ""
             raise AgentError(f"agent {self.name!r} raised {type(e).__name__}: {elide(first, MAX_SHOWN)}") from e
         if self._unchecked:
-            self._check(action)
+            action = self._check(action)
         return action if self._convert is None else self._convert(action)
 
     def _callable_act(self, fn: Callable[[Any], Any]) -> Callable[[Any, Sequence[int] | None], Any]:
@@ -191,11 +200,14 @@ class Agent:
         if self._policy is None and not self.batch:
             self._convert = int if isinstance(action_space, gym.spaces.Discrete) else np.asarray
 
-    def _check(self, action: Any) -> None:
+    def _check(self, action: Any) -> Any:
+        """``action``, checked against the action space; a ``Box`` action clipped to its bounds (warned once)."""
+        import gymnasium as gym
+
         space = self._expected
         if space is None:  # nothing to check against (no check_fits): not checked until start
             self._unchecked = False
-            return
+            return action
         for row in np.asarray(action) if self.batch else (action,):
             problem = action_problem(space, row)
             if problem:
@@ -203,14 +215,27 @@ class Agent:
                     f"agent {self.name!r} gave the action {shown(row)} ({problem}), which is not one of {space}",
                     hint="an agent's action must be one of the env's action space, as env.action_space.contains says",
                 )
-        self._unchecked = False
+        if isinstance(space, gym.spaces.Box):
+            array = np.asarray(action)
+            clipped = np.clip(array, space.low, space.high)
+            if not np.array_equal(clipped, array):
+                if not self._clipped:
+                    self._clipped = True
+                    warnings.warn(
+                        f"agent {self.name!r} gave the action {shown(array)} outside {space}: its actions are "
+                        "clipped to the bounds, as SB3's predict clips a model's",
+                        SpecWarning,
+                        stacklevel=3,
+                    )
+                return clipped
+        return action
 
 
 def action_problem(space: Any, action: Any) -> str:
     """What is wrong with ``action`` for ``space`` in a few words: its shape, its type, its range; ``""``: nothing.
 
-    A ``Box`` action is checked for its shape and a number type only (an env clips what lies outside its bounds);
-    any other space asks ``space.contains``.
+    A ``Box`` action is checked for its shape, a number type and finite values (what lies outside its bounds is
+    clipped by :class:`Agent`, as SB3's ``predict`` clips a model's); any other space asks ``space.contains``.
 
     Example:
         >>> import gymnasium as gym
@@ -234,7 +259,7 @@ def action_problem(space: Any, action: Any) -> str:
                 "a number" if numbers == "iuf" else "an integer"
             )
         if isinstance(space, gym.spaces.Box):
-            return ""
+            return "" if np.isfinite(array).all() else "not finite"
         action = array.astype(space.dtype) if array.dtype != space.dtype else array
         if isinstance(space, gym.spaces.Discrete):
             action = action.item()

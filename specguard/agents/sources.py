@@ -32,13 +32,15 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import pickle
 import zipfile
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from specguard.agents.agent import Agent, observation_kind
+from specguard.agents.decode import read_data, read_statistics
 from specguard.cache.canonical import digest
 from specguard.cache.store import file_sha256
 from specguard.error import AgentError, InvalidSpec, SpecError
@@ -72,6 +74,7 @@ def load_agent(
     normalizer: Any = None,
     deterministic: bool = True,
     batch: bool = False,
+    trust: bool = False,
 ) -> Agent:
     """``agent`` as an :class:`~specguard.agents.agent.Agent`, from wherever it was trained (see the module).
 
@@ -85,25 +88,35 @@ def load_agent(
         deterministic: a model's deterministic action, or a sampled one.
         batch: the agent takes a batch of observations (one row per env), as
             :class:`~specguard.training.policy.Policy` does; :meth:`Agent.batched` turns it.
+        trust: run the code an agent's files may hold. By default a zip's ``data`` and a ``vecnormalize.pkl`` are
+            decoded without running any (:mod:`specguard.agents.decode`: arrays, spaces, SB3's and sb3-contrib's own
+            classes), and a file that needs more is refused naming the field; ``trust=True`` unpickles them as SB3's
+            ``load`` does, for files you made or trust. The weights are read with ``torch.load(weights_only=True)``
+            either way. (A ``FILE.py::NAME`` is a Python file: importing it runs it, as importing a spec file does.)
 
     Raises:
         AgentError: one line naming what cannot be loaded and why (see :class:`~specguard.error.AgentError`).
     """
     if isinstance(agent, str) and "::" in agent:
         return load_agent(
-            _named(agent), algorithm=algorithm, normalizer=normalizer, deterministic=deterministic, batch=batch
+            _named(agent),
+            algorithm=algorithm,
+            normalizer=normalizer,
+            deterministic=deterministic,
+            batch=batch,
+            trust=trust,
         )
     if isinstance(agent, (str, os.PathLike)):
-        return _from_path(Path(agent), algorithm, normalizer, deterministic=deterministic, batch=batch)
+        return _from_path(Path(agent), algorithm, normalizer, deterministic=deterministic, batch=batch, trust=trust)
     if algorithm is not None:
         raise AgentError(
             f"algorithm={shown(algorithm)} names a saved zip's algorithm, and the agent {shown(agent)} is no path",
             hint="leave algorithm out for a model in memory or a callable",
         )
     if callable(getattr(agent, "predict", None)):
-        return _from_model(agent, normalizer, deterministic=deterministic, batch=batch)
+        return _from_model(agent, normalizer, deterministic=deterministic, batch=batch, trust=trust)
     if callable(agent):
-        return _from_callable(agent, normalizer, batch=batch)
+        return _from_callable(agent, normalizer, batch=batch, trust=trust)
     raise AgentError(f"cannot load an agent from {shown(agent)} (a {type(agent).__name__})")
 
 
@@ -120,18 +133,24 @@ def _named(target: str) -> Any:
             f"agent {target!r}: {path} defines nothing named {name!r}; its callables: {', '.join(defined) or 'none'}",
             hint="name a policy defined in the file, e.g. policies.py::lean",
         )
-    return getattr(module, name)
+    found = getattr(module, name)
+    if isinstance(found, str) and "::" in found:  # a name for another name: followed, it may lead back to itself
+        raise AgentError(
+            f"agent {target!r}: {name} is the text {found!r}, another FILE.py::NAME",
+            hint="name the policy itself (a callable, a model or a path), not a name for it",
+        )
+    return found
 
 
 # -- a model in memory, a callable ---------------------------------------------------------------------------
 
 
-def _from_model(model: Any, normalizer: Any, *, deterministic: bool, batch: bool) -> Agent:
+def _from_model(model: Any, normalizer: Any, *, deterministic: bool, batch: bool, trust: bool) -> Agent:
     from stable_baselines3.common.base_class import BaseAlgorithm
 
     name = type(model).__name__
     observation_space = getattr(model, "observation_space", None)
-    norm = normalizer_of(model, _statistics(f"agent {name!r}", normalizer, observation_space))
+    norm = normalizer_of(model, _statistics(f"agent {name!r}", normalizer, observation_space, trust=trust))
     sb3 = isinstance(model, BaseAlgorithm)
     return Agent(
         Policy(model, norm, deterministic=deterministic, batch=batch),
@@ -147,16 +166,40 @@ def _from_model(model: Any, normalizer: Any, *, deterministic: bool, batch: bool
     )
 
 
-def _from_callable(fn: Callable[[Any], Any], normalizer: Any, *, batch: bool) -> Agent:
+def _from_callable(fn: Callable[[Any], Any], normalizer: Any, *, batch: bool, trust: bool) -> Agent:
     name = function_text(fn)
-    norm = _statistics(f"agent {name!r}", normalizer, None)
+    norm = _statistics(f"agent {name!r}", normalizer, None, trust=trust)
     return Agent(
-        fn,
+        _torch_acting(fn),
         name=name,
         identity=lambda: _digest([("callable", _parameters(fn, name)), ("normalizer", _norm_digest(norm))]),
         normalizer=norm,
         batch=batch,
     )
+
+
+def _torch_acting(fn: Callable[[Any], Any]) -> Callable[[Any], Any]:
+    """``fn`` acting as a policy gives actions: a torch module (a CleanRL or TorchRL actor) is asked without
+    gradients, on the observation as a tensor; a tensor it returns is an array, and of a tuple (TorchRL's
+    ``out_keys``, ``(action, log_prob, ...)``) or a mapping with an ``"action"`` key, the action is taken."""
+    import torch
+
+    def action_of(out: Any) -> Any:
+        if isinstance(out, Mapping) and "action" in out:
+            out = out["action"]
+        elif isinstance(out, tuple) and out and isinstance(out[0], torch.Tensor):
+            out = out[0]
+        return out.detach().cpu().numpy() if isinstance(out, torch.Tensor) else out
+
+    if not isinstance(fn, torch.nn.Module):
+        return lambda obs: action_of(fn(obs))
+
+    def act(obs: Any) -> Any:
+        with torch.no_grad():
+            x = obs if isinstance(obs, Mapping) else torch.as_tensor(np.asarray(obs), dtype=torch.float32)
+            return action_of(fn(x))
+
+    return act
 
 
 def _parameters(obj: Any, name: str) -> str:
@@ -191,9 +234,10 @@ def _digest(parts: Iterable[tuple[str, Any]]) -> str:
 # -- VecNormalize statistics ---------------------------------------------------------------------------------------
 
 
-def _statistics(where: str, source: Any, observation_space: Any) -> Any:
-    """The ``VecNormalize`` statistics ``source`` is or holds (a path to their pickle), checked against the
-    observations the agent reads; ``None``: none."""
+def _statistics(where: str, source: Any, observation_space: Any, *, trust: bool) -> Any:
+    """The ``VecNormalize`` statistics ``source`` is or holds (a path to their pickle, decoded by
+    :func:`~specguard.agents.decode.read_statistics`), checked against the observations the agent reads; ``None``:
+    none."""
     from stable_baselines3.common.vec_env import VecNormalize
 
     if source is None:
@@ -201,11 +245,7 @@ def _statistics(where: str, source: Any, observation_space: Any) -> Any:
     norm = source
     if isinstance(source, (str, os.PathLike)):
         where = repr(str(source))
-        try:
-            with Path(source).open("rb") as f:
-                norm = pickle.load(f)  # VecNormalize.save pickles itself (its venv left out)
-        except Exception as e:
-            raise AgentError(f"{where}: cannot read VecNormalize statistics: {_why(e)}") from e
+        norm = read_statistics(Path(source), trust=trust)
     if not isinstance(norm, VecNormalize):
         raise AgentError(f"{where}: expected VecNormalize statistics, got {shown(norm)} (a {type(norm).__name__})")
     if observation_space is not None and observation_kind(norm.observation_space) != observation_kind(
@@ -228,28 +268,39 @@ def _why(e: BaseException) -> str:
 # -- a path: a zip or a folder ---------------------------------------------------------------------------------
 
 
-def _from_path(path: Path, algorithm: Any, normalizer: Any, *, deterministic: bool, batch: bool) -> Agent:
+def _from_path(path: Path, algorithm: Any, normalizer: Any, *, deterministic: bool, batch: bool, trust: bool) -> Agent:
     if not path.exists():
-        raise AgentError(f"{str(path)!r}: no such file or folder")
+        hub = str(path).count("/") == 1 and not str(path).startswith((".", "/")) and path.suffix != ".zip"
+        raise AgentError(
+            f"{str(path)!r}: no such file or folder",
+            hint=f"a Hugging Face Hub repo id? specguard downloads nothing: download it first (huggingface-cli "
+            f"download {path} --local-dir DIR, or rl_zoo3.load_from_hub) and give the folder"
+            if hub
+            else None,
+        )
+    if not path.is_dir() and not path.is_file():  # a named pipe, a device: opening it may block forever
+        raise AgentError(f"{str(path)!r}: not a regular file or a folder", hint=None)
     model_zip = _model_zip(path) if path.is_dir() else path
     folder = model_zip.parent
-    data = _data(model_zip)
-    settings = _settings_folder(folder)
+    data, custom = _data(model_zip, trust=trust)
+    settings = _settings_folder(folder, model_zip)
     config = _yaml_mapping(settings / "config.yml")
     args = _yaml_mapping(settings / "args.yml")
     cls = _algorithm(model_zip, data, algorithm, hints=[str(args.get("algo", "")), *_path_words(model_zip)])
     stats = normalizer
     if stats is None:
-        stats = next((p for d in (settings, folder) for p in (d / n for n in STATISTICS) if p.is_file()), None)
-    norm = _statistics(repr(str(model_zip)), stats, data["observation_space"])
-    try:
-        model = cls.load(model_zip, device="cpu", custom_objects=_CUSTOM_OBJECTS)
+        # the zip's own statistics beside it first, then its rl-zoo3 run's
+        stats = next((p for d in (folder, settings) for p in (d / n for n in STATISTICS) if p.is_file()), None)
+    norm = _statistics(repr(str(model_zip)), stats, data["observation_space"], trust=trust)
+    try:  # every serialized field is in custom: SB3 unpickles none of them
+        model = cls.load(model_zip, device="cpu", custom_objects=custom)
     except Exception as e:
         raise AgentError(f"{str(model_zip)!r}: {cls.__name__} cannot load it: {_why(e)}") from e
     stats_file = Path(stats) if isinstance(stats, (str, os.PathLike)) else None
     return Agent(
         Policy(model, norm, deterministic=deterministic, batch=batch),
-        name=f"{cls.__name__} ({model_zip.name})",
+        # an rl-zoo3 run's zips share their names (<env_id>.zip in <env_id>_1/, _2/, ...): its folder tells them apart
+        name=f"{cls.__name__} ({model_zip.name if settings == folder else f'{folder.name}/{model_zip.name}'})",
         identity=lambda: _digest(
             [
                 ("zip", file_sha256(model_zip)),
@@ -271,7 +322,10 @@ def _from_path(path: Path, algorithm: Any, normalizer: Any, *, deterministic: bo
 
 
 def _is_model(path: Path) -> bool:
-    """``path`` is a zip that holds SB3's ``data`` (a model; rl-zoo3's ``train_eval_metrics.zip`` is not)."""
+    """``path`` is a zip that holds SB3's ``data`` (a model; rl-zoo3's ``train_eval_metrics.zip`` is not); a named
+    pipe called ``*.zip`` is none (never opened: it would block)."""
+    if not path.is_file():
+        return False
     try:
         with zipfile.ZipFile(path) as z:
             return "data" in z.namelist()
@@ -303,31 +357,28 @@ def _model_zip(folder: Path) -> Path:
     )
 
 
-def _data(model_zip: Path) -> dict[str, Any]:
-    """The model's ``data`` (its class parameters, as SB3's ``load`` reads them): refused unless it is a model's."""
-    from stable_baselines3.common.save_util import json_to_data
-
+def _data(model_zip: Path, *, trust: bool) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The model's ``data`` (its class parameters, as SB3's ``load`` reads them) and the ``custom_objects`` that
+    hand SB3 the fields decoded here (:func:`~specguard.agents.decode.read_data`): refused unless it is a model's."""
     where = repr(str(model_zip))
-    try:
-        with zipfile.ZipFile(model_zip) as z:
-            text = z.read("data").decode()
-        data = json_to_data(text, custom_objects=_CUSTOM_OBJECTS)
-    except (zipfile.BadZipFile, KeyError, OSError, ValueError, UnicodeDecodeError) as e:
-        raise AgentError(f"{where}: not a stable-baselines3 model ({_why(e)})") from None
+    data, custom = read_data(model_zip, trust=trust, replace=_CUSTOM_OBJECTS)
     missing = [k for k in ("policy_class", "observation_space", "action_space") if k not in data]
     if missing or not isinstance(data["policy_class"], type):
         what = f"its data has no {', '.join(missing)}" if missing else "its policy class cannot be read here"
         raise AgentError(f"{where}: not a stable-baselines3 model ({what})")
-    return data  # type: ignore[no-any-return]
+    return data, custom
 
 
-def _settings_folder(folder: Path) -> Path:
-    """Where a run's settings lie: rl-zoo3's one ``<env_id>/`` subfolder with ``config.yml`` or ``args.yml``, else
-    the folder itself (the Hub's layout)."""
+def _settings_folder(folder: Path, model_zip: Path | None = None) -> Path:
+    """Where a run's settings lie: rl-zoo3's ``<env_id>/`` subfolder with ``config.yml`` or ``args.yml``, the one
+    that belongs to the run's final model ``<env_id>.zip`` beside it (or is named as ``model_zip``), else the folder
+    itself (the Hub's layout). Another subfolder's settings are another run's, never this one's."""
     named = [
         d
         for d in sorted(folder.iterdir())
-        if d.is_dir() and ((d / "config.yml").is_file() or (d / "args.yml").is_file())
+        if d.is_dir()
+        and ((d / "config.yml").is_file() or (d / "args.yml").is_file())
+        and ((folder / f"{d.name}.zip").is_file() or (model_zip is not None and model_zip.stem == d.name))
     ]
     return named[0] if len(named) == 1 else folder
 

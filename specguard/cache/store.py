@@ -198,7 +198,7 @@ class Cache:
         try:
             record = json.loads((folder / RESULT).read_text())
             return validate_record(record, folder, key=key, seed=seed, paths=paths, secret=self.secret, model=model)
-        except (OSError, ValueError, KeyError, TypeError) as e:
+        except (OSError, ValueError, KeyError, TypeError, RecursionError) as e:  # RecursionError: JSON nested deep
             # Damaged, edited, unsigned or stale: remove it so the retrained run can take its place.
             shutil.rmtree(folder, ignore_errors=True)
             again = "retraining" if model else "evaluating again"

@@ -553,11 +553,12 @@ class BaselineEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         self._t += 1
         f = self._read(obs, info, self.env, self._t)
         # Own state (stages, counters) follows the episode, though the spec's reward and termination do not
-        # apply; without own state, membership of one state is all there is (no rewards computed for nothing).
+        # apply; without own state, membership of one state is all there is (no rewards computed for nothing),
+        # and the evaluator starts afresh in it: its state is the episode's last, as the falsifier reads it.
         members = (
             self.evaluator.step(action, f, terminated or truncated, terminated).goals
             if self.evaluator.slots
-            else self.evaluator.members(f)
+            else self.evaluator.reset(f)
         )
         return obs, reward, terminated, truncated, self._info(info, members)
 

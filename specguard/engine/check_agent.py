@@ -87,6 +87,7 @@ def check_agent(
     algorithm: str | type | None = None,
     cache_dir: str | Path | None = DEFAULT_CACHE_DIR,
     outcomes: list[dict[str, int]] | None = None,
+    trust: bool = False,
 ) -> SpecResult:
     """Judge ``agent`` against ``spec`` on evaluation episodes, training nothing.
 
@@ -108,6 +109,8 @@ def check_agent(
         outcomes: if given, receives each episode's own counts in order (1 or 0 per goal and safety key), for a
             paired comparison (:func:`specguard.gate.agent_gate.compare_agents`); the cache is then neither read nor
             written (it keeps counts, not each episode's).
+        trust: run the code the agent's files may hold, as for :func:`~specguard.agents.sources.load_agent`
+            (default: decode them without running any, and refuse a file that needs more).
 
     Returns:
         The result, with the agent's episodes as one run (seed ``seed``, no training).
@@ -124,7 +127,7 @@ def check_agent(
     first, most = stages[0], stages[-1]
     check_choice(where, "observation", observation, AGENT_OBSERVATIONS)
     seed = check_natural(where, "seed", seed, "the evaluation seeds' run")
-    agent = spec_agent(spec, agent, algorithm=algorithm, batch=False)
+    agent = spec_agent(spec, agent, algorithm=algorithm, batch=False, trust=trust)
     # The agent as one run: one seed, judged at the looks of its stages (no checkpoints), as a trained run's final
     # evaluation is judged; the quorum of one run is that run.
     one = dataclasses.replace(
@@ -276,6 +279,7 @@ class AgentCheck:
     wrap: Callable[[Any], Any] | None = None
     seed: int = 0
     algorithm: str | type | None = None
+    trust: bool = False
 
     def __post_init__(self) -> None:
         where = f"AgentCheck({self.spec.label!r})" if isinstance(self.spec, Spec) else "AgentCheck"
@@ -303,6 +307,7 @@ class AgentCheck:
             algorithm=self.algorithm,
             cache_dir=cache_dir,
             outcomes=outcomes,
+            trust=self.trust,
         )
 
 
@@ -374,12 +379,14 @@ def _episodes(
         ) from e
 
 
-def spec_agent(spec: Spec, agent: Any, *, algorithm: str | type | None = None, batch: bool = False) -> Agent:
+def spec_agent(
+    spec: Spec, agent: Any, *, algorithm: str | type | None = None, batch: bool = False, trust: bool = False
+) -> Agent:
     """``agent`` as an :class:`~specguard.agents.agent.Agent` acting as ``spec`` says (its ``deterministic``), taking
-    a batch of observations or one (``batch``): loaded by :func:`~specguard.agents.sources.load_agent` unless it is
-    one already."""
+    a batch of observations or one (``batch``): loaded by :func:`~specguard.agents.sources.load_agent` (with
+    ``algorithm`` and ``trust``) unless it is one already."""
     if not isinstance(agent, Agent):
-        return load_agent(agent, algorithm=algorithm, deterministic=spec.deterministic, batch=batch)
+        return load_agent(agent, algorithm=algorithm, deterministic=spec.deterministic, batch=batch, trust=trust)
     return agent if agent.batch == batch else agent.batched(batch)
 
 

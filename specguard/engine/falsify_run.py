@@ -202,6 +202,7 @@ def falsify_agent(
     wrap: Callable[[Any], Any] | None = None,
     algorithm: str | type | None = None,
     score: str = "last",
+    trust: bool = False,
 ) -> Falsification:
     """Search ``starts`` for a start from which ``agent``, trained elsewhere, misses ``spec`` (training nothing).
 
@@ -216,7 +217,7 @@ def falsify_agent(
             for one observation is asked row by row).
         starts: the start space; ``None``: :func:`start_space`'s (the spec's own, else the env's).
         database: the directory of the Hypothesis example database; ``None``: nothing stored or replayed.
-        observation, wrap, algorithm: what the agent sees and how it is loaded, as for ``check_agent``.
+        observation, wrap, algorithm, trust: what the agent sees and how it is loaded, as for ``check_agent``.
         score: the robustness score that steers the search, as for :func:`falsify_runs`.
         Others: as :func:`specguard.falsify.search.falsify`.
 
@@ -248,7 +249,8 @@ def falsify_agent(
     where = f"falsify_agent({spec.label!r})"
     check_choice(where, "observation", observation, AGENT_OBSERVATIONS)
     check_choice(where, "score", score, SCORES)
-    acting = spec_agent(spec, agent, algorithm=algorithm, batch=True)
+    acting = spec_agent(spec, agent, algorithm=algorithm, batch=True, trust=trust)
+    fresh = _fresh_copy(agent) if acting.model is None else None  # a callable's, before it is ever asked
     space = start_space(spec, starts)
     runner = EpisodeRunner(agent_envs(spec, observation, wrap), acting, space, property_keys(spec), score=score)
     check_fits(acting, runner.observation_space, runner.action_space)  # before any episode
@@ -258,7 +260,61 @@ def falsify_agent(
         key = database_key(fingerprint_spec(spec).spec_key, None, space, agent=f"{acting.identity} {seen}")
         db = DirectoryBasedExampleDatabase(str(database))
     label = f"{spec.label} agent {acting.name}"
-    return _search(runner, spec, label, db, key, examples, uniform, search_seed, progress)
+    found = _search(runner, spec, label, db, key, examples, uniform, search_seed, progress)
+    if found.counterexample is not None and acting.model is None:
+        _replay_afresh(
+            runner, found, fresh, lambda a: spec_agent(spec, a, algorithm=algorithm, batch=True, trust=trust), label
+        )
+    return found
+
+
+def _fresh_copy(agent: Any) -> Any:
+    """A deep copy of a callable agent as given, before any episode (``None``: it cannot be copied)."""
+    import copy
+
+    try:
+        return copy.deepcopy(agent)
+    except Exception:
+        return None
+
+
+def _replay_afresh(
+    runner: EpisodeRunner, found: Falsification, fresh: Any, load: Callable[[Any], Any], label: str
+) -> None:
+    """Replay the counterexample with ``fresh``, a copy of a callable agent made before the search: a callable that
+    keeps state across episodes (a step counter, a memory) acts from the counterexample as it had come to act after
+    the search's episodes, not as it does from a start of its own. Where the copy meets the spec from it, or the
+    agent cannot be copied, the report says so and a warning is raised. ``load`` makes the copy the agent the
+    search ran (as ``falsify_agent`` loaded it)."""
+    import warnings
+
+    from specguard.agents.agent import Agent, check_fits
+
+    c = found.counterexample
+    assert c is not None
+    if fresh is None:
+        note = (
+            "the agent could not be copied (copy.deepcopy failed), so the counterexample was not replayed with a "
+            "fresh copy: a callable that keeps state across episodes may fail from it only after the search's episodes"
+        )
+    else:
+        acting = fresh.batched(True) if isinstance(fresh, Agent) else load(fresh)
+        check_fits(acting, runner.observation_space, runner.action_space)
+        searching, runner.act = runner.act, acting
+        try:
+            point = np.array([c.start[n] for n in runner.starts.names], dtype=np.float64)
+            replay = runner.run(point[None, :])[0]
+        finally:
+            runner.act = searching
+        if replay.failed:
+            return
+        note = (
+            "NOT REPRODUCED: a fresh copy of the agent (copy.deepcopy, made before the search) meets the spec from "
+            f"this counterexample ({replay.summary()}); the agent keeps state across episodes, and the counterexample "
+            "and the failure rate are of the agent as the search's earlier episodes left it"
+        )
+    found.notes.append(note)
+    warnings.warn(f"{label}: {note}", stacklevel=3)
 
 
 def _search(

@@ -85,7 +85,10 @@ def judged(spec: Spec, runs: Sequence[RunResult], *, errors: Mapping[int, str] |
 def episode_notes(tree: Node | None, runs: Sequence[RunResult]) -> list[str]:
     """The facts about the evaluation episodes that every door shows beside the verdicts, one line each.
 
-    The episodes cut at specguard's step cap; where the root goal holds until the end, the episodes that started
+    First, each run whose training one of the spec's callbacks stopped before its budget (``seed 0: training
+    stopped by <callback> at <steps> of <budget> steps``, :attr:`RunResult.stop_reason
+    <specguard.training.result.RunResult>`): its episodes are those of a policy trained that far. The episodes cut
+    at specguard's step cap; where the root goal holds until the end, the episodes that started
     outside it (failed before the policy acted) and those the env ended by termination before their horizon
     (docs/semantics.md, "Goals that hold until the end"); for a reach goal, the episodes that started inside it
     (met before the policy acted). Without a ``tree``, the root is the runs' first key.
@@ -93,7 +96,7 @@ def episode_notes(tree: Node | None, runs: Sequence[RunResult]) -> list[str]:
     episodes = sum(r.episodes for r in runs)
     started = sum(r.started_in_goal for r in runs)
     root = tree.name if tree is not None else next((p for r in runs[:1] for p in r.successes), "?")
-    lines = []
+    lines = [f"seed {r.seed}: training {r.stop_reason}" for r in runs if r.stop_reason is not None]
     capped = sum(r.capped for r in runs)
     if capped:
         lines.append(

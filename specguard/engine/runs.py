@@ -196,6 +196,8 @@ class Runs:
                 elapsed_s=run.train_seconds,
                 success=None if root is None or not run.episodes else root / run.episodes,
                 episodes=run.episodes,
-                message=("thresholds met at a checkpoint | " if run.met_early else "") + message,
+                message=("thresholds met at a checkpoint | " if run.met_early else "")
+                + ("" if run.stop_reason is None else f"{run.stop_reason} | ")
+                + message,
             )
         )

@@ -20,6 +20,7 @@ Example:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -39,6 +40,8 @@ from specguard.stats.verdicts import (
 )
 from specguard.training.result import RunResult
 from specguard.tree.keys import kind
+from specguard.utils.text import value_text
+from specguard.validation import is_choice, is_count, is_finite, is_natural, is_open_fraction
 
 __all__ = ["GoalVerdict", "SpecResult"]
 
@@ -77,15 +80,24 @@ class GoalVerdict:
         return {**asdict(self), "runs": [str(v) for v in self.runs], "verdict": str(self.verdict)}
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> GoalVerdict:
+    def from_dict(cls, data: Any) -> GoalVerdict:
         """The goal :meth:`to_dict` wrote (extra keys, such as a result's ``kind`` and ``word``, ignored).
 
         Raises:
-            ValueError: a field is missing, or a verdict is not one of its words.
+            ValueError: ``data`` is no object, a field is missing, or one is not what :meth:`to_dict` writes (a
+                verdict not one of its words, a count not an integer), in one line naming the goal and the field.
         """
+        if not isinstance(data, dict):
+            raise ValueError(f"goal verdict: expected an object, as to_dict() writes, got {value_text(data)}")
         missing = sorted(set(_GOAL_FIELDS) - set(data))
         if missing:
-            raise ValueError(f"goal verdict {data.get('path', '?')!r} lacks {', '.join(missing)}")
+            raise ValueError(f"goal verdict {value_text(data.get('path', '?'))} lacks {', '.join(missing)}")
+        where = f"goal verdict {value_text(data['path'])}"
+        for name, ok, expected in _GOAL_CHECKS:
+            if not ok(data[name]):
+                raise ValueError(f"{where}: {name} {value_text(data[name])} is not {expected}")
+        if data["successes"] > data["episodes"]:
+            raise ValueError(f"{where}: successes {data['successes']!r} exceed episodes {data['episodes']!r}")
         lo, hi = data["interval"]
         return cls(
             path=data["path"],
@@ -97,6 +109,31 @@ class GoalVerdict:
             episodes=data["episodes"],
             interval=(lo, hi),
         )
+
+
+def _words(enum: Any) -> tuple[str, ...]:
+    return tuple(str(v) for v in enum)
+
+
+_GOAL_CHECKS: tuple[tuple[str, Callable[[Any], bool], str], ...] = (
+    ("path", lambda v: isinstance(v, str), "a string"),
+    ("threshold", lambda v: is_finite(v) and 0.0 <= float(v) <= 1.0, "a number in [0, 1]"),
+    ("required", is_count, "an integer >= 1"),
+    (
+        "runs",
+        lambda v: isinstance(v, list) and all(is_choice(x, _words(RunVerdict)) for x in v),
+        f"a list of run verdicts ({', '.join(_words(RunVerdict))})",
+    ),
+    ("verdict", lambda v: is_choice(v, _words(QuorumVerdict)), f"one of {', '.join(_words(QuorumVerdict))}"),
+    ("successes", is_natural, "an integer >= 0"),
+    ("episodes", is_natural, "an integer >= 0"),
+    (
+        "interval",
+        lambda v: isinstance(v, (list, tuple)) and len(v) == 2 and all(is_finite(x) for x in v),
+        "two finite numbers",
+    ),
+)
+"""Each field of a stored goal verdict: its rule and the words for what it should be."""
 
 
 @dataclass
@@ -232,28 +269,98 @@ class SpecResult:
             trained, cache_dir: the spec as run and its cache, to reach the runs' models again.
 
         Raises:
-            ValueError: a field is missing or malformed, naming it.
+            ValueError: ``data`` is no object, or a field is missing or not what ``to_dict`` writes: one line naming
+                the result, the field (and the goal or run) and the value found.
         """
+        if not isinstance(data, dict):
+            raise ValueError(f"a spec result is an object, as to_dict() writes, got {value_text(data)}")
         missing = sorted({"spec", "runs", "goals"} - set(data))
         if missing:
-            raise ValueError(f"a spec result needs {', '.join(missing)}, got the fields {sorted(data)}")
+            raise ValueError(f"a spec result needs {', '.join(missing)}, got the fields {sorted(map(str, data))}")
+        spec = data["spec"]
+        if not isinstance(spec, str):
+            raise ValueError(f"spec result {value_text(spec)}: spec {value_text(spec)} is not a string")
+        fields = {name: _field(spec, data, name, default, ok, expected) for name, default, ok, expected in _FIELDS}
+        goals: dict[str, GoalVerdict] = {}
+        for path, goal in fields["goals"].items():
+            if not isinstance(goal, dict):
+                raise ValueError(
+                    f"spec result {spec!r}: goal verdict {path!r}: expected an object, got {value_text(goal)}"
+                )
+            try:
+                goals[path] = GoalVerdict.from_dict(goal)
+            except ValueError as e:
+                raise ValueError(f"spec result {spec!r}: {e}") from None
         return cls(
-            spec=data["spec"],
-            runs=[_run_of(run, data["spec"]) for run in data["runs"]],
-            goals={p: GoalVerdict.from_dict(g) for p, g in data["goals"].items()},
-            errors={int(k): v for k, v in data.get("errors", {}).items()},
-            tracebacks={int(k): v for k, v in data.get("tracebacks", {}).items()},
-            cached={int(k): v for k, v in data.get("cached", {}).items()},
-            seconds=data.get("seconds", 0.0),
-            confidence=data.get("confidence", 0.95),
-            spec_key=data.get("spec_key"),
-            undecided=data.get("undecided", DEFAULT_UNDECIDED),
-            xfail=dict(data.get("xfail", {})),
-            notes=list(data.get("notes", [])),
-            agent=data.get("agent"),
+            spec=spec,
+            runs=[_run_of(run, spec) for run in fields["runs"]],
+            goals=goals,
+            errors=_by_seed(fields["errors"]),
+            tracebacks=_by_seed(fields["tracebacks"]),
+            cached=_by_seed(fields["cached"]),
+            seconds=fields["seconds"],
+            confidence=fields["confidence"],
+            spec_key=fields["spec_key"],
+            undecided=fields["undecided"],
+            xfail=dict(fields["xfail"]),
+            notes=list(fields["notes"]),
+            agent=fields["agent"],
             trained=trained,
             cache_dir=None if cache_dir is None else Path(cache_dir),
         )
+
+
+def _is_seed_key(key: Any) -> bool:
+    """A seed as ``to_dict`` writes it in a key (``"3"``), or as an ``int``."""
+    return is_natural(key) or (isinstance(key, str) and key.isascii() and key.isdecimal())
+
+
+def _by_seed(values: dict[Any, Any]) -> dict[int, Any]:
+    return {int(k): v for k, v in values.items()}
+
+
+def _seeds_to(ok: Callable[[Any], bool]) -> Callable[[Any], bool]:
+    """The rule for a per-seed field: an object whose keys are seeds and whose values pass ``ok``."""
+    return lambda v: isinstance(v, dict) and all(_is_seed_key(k) and ok(x) for k, x in v.items())
+
+
+def _is_text(value: Any) -> bool:
+    return isinstance(value, str)
+
+
+_FIELDS: tuple[tuple[str, Any, Callable[[Any], bool], str], ...] = (
+    ("runs", None, lambda v: isinstance(v, list), "a list of runs"),
+    ("goals", None, lambda v: isinstance(v, dict), "an object of goal verdicts by path"),
+    ("errors", {}, _seeds_to(_is_text), "an object of texts by seed"),
+    ("tracebacks", {}, _seeds_to(_is_text), "an object of texts by seed"),
+    ("cached", {}, _seeds_to(lambda x: isinstance(x, bool)), "an object of true or false by seed"),
+    ("seconds", 0.0, lambda v: is_finite(v) and float(v) >= 0, "a finite number >= 0"),
+    ("confidence", 0.95, is_open_fraction, "a number in (0, 1)"),
+    ("spec_key", None, lambda v: v is None or isinstance(v, str), "a string or null"),
+    ("undecided", DEFAULT_UNDECIDED, lambda v: is_choice(v, tuple(UNDECIDED_AS)), f"one of {', '.join(UNDECIDED_AS)}"),
+    (
+        "xfail",
+        {},
+        lambda v: isinstance(v, dict) and all(isinstance(k, str) and isinstance(x, str) for k, x in v.items()),
+        "an object of reasons (texts) by goal path",
+    ),
+    ("notes", [], lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v), "a list of texts"),
+    ("agent", None, lambda v: v is None or isinstance(v, str), "a string or null"),
+)
+"""Each field of a stored result but its label: its default where it may be absent, its rule and the words for
+what it should be."""
+
+
+def _field(spec: str, data: dict[str, Any], name: str, default: Any, ok: Callable[[Any], bool], expected: str) -> Any:
+    """Field ``name`` of a stored result (``default`` where absent), if ``ok`` says it is what ``to_dict`` writes.
+
+    Raises:
+        ValueError: naming the result, the field and the value found.
+    """
+    value = data.get(name, default)
+    if not ok(value):
+        raise ValueError(f"spec result {spec!r}: {name} {value_text(value)} is not {expected}")
+    return value
 
 
 def _run_of(data: Any, spec: str) -> RunResult:

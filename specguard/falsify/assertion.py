@@ -127,14 +127,21 @@ def falsify_verdict(found: Falsification, max_rate: float | None, confidence: fl
     return run_verdict(held, found.uniform_episodes, 1.0 - max_rate, confidence)
 
 
-def rule_text(max_rate: float | None) -> str:
-    """What a falsify check asserts, in words (reports and failure messages say it alike).
+def rule_text(max_rate: float | None, found: bool | None = None) -> str:
+    """What a falsify check asserts, in words (reports and failure messages say it alike); without ``max_rate``, a
+    run's header says what its search found (``found``), so a falsified run's never reads "no counterexample".
 
     Example:
         >>> rule_text(None), rule_text(0.05)
         ('no counterexample', 'a failure rate at most 0.05 over the start space')
+        >>> rule_text(None, found=True), rule_text(None, found=False), rule_text(0.05, found=True)
+        ('a counterexample found', 'no counterexample found', 'a failure rate at most 0.05 over the start space')
     """
-    return "no counterexample" if max_rate is None else f"a failure rate at most {max_rate:g} over the start space"
+    if max_rate is not None:
+        return f"a failure rate at most {max_rate:g} over the start space"
+    if found is None:
+        return "no counterexample"
+    return "a counterexample found" if found else "no counterexample found"
 
 
 def verdict_lines(
@@ -149,14 +156,13 @@ def verdict_lines(
         >>> starts = StartSpace({"x": (-0.05, 0.05)}).resolve(gym.make("CartPole-v1"))
         >>> found = {0: Falsification(starts, guided=200)}
         >>> print("\\n".join(verdict_lines(found, {0: falsify_verdict(found[0], None)}, None)))
-        seed 0: met (no counterexample)
+        seed 0: met (no counterexample found)
           StartSpace for CartPole-v1: starts set by state over x, v, theta, omega
           no counterexample in 200 guided episodes
     """
-    rule = rule_text(max_rate)
     lines = []
     for seed, falsification in sorted(found.items()):
-        lines.append(f"seed {seed}: {verdicts[seed].value} ({rule})")
+        lines.append(f"seed {seed}: {verdicts[seed].value} ({rule_text(max_rate, falsification.found)})")
         lines += [f"  {line}" for line in falsification.report().splitlines()]
     return lines
 

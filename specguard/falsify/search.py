@@ -359,8 +359,14 @@ class Falsification:
 
 
 def start_text(start: Mapping[str, float]) -> str:
-    """A start as reports print it: ``x=0.502075, v=0`` (6 significant digits; JSON keeps it exact)."""
-    return ", ".join(f"{k}={v:.6g}" for k, v in start.items())
+    """A start as reports print it, exact: each value the shortest text that reads back as the same float, so a
+    start copied from a report replays the very episode (rounded, a start a millionth away may end elsewhere).
+
+    Example:
+        >>> start_text({"x": 0.5020751953125001, "v": 0.0, "theta": -1e-07})
+        'x=0.5020751953125001, v=0.0, theta=-1e-07'
+    """
+    return ", ".join(f"{k}={float(v)!r}" for k, v in start.items())
 
 
 def judged_env(env: Any) -> SpecEnv | BaselineEnv:

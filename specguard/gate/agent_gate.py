@@ -9,6 +9,11 @@ McNemar test of a drop (:mod:`specguard.stats.paired`), looked at after each sta
 Bonferroni share of the level; the comparisons together are held at the family-wise ``level`` by Holm's procedure
 (:mod:`specguard.stats.family`). A comparison is *fine* once the upper bound of its drop is below ``margin``.
 
+The keys compared are the spec's asserted ones, those with a threshold (:func:`compared_keys`), as against a saved
+baseline (:mod:`specguard.gate.saved_agent`): an unasserted leaf is measured, never gated. The comparison passes
+(:attr:`AgentComparison.passed`, and so ``specguard check --against``'s exit status) when the new agent's check is as
+expected and nothing dropped.
+
 Example:
     >>> import specguard as sg
     >>> cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
@@ -16,8 +21,10 @@ Example:
     >>> spec = sg.Spec(cartpole, up, budget=sg.Budget(timesteps=1, eval_episodes=20), expect=0.5)
     >>> lean = lambda obs: int(obs[2] > 0)
     >>> comparison = compare_agents(spec, lean, lean, max_episodes=20)
-    >>> comparison.passed, comparison.keys["up"].state
-    (True, <GateState.FINE: 'fine'>)
+    >>> comparison.dropped, comparison.keys["up"].state  # no drop against itself ...
+    ([], <GateState.FINE: 'fine'>)
+    >>> comparison.result.status(), comparison.passed  # ... but it misses its threshold: the comparison fails
+    ('FAILED', False)
 """
 
 from __future__ import annotations
@@ -29,19 +36,18 @@ from typing import Any
 from specguard.agents.agent import Agent
 from specguard.engine.check_agent import AGENT_OBSERVATIONS, agent_episodes, agent_stages, check_agent, spec_agent
 from specguard.engine.spec_result import SpecResult
-from specguard.error import InvalidSpec
 from specguard.spec.spec import Spec
 from specguard.stats.family import holm, procedure_text
 from specguard.stats.paired import TEST, discordant, drop_p_value, drop_upper_bound, repeated_p_value
 from specguard.stats.sequential import DEFAULT_ALPHA, DEFAULT_MARGIN, GateState
-from specguard.utils.text import shown
-from specguard.validation import check_choice, check_natural, check_open_fraction
+from specguard.validation import check_choice, check_fraction, check_natural, check_open_fraction
 
 __all__ = [
     "AgentComparison",
     "Figures",
     "KeyComparison",
     "compare_agents",
+    "compared_keys",
     "key_comparison",
     "paired_figures",
     "played",
@@ -94,13 +100,22 @@ class AgentComparison:
     margin: float
 
     @property
+    def dropped(self) -> list[str]:
+        """The goals and safety rates that dropped, in the order compared."""
+        return [key for key, k in self.keys.items() if k.state is GateState.DROPPED]
+
+    @property
     def passed(self) -> bool:
-        """No goal or safety rate dropped."""
-        return all(k.state is not GateState.DROPPED for k in self.keys.values())
+        """The comparison's one verdict, at every door (this object, its ``to_dict()``, and the exit status of
+        ``specguard check --against``): the new agent's check is as expected
+        (:attr:`SpecResult.as_expected <specguard.engine.spec_result.SpecResult.as_expected>`: no seed failed and
+        every asserted goal passed or was expected to miss, an undecided one counted as the spec's ``undecided``
+        says) **and** no goal or safety rate dropped against the old agent (:attr:`dropped`)."""
+        return self.result.as_expected and not self.dropped
 
     def summary(self) -> str:
         """The family-wise line: the test, the procedure and its level, the looks."""
-        dropped = sum(k.state is GateState.DROPPED for k in self.keys.values())
+        dropped = len(self.dropped)
         return (
             f"{dropped} of {len(self.keys)} dropped: {TEST}, {procedure_text(self.level, max(1, len(self.keys)))}, "
             f"{len(self.looks)} of {self.planned} looks (at {', '.join(map(str, self.looks))} episodes), "
@@ -116,6 +131,14 @@ class AgentComparison:
             "margin": self.margin,
             "keys": {key: {**asdict(k), "state": k.state.value} for key, k in self.keys.items()},
         }
+
+
+def compared_keys(spec: Spec) -> list[str]:
+    """The keys a comparison of two agents compares, at every door (:func:`compare_agents`, and a saved agent's
+    comparison under pytest, :mod:`specguard.gate.saved_agent`, which stores and gates these): the spec's asserted
+    goals and safety rates, those with a threshold, in the spec's order. An unasserted leaf is measured, not gated,
+    as a trained spec's comparison with a baseline gates only its thresholded goals."""
+    return list(spec.thresholds)
 
 
 def played(
@@ -167,16 +190,21 @@ def compare_agents(
     algorithm: str | type | None = None,
     level: float = DEFAULT_ALPHA,
     margin: float = DEFAULT_MARGIN,
+    trust: bool = False,
 ) -> AgentComparison:
     """Judge ``new`` against ``spec`` and compare it with ``old`` on paired episodes, per goal and safety rate.
 
     Args:
-        spec, episodes, max_episodes, observation, wrap, seed, algorithm: as for
+        spec, episodes, max_episodes, observation, wrap, seed, algorithm, trust: as for
             :func:`~specguard.engine.check_agent.check_agent`, the same for both agents (``wrap`` and ``algorithm``
             too: two agents trained alike).
         new: the agent to gate; old: the agent it replaces (anything ``check_agent`` takes).
         level: the family-wise level of the comparisons (Holm's procedure).
-        margin: the drop in success (rate points) a comparison is *fine* once clearly below.
+        margin: the drop in success (rate points) a comparison is *fine* once clearly below, in ``(0, 1]``.
+
+    Returns:
+        The comparison of each asserted goal and safety rate (:func:`compared_keys`); it passes
+        (:attr:`AgentComparison.passed`) when the new agent's check is as expected and none dropped.
 
     Raises:
         InvalidSpec: an argument is out of range. AgentError, AgentMismatch, EvaluationError: as ``check_agent``.
@@ -185,17 +213,19 @@ def compare_agents(
     stages = agent_stages(where, spec, episodes, max_episodes)
     check_choice(where, "observation", observation, AGENT_OBSERVATIONS)
     seed = check_natural(where, "seed", seed, "the evaluation seeds' run")
-    check_open_fraction(where, "level", level, "the family-wise level")
-    if not 0.0 < margin <= 1.0:
-        raise InvalidSpec(where, f"expected a margin in (0, 1], got {shown(margin)}")
-    agents = {"new": spec_agent(spec, new, algorithm=algorithm), "old": spec_agent(spec, old, algorithm=algorithm)}
+    level = check_open_fraction(where, "level", level, "the family-wise level")
+    margin = check_fraction(where, "margin", margin, "rate points")
+    agents = {
+        "new": spec_agent(spec, new, algorithm=algorithm, trust=trust),
+        "old": spec_agent(spec, old, algorithm=algorithm, trust=trust),
+    }
     outcomes: dict[str, list[dict[str, int]]] = {"new": [], "old": []}
     options = {"observation": observation, "wrap": wrap, "seed": seed}
     results = {
         side: check_agent(spec, agent, episodes=stages[0], max_episodes=stages[-1], outcomes=outcomes[side], **options)
         for side, agent in agents.items()
     }
-    paths = [key for key in outcomes["new"][0] if key in outcomes["old"][0]]
+    paths = compared_keys(spec)
     p_values: dict[str, list[float]] = {key: [] for key in paths}
     looks: list[int] = []
     keys: dict[str, KeyComparison] = {}

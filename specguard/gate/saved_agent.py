@@ -24,7 +24,7 @@ from typing import Any
 from specguard.agents.agent import Agent
 from specguard.engine.check_agent import AgentCheck, agent_stages, evaluation_identity, seed_base, spec_agent
 from specguard.error import AgentError, FingerprintError
-from specguard.gate.agent_gate import KeyComparison, key_comparison, paired_figures, played
+from specguard.gate.agent_gate import KeyComparison, compared_keys, key_comparison, paired_figures, played
 from specguard.gate.baseline import SETTINGS, AgentEntry, Baseline, spec_of_key
 from specguard.stats.paired import drop_p_value
 from specguard.stats.sequential import DEFAULT_MARGIN, describe_change
@@ -116,7 +116,7 @@ def saved_entry(check: AgentCheck, outcomes: list[dict[str, int]]) -> AgentEntry
         spec=parts["spec"],
         settings=settings,
         seeds=list(range(base, base + most)),
-        outcomes={key: [o[key] for o in first] for key in check.spec.thresholds},
+        outcomes={key: [o[key] for o in first] for key in compared_keys(check.spec)},
     )
 
 
@@ -170,7 +170,7 @@ def compare_saved(
     new = played(check.spec, agent, outcomes, n, **_options(check))
     old = [{key: values[i] for key, values in saved.outcomes.items()} for i in range(n)]
     keys = {}
-    for key in check.spec.thresholds:
+    for key in compared_keys(check.spec):
         if key in saved.outcomes:
             figures = paired_figures(old, new, key)
             p_value = drop_p_value(figures[2], figures[3])

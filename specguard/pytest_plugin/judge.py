@@ -86,10 +86,14 @@ class GoalCheck:
         return [(s["successes"], s["episodes"]) for s in self.per_seed]
 
     def junit_properties(self) -> list[tuple[str, Any]]:
-        """The figures as ``(name, value)`` pairs for JUnit XML properties."""
+        """The figures as ``(name, value)`` pairs for JUnit XML properties; ``stopped`` only where one of the
+        spec's callbacks stopped a run's training (``seed 0: stopped by <callback> at <steps> of <budget> steps``,
+        one clause a seed)."""
         lo, hi = self.interval
         names = ("kind", "success", "threshold", "successes", "episodes", "runs_met", "runs", "train_seconds", "cached")
-        return [(n, getattr(self, n)) for n in names] + [("interval", interval_text((lo, hi), digits=4))]
+        properties = [(n, getattr(self, n)) for n in names] + [("interval", interval_text((lo, hi), digits=4))]
+        stopped = [f"seed {s['seed']}: {s['stop_reason']}" for s in self.per_seed if s.get("stop_reason")]
+        return properties + ([("stopped", "; ".join(stopped))] if stopped else [])
 
     def message(self) -> str:
         verb = OUTCOME_VERBS[self.outcome]
@@ -222,6 +226,7 @@ def judge_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalChe
             "verdict": v.value,
             "timesteps": r.timesteps,
             "met_early": r.met_early,
+            "stop_reason": r.stop_reason,
             "train_seconds": r.train_seconds,
             "evaluated": sum(p.get("evaluation_episodes", 0) for p in r.curve) or r.episodes,
             **({"weights": r.weights} if r.weights else {}),

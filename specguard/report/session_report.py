@@ -204,18 +204,19 @@ def counterexample_lines(runs: Sequence[Row]) -> list[str]:
     rate, and its counterexample's GIF (linked by file name, beside the Markdown).
 
     Example:
-        >>> run = {"group": "t.py::test_up", "seed": 0, "verdict": "missed", "max_rate": None, "start": {"x": 0.5},
+        >>> run = {"group": "t.py::up", "seed": 0, "verdict": "missed", "max_rate": None, "start": {"x": 0.5},
         ...        "missed": ["up"], "origin": "found after 3 episodes", "episode": "9 steps", "rate": "",
-        ...        "guided": 3, "gif": "t.py__test_up-falsify-seed0.gif", "gif_text": "up, 9 steps"}
+        ...        "guided": 3, "gif": "t.py__up-falsify-seed0.gif", "gif_text": "up, 9 steps"}
         >>> print("\\n".join(counterexample_lines([run])))
-        - **`t.py::test_up`**, seed 0: missed (no counterexample): `x=0.5`, found after 3 episodes; missed `up`; 9 steps
+        - **`t.py::up`**, seed 0: missed (a counterexample found): `x=0.5`, found after 3 episodes; missed `up`; 9 steps
         <BLANKLINE>
-          ![counterexample of t.py::test_up, seed 0](t.py__test_up-falsify-seed0.gif)
+          ![counterexample of t.py::up, seed 0](t.py__up-falsify-seed0.gif)
         <BLANKLINE>
     """
     lines: list[str] = []
     for run in runs:
-        head = f"- **`{run['group']}`**, seed {run['seed']}: {run['verdict']} ({rule_text(run['max_rate'])})"
+        rule = rule_text(run["max_rate"], run["start"] is not None)
+        head = f"- **`{run['group']}`**, seed {run['seed']}: {run['verdict']} ({rule})"
         if run["start"] is None:
             head += f": no counterexample in {run['guided']} guided episodes"
         else:

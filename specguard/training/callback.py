@@ -29,12 +29,13 @@ imports it only when a run trains.
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
-from specguard.error import SpecError, TrainingError
+from specguard.error import SpecError, SpecWarning, TrainingError
 from specguard.training.curve import count_episode, root_success
 from specguard.training.progress import encode_update
 from specguard.utils.text import MAX_SHOWN, elide, function_text
@@ -242,6 +243,8 @@ class LogGoals(BaseCallback):  # type: ignore[misc]
     evaluation (:meth:`evaluated`: a checkpoint's look, the final evaluation), the evaluation's rates under
     ``specguard/eval/``. SB3 writes them with its own records, in the formats its
     logger has (``tensorboard_log``: TensorBoard; ``stable_baselines3.common.logger.configure``: CSV, JSON, ...).
+    When training ends, what SB3 left unwritten is written at the last step: the episodes of a rollout that a
+    callback cut short, and a met checkpoint's look that stopped training (the run's result).
     """
 
     def __init__(self) -> None:
@@ -261,12 +264,20 @@ class LogGoals(BaseCallback):  # type: ignore[misc]
                 self.logger.record(log_key(key), count / self.episodes)
         self.counts, self.episodes = {}, 0
 
+    def _on_training_end(self) -> None:
+        # A callback that stopped training (a met look, the wall-clock cap, the user's) stopped it inside a rollout,
+        # after SB3's last write: what is pending (a met look, the run's result; SB3's own last records) and the
+        # episodes of the rollout cut short would never be written. Written here, at the step training ended.
+        self._on_rollout_end()
+        self.logger.dump(self.num_timesteps)
+
     def evaluated(self, step: int, counts: Mapping[str, int], episodes: int, *, write: bool = False) -> None:
         """Record an evaluation of ``episodes`` episodes at training step ``step``.
 
         SB3 writes it with its next records (a checkpoint's, while training: writing it at once would move SB3's
-        own pending records to this step); ``write=True`` writes it now, at ``step`` (the final evaluation, after
-        training, when SB3 writes nothing more).
+        own pending records to this step), or, if training ends first, :class:`LogGoals` writes it when training
+        ends (a met look that stopped training); ``write=True`` writes it now, at ``step`` (the final evaluation,
+        after training, when SB3 writes nothing more).
         """
         for key, count in counts.items():
             self.logger.record(log_key(key, evaluation=True), count / episodes)
@@ -279,6 +290,10 @@ class UserCallback(BaseCallback):  # type: ignore[misc]
     """A user's callback (``Spec(callbacks=...)``) among specguard's: it acts as it would alone, and an exception
     it raises fails the run in one line naming it (a :class:`~specguard.error.TrainingError`), not as the env's.
 
+    When its ``on_step`` stops training (returns False), :attr:`stopped_at` is the step, for the run's result to
+    say so (:attr:`RunResult.stop_reason <specguard.training.result.RunResult>`); returning ``None`` (a forgotten
+    ``return True``), which SB3 takes as False, also warns (a :class:`~specguard.error.SpecWarning` naming it).
+
     Args:
         callback: the user's ``BaseCallback``.
         label: the run, as messages name it (``Spec 'x', seed 0``).
@@ -288,6 +303,13 @@ class UserCallback(BaseCallback):  # type: ignore[misc]
         super().__init__()
         self.callback = callback
         self.label = label
+        self.stopped_at: int | None = None  # the step its on_step first returned False (or None): it stopped training
+        self.returned_none = False  # what it returned then was None (a forgotten `return True`)
+
+    @property
+    def name(self) -> str:
+        """The user's callback as messages name it: its class's qualified name."""
+        return function_text(type(self.callback))
 
     def _guard(self, hook: str, call: Callable[[], Any]) -> Any:
         try:
@@ -295,9 +317,8 @@ class UserCallback(BaseCallback):  # type: ignore[misc]
         except SpecError:
             raise
         except Exception as e:
-            name = function_text(type(self.callback))
             raise TrainingError(
-                f"{self.label}, callback {name}, in {hook} at step {self.num_timesteps}: it raised "
+                f"{self.label}, callback {self.name}, in {hook} at step {self.num_timesteps}: it raised "
                 f"{type(e).__name__}: {elide(str(e), MAX_SHOWN)}"
             ) from e
 
@@ -311,7 +332,18 @@ class UserCallback(BaseCallback):  # type: ignore[misc]
         self._guard("on_rollout_start", self.callback.on_rollout_start)
 
     def _on_step(self) -> bool:
-        return bool(self._guard("on_step", self.callback.on_step))
+        go_on = self._guard("on_step", self.callback.on_step)
+        if go_on is None and self.stopped_at is None:  # a forgotten `return True`: SB3 stops, in silence
+            self.returned_none = True
+            warnings.warn(
+                f"{self.label}, callback {self.name}: its _on_step returned None at step {self.num_timesteps}, "
+                "which SB3 takes as False: training stopped there (return True to go on training)",
+                SpecWarning,
+                stacklevel=2,
+            )
+        if not go_on and self.stopped_at is None:
+            self.stopped_at = self.num_timesteps
+        return bool(go_on)
 
     def _on_rollout_end(self) -> None:
         self._guard("on_rollout_end", self.callback.on_rollout_end)

@@ -51,6 +51,10 @@ class RunResult:
             keep unless ``until="termination"`` (docs/semantics.md, "Goals that hold until the end").
         capped: of the ``episodes``, those cut at specguard's step cap, the end of an episode whose env
             declares no episode limit (:mod:`specguard.construction.cap`).
+        stop_reason: why training stopped before its budget when one of the spec's own callbacks
+            (``Spec(callbacks=...)``) stopped it, as every door says it: ``"stopped by <callback> at <steps> of
+            <budget> steps"`` (and why, when its ``_on_step`` returned None); ``None`` when none did. A stored
+            run without it (written before it was recorded) reads as ``None``.
     """
 
     spec: str
@@ -66,6 +70,7 @@ class RunResult:
     started_in_goal: int = 0
     terminated: int = 0
     capped: int = 0
+    stop_reason: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -77,8 +82,13 @@ class RunResult:
         Raises:
             ValueError: the first check that failed, in words.
         """
+        if isinstance(data, dict):
+            data = {**_ADDED_LATER, **data}  # a run stored before a field was recorded: its default
         check_run_result(data, seed, paths)
         return cls(**data)
+
+
+_ADDED_LATER: dict[str, Any] = {"stop_reason": None}  # fields a stored run may lack, with the value it reads as
 
 
 def _is_int(v: Any) -> bool:
@@ -126,5 +136,7 @@ def check_run_result(result: Any, seed: int, paths: Collection[str]) -> None:
     for flag in ("hit_wall_clock", "met_early"):
         if not isinstance(result[flag], bool):
             raise ValueError(f"{flag} is not a boolean")
+    if result["stop_reason"] is not None and not isinstance(result["stop_reason"], str):
+        raise ValueError(f"stop_reason {result['stop_reason']!r} is neither a string nor null")
     if not isinstance(result["curve"], list) or not all(isinstance(p, dict) for p in result["curve"]):
         raise ValueError("curve is not a list of points")

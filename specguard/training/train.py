@@ -18,9 +18,9 @@ verdicts, intervals, caches and baselines treat both alike.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 
@@ -38,6 +38,9 @@ from specguard.training.policy import policy as policy_of
 from specguard.training.progress import ProgressEvent, decode_update
 from specguard.training.result import RunResult
 from specguard.utils.text import MAX_SHOWN, elide, function_text, shown
+
+if TYPE_CHECKING:
+    from specguard.training.callback import UserCallback
 
 __all__ = ["EVAL_SEED_BASE", "EVAL_SEED_STRIDE", "evaluate", "train_run"]
 
@@ -132,6 +135,7 @@ class _Run:
     capped: dict[int, bool] = field(default_factory=dict)  # evaluation episode -> specguard's step cap cut it
     met_early: bool = False  # a checkpoint's look met every threshold and stopped training
     hit_wall_clock: bool = False  # the wall-clock cap stopped training
+    stop_reason: str | None = None  # a user's callback stopped training: which, where (RunResult.stop_reason)
     log: Any = None  # the run's LogGoals callback, made when it trains: its evaluations go to the model's logger
     steps: int | None = None  # a trainer's last checkpoint's steps (Spec(trainer=...)); None: the SB3 model's
 
@@ -245,7 +249,7 @@ def _build(spec: Spec, seed: int) -> _Run:
 def _learn(run: _Run, emit: Emit) -> tuple[GoalCurve, WeightAdapter | None, dict[str, Any], float]:
     """Train the run's budget, looking at its checkpoints; the curve, the adapter, a met look's counts, the seconds.
 
-    What stopped training early is recorded on ``run`` (``met_early``, ``hit_wall_clock``).
+    What stopped training early is recorded on ``run`` (``met_early``, ``hit_wall_clock``, ``stop_reason``).
 
     Raises:
         TrainingError: the env or a user function failed while training (the training step named) or in a
@@ -266,6 +270,7 @@ def _learn(run: _Run, emit: Emit) -> tuple[GoalCurve, WeightAdapter | None, dict
     log = run.log = LogGoals()
     stop_on_checkpoint = StopTrainingOnMetCheckpoint(_checkpoints(spec), _looker(run, curve, looked))
     stop_on_wall_clock = StopTrainingOnWallClock(budget.wall_clock_s)
+    user = _user_callbacks(run)
     callback = training_callbacks(
         curve,
         every=budget.timesteps // CURVE_POINTS,
@@ -275,7 +280,7 @@ def _learn(run: _Run, emit: Emit) -> tuple[GoalCurve, WeightAdapter | None, dict
         stop_on_checkpoint=stop_on_checkpoint,
         stop_on_wall_clock=stop_on_wall_clock,
         log=log,
-        user=_user_callbacks(run),
+        user=user,
     )
     emit("train", 0, None)
     start = time.perf_counter()
@@ -291,7 +296,19 @@ def _learn(run: _Run, emit: Emit) -> tuple[GoalCurve, WeightAdapter | None, dict
     # A look that met every threshold stopped training, even if the evaluation itself ran past the cap.
     run.met_early = stop_on_checkpoint.met_early
     run.hit_wall_clock = stop_on_wall_clock.hit_wall_clock and not run.met_early
+    run.stop_reason = _stop_reason(user, budget.timesteps)
     return curve, adapter, looked, seconds
+
+
+def _stop_reason(user: Sequence[UserCallback], budget: int) -> str | None:
+    """What the first of the user's callbacks to stop training says of it (:attr:`RunResult.stop_reason`), or
+    ``None`` when none did; a ``None`` returned (SB3 takes it as False) is named as such."""
+    stopped = [c for c in user if c.stopped_at is not None]
+    if not stopped:
+        return None
+    first = min(stopped, key=lambda c: c.stopped_at or 0)  # the order of the spec among those at one step
+    reason = f"stopped by {first.name} at {first.stopped_at} of {budget} steps"
+    return reason + (": its _on_step returned None, which SB3 takes as False" if first.returned_none else "")
 
 
 def _checkpoints(spec: Spec) -> list[int]:
@@ -364,7 +381,7 @@ def _learn_with_trainer(run: _Run, emit: Emit) -> tuple[GoalCurve, None, dict[st
     return curve, None, looked, seconds
 
 
-def _user_callbacks(run: _Run) -> list[Any]:
+def _user_callbacks(run: _Run) -> list[UserCallback]:
     """The spec's callbacks of the user's, each made by its factory for this run and guarded (its errors named).
 
     Raises:
@@ -483,5 +500,6 @@ def train_run(
         started_in_goal=run.started_in_goal(episodes),
         terminated=run.ended_by_termination(episodes),
         capped=run.cut_at_cap(episodes),
+        stop_reason=run.stop_reason,
     )
     return result, run.model
