@@ -12,6 +12,8 @@ beside the code that raises them: ``Broken`` in :mod:`specguard.contract.trees`,
 
 from __future__ import annotations
 
+import sys
+
 __all__ = [
     "AgentError",
     "AgentMismatch",
@@ -117,7 +119,20 @@ class SpecWarning(UserWarning):
     Issued before training, where the env is built; ``run_spec`` issues it once, in the caller's process. Also
     issued by ``sg.zoo_settings`` for rl-zoo3 settings a spec cannot take (it trains without them), and while
     training, in the run's process, for a callback of the spec's whose ``_on_step`` returned None (SB3 stops).
+    Its location is the user's line (:func:`user_stacklevel`), not specguard's.
     """
+
+
+def user_stacklevel() -> int:
+    """The ``stacklevel`` for a warning of the calling function: the innermost frame outside ``specguard``.
+
+    That is the user's line that called into specguard (``make_env``, ``run_spec``, ``Spec.as_run``,
+    ``zoo_settings``), however many of specguard's frames lie between.
+    """
+    frame, level = sys._getframe(1), 1  # level 1: the function that warns
+    while frame.f_back is not None and str(frame.f_globals.get("__name__", "")).startswith("specguard."):
+        frame, level = frame.f_back, level + 1
+    return level
 
 
 class InitialEnvError(SpecError):

@@ -22,6 +22,7 @@ Example:
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable, Iterable, Sequence
 from numbers import Integral, Real
 from typing import Any, TypeGuard
@@ -30,7 +31,7 @@ import numpy as np
 
 from specguard.error import EvaluationError, InvalidSpec
 from specguard.utils.node_paths import ANNOTATION_SEPARATOR, PATH_SEPARATOR
-from specguard.utils.text import aside, number_text
+from specguard.utils.text import aside, elide, number_text
 
 __all__ = [
     "check_budget",
@@ -243,6 +244,37 @@ def check_text(where: str, argument: str, value: object) -> str:
     if not isinstance(value, str) or not value.strip():
         raise InvalidSpec(where, f"expected {argument} to be a non-empty string, got {value!r}")
     return str.__str__(value)
+
+
+def check_folder(where: str, argument: str, value: object) -> str:
+    """A folder to write into, made where it is missing (a TensorBoard folder): a path, as a plain ``str``, that
+    holds no NUL, whose names fit the file system and whose existing part is folders.
+
+    Raises:
+        InvalidSpec: naming ``where``, ``argument`` and the path given (or the file it lies in).
+    """
+    if not isinstance(value, (str, os.PathLike)) or not isinstance(os.fspath(value), str) or not os.fspath(value):
+        raise InvalidSpec(where, f"expected {argument} to be a folder, got {value!r}")
+    path = str(os.fspath(value))
+    if "\0" in path:
+        raise InvalidSpec(where, f"expected {argument} to be a folder, got {path!r}, which holds a NUL character")
+    existing = os.path.abspath(path)
+    while not os.path.lexists(existing) and os.path.dirname(existing) != existing:
+        existing = os.path.dirname(existing)
+    if not os.path.isdir(existing):
+        what = "is a file" if existing == os.path.abspath(path) else f"lies below the file {existing!r}"
+        raise InvalidSpec(where, f"expected {argument} to be a folder, got {path!r}, which {what}")
+    try:
+        longest, name_max = os.pathconf(existing, "PC_PATH_MAX"), os.pathconf(existing, "PC_NAME_MAX")
+    except (OSError, ValueError, AttributeError):  # not on Linux or macOS: the common limits
+        longest, name_max = 4096, 255
+    names = os.path.abspath(path).split(os.sep)
+    too_long = next((n for n in names if len(os.fsencode(n)) > name_max), None)
+    if too_long is not None or len(os.fsencode(os.path.abspath(path))) >= longest:
+        part = f"a name over {name_max} bytes" if too_long is not None else f"over {longest} bytes"
+        shown_path = elide(path, 60)
+        raise InvalidSpec(where, f"expected {argument} to be a folder, got {shown_path!r}, which is too long ({part})")
+    return path
 
 
 def is_choice(value: object, choices: Sequence[str]) -> bool:

@@ -118,6 +118,7 @@ def test_an_rl_zoo_run_folder_loads_its_final_model_statistics_and_settings(save
     agent = load_agent(run)
     assert agent.path == run / "CartPole-v1.zip" and agent.name == "PPO (CartPole-v1_1/CartPole-v1.zip)"
     assert agent.config == dict(config) and agent.env_kwargs == {"sutton_barto_reward": True}
+    assert agent.env_id == "CartPole-v1" and agent.batched().env_id == "CartPole-v1"
     obs = _observations()[5]
     assert agent(obs) == int(model.predict(norm.normalize_obs(obs), deterministic=True)[0])
 
@@ -391,3 +392,17 @@ def test_a_file_colon_colon_name_that_names_another_name_is_refused_not_followed
     assert (
         message == f"agent {str(policies) + '::me'!r}: me is the text {str(policies) + '::me'!r}, another FILE.py::NAME"
     )
+
+
+def test_an_action_numpy_cannot_read_is_refused_in_torch_s_own_words():
+    grad = torch.zeros(2, requires_grad=True) * 1.0
+    agent = load_agent(lambda obs: [grad, grad.sum()])  # a list, not a tuple: not taken apart for it
+    check_fits(agent, CARTPOLE.observation_space, gym.spaces.Box(-1, 1, (2,)))
+    agent.start([None])
+    with pytest.raises(AgentError, match=r"numpy cannot read it: RuntimeError: .*requires grad"):
+        agent(np.zeros(4))
+    pair = load_agent(lambda obs: [np.zeros(2), np.zeros(3)])
+    check_fits(pair, CARTPOLE.observation_space, gym.spaces.Box(-1, 1, (2,)))
+    pair.start([None])
+    with pytest.raises(AgentError, match=r"numpy cannot read it: ValueError: .*; a list of 2 values: give the action"):
+        pair(np.zeros(4))

@@ -369,6 +369,56 @@ def test_tensorboard_needs_its_package_in_one_line(tmp_path, monkeypatch):
         quick_spec().as_run(tensorboard_log=tmp_path)
 
 
+def checkpoints_of_the_run(root, seed, spec):
+    """The docs' per-run checkpoint saver: one folder per spec and seed."""
+    from stable_baselines3.common.callbacks import CheckpointCallback
+
+    return CheckpointCallback(save_freq=128, save_path=str(Path(root) / spec.label / f"seed_{seed}"))
+
+
+def test_a_factory_that_takes_the_seed_and_spec_gets_them_so_each_run_writes_its_own_folder(tmp_path):
+    from specguard.training.train import train_run
+
+    spec = quick_spec(callbacks=[functools.partial(checkpoints_of_the_run, str(tmp_path))])
+    for seed in (0, 1):
+        train_run(spec, seed)
+    saved = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*.zip"))
+    assert saved == [f"balance/seed_{seed}/rl_model_{steps}_steps.zip" for seed in (0, 1) for steps in (128, 256)]
+
+
+def test_a_factory_is_given_only_the_run_arguments_its_signature_names_and_a_partial_left_free():
+    from specguard.training.train import _run_arguments
+
+    class Run:
+        seed, spec = 3, "the spec"
+
+    def both(seed, spec): ...
+    def anything(**kwargs): ...
+
+    assert _run_arguments(both, Run) == {"seed": 3, "spec": "the spec"}
+    assert _run_arguments(functools.partial(both, seed=9), Run) == {"spec": "the spec"}
+    assert _run_arguments(anything, Run) == {} and _run_arguments(MarkTraining, Run) == {}
+
+
+def test_a_tensorboard_folder_that_cannot_be_made_is_refused_in_one_line_naming_it(tmp_path):
+    file = tmp_path / "file.txt"
+    file.write_text("")
+    refused = {
+        file: f"got {str(file)!r}, which is a file",
+        file / "runs": f"got {str(file / 'runs')!r}, which lies below the file {str(file)!r}",
+        "runs\0": "got 'runs\\x00', which holds a NUL character",
+        "r" * 300: "which is too long (a name over 255 bytes)",
+        42: "expected tensorboard_log to be a folder, got 42",
+    }
+    for folder, message in refused.items():
+        with pytest.raises(sg.InvalidSpec) as spec_error:
+            quick_spec(tensorboard_log=folder)
+        with pytest.raises(sg.InvalidSpec) as door_error:
+            quick_spec().as_run(tensorboard_log=folder)
+        for error in (spec_error, door_error):
+            assert message in str(error.value).splitlines()[0], str(error.value)
+
+
 def test_run_spec_writes_each_goals_curve_to_tensorboard_one_folder_per_spec_and_seed(tmp_path):
     result = sg.run_spec(
         quick_spec(), workers=2, cache_dir=tmp_path / "cache", progress=None, tensorboard_log=tmp_path / "tb"

@@ -368,3 +368,58 @@ def test_the_table_of_an_agent_counts_no_runs():
     assert result.agent == "lean"
     header = sg.table(result).splitlines()[0].split()
     assert header == ["goal", "success", "95%", "interval", "threshold", "verdict"]
+
+
+def test_an_agent_trained_on_another_env_id_is_judged_with_a_loud_note():
+    from specguard.agents.agent import Agent
+
+    agent = Agent(lean, name="zoo lean", env_id="CartPole-v0")
+    with pytest.warns(sg.SpecWarning, match=r"trained on env 'CartPole-v0'.*\('CartPole-v1'\)"):
+        result = check_agent(KEEP, agent, episodes=10, max_episodes=10, cache_dir=None)
+    assert "'CartPole-v0'" in result.notes[0] and "'CartPole-v0'" in sg.table(result)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", sg.SpecWarning)
+        agent = Agent(lean, name="zoo lean", env_id="CartPole-v1")
+        same = check_agent(KEEP, agent, episodes=10, max_episodes=10, cache_dir=None)
+    assert not any("trained on env" in note for note in same.notes)
+
+
+def test_an_agents_result_asked_for_its_model_points_to_the_agent():
+    result = check_agent(KEEP, lean, episodes=10, max_episodes=10)
+    for reach in (sg.load_model, sg.rollout):
+        with pytest.raises(sg.SpecError, match="judged agent 'lean', trained elsewhere") as caught:
+            reach(result, 0)
+        assert "not cached" not in str(caught.value) and "falsify_agent" in str(caught.value)
+
+
+def test_episodes_that_start_inside_a_reach_goal_are_met_at_the_start_only_where_the_goal_ends_them():
+    tilted = sg.Spec(CARTPOLE, sg.Goal("tilted", theta=(0.02, None)), budget=sg.Budget(timesteps=1), expect=0.3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", sg.SpecWarning)  # some starts are inside the root goal: that is the point
+        own = check_agent(tilted, lean, episodes=20, max_episodes=20, cache_dir=None)
+        constructed = check_agent(tilted, lean, episodes=20, max_episodes=20, observation="spec", cache_dir=None)
+    started = own.runs[0].started_in_goal
+    assert started > 0  # the notes are tested
+    (note,) = [n for n in own.notes if "started inside the root goal" in n]
+    # the initial env's own episodes go on past the goal: the last state decides, as for every episode
+    assert "before the policy acted" not in note and "judged at its last state" in note
+    assert f"{started} of 20" in note and "judged at its last state" in sg.table(own)
+    (note,) = [n for n in constructed.notes if "started inside the root goal" in n]
+    assert note.endswith("met before the policy acted")
+
+
+def test_check_on_a_pytest_agent_file_names_what_it_found_and_how_to_run_it(tmp_path, capsys):
+    from specguard.cli.main import main
+
+    tests = tmp_path / "test_agent_checks.py"
+    tests.write_text(
+        "import specguard as sg\n\n\n"
+        "@sg.goal_spec(expect=0.5)\n"
+        "def test_lean():\n"
+        "    cartpole = sg.InitialEnv('CartPole-v1', features=('x', 'v', 'theta', 'omega'))\n"
+        "    spec = sg.Spec(cartpole, sg.Goal('right', theta=(0.1, None)), budget=sg.Budget(timesteps=1))\n"
+        "    return sg.AgentCheck(spec, lambda obs: int(obs[2] > 0))\n"
+    )
+    assert main(["check", str(tests), "--agent", "agent.zip"]) == 2
+    err = capsys.readouterr().err
+    assert "pytest goal-spec file" in err and "@goal_spec" in err and f"pytest --goal-specs {tests}" in err

@@ -290,3 +290,25 @@ def test_holm_leaves_expected_misses_and_a_quiet_session_alone():
     quiet = [compared_row("a", 0.4), compared_row("b", 0.9)]
     assert not apply_family(quiet) and family_lines(quiet)[1] == "dropped: none"
     assert not apply_family([{"group": "g", "goal": "x", "verdict": "passed"}]) and family_lines([]) == []
+
+
+@pytest.mark.parametrize(
+    "tree, goal",
+    [
+        (sg.Always(sg.Goal("upright", theta=(-0.2, 0.2)), name="balance"), "balance"),  # the env ends it: a fall
+        (sg.Goal("far", x=(2.0, None)), "far"),  # never reached
+    ],
+)
+def test_an_agents_failing_goal_hints_at_its_behaviour_not_at_training(tree, goal):
+    cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+    s = sg.Spec(cartpole, tree, budget=sg.Budget(timesteps=1), expect=0.5)
+
+    def lean(obs):
+        return int(obs[2] > 0)
+
+    result = sg.check_agent(s, lean, episodes=10, max_episodes=10, cache_dir=None)
+    check = judge_goal(result, s, goal, "g")
+    assert check.outcome == "failed" and check.hint is not None
+    assert "agent 'lean'" in check.hint
+    for training in ("learn", "train", "Distance", "budget", "weight"):
+        assert training not in check.hint, check.hint

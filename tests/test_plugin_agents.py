@@ -101,13 +101,16 @@ def test_an_agent_check_is_judged_per_goal_with_xfail_xpass_table_and_junit(pyte
         [
             "*= specguard goal specs =*",
             "spec*goal*success*interval*threshold*runs met*per seed*verdict*training",
-            "test_agent_checks.py::test_lean *balance *0% (0/10)*>= 0.5*0/1*xfailed*",
-            "test_agent_checks.py::test_lean *balance:edges (safe)*100% (10/10)*>= 0.5*1/1*passed*",
-            "test_agent_checks.py::test_random *balance *0% (0/10)*>= 0.5*0/1*failed*",
-            "test_agent_checks.py::test_safe_after_all *balance:edges (safe)*100% (10/10)*>= 0.5*1/1*xpassed*",
-            "test_agent_checks.py::test_declared[[]lean[]] *balance:edges (safe)*100% (10/10)*>= 0.5*1/1*passed*",
+            "test_agent_checks.py::test_lean *balance *0% (0/10)*>= 0.5*agent: 10 episodes*xfailed*-",
+            "test_agent_checks.py::test_lean *balance:edges (safe)*100% (10/10)*>= 0.5*agent: 10 episodes*passed*-",
+            "test_agent_checks.py::test_random *balance *0% (0/10)*>= 0.5*agent: 10 episodes*failed*-",
+            "test_agent_checks.py::test_safe_after_all *balance:edges (safe)*100% (10/10)*>= 0.5*agent: 10 episodes"
+            "*xpassed*-",
+            "test_agent_checks.py::test_declared[[]lean[]] *balance:edges (safe)*100% (10/10)*>= 0.5*agent: 10 "
+            "episodes*passed*-",
         ]
     )
+    assert "0.0s" not in result.stdout.str().split("specguard goal specs")[-1]  # an agent trains nothing
     # judged once per test, its items sharing the result, which other plugins hear of
     heard = sorted(line.split("[")[0].split(" ")[0] for line in results(pytester))
     assert heard == [
@@ -213,3 +216,71 @@ def test_xdist_judges_agents_on_the_workers_and_reports_on_the_controller(pytest
         ]
     )
     assert len(results(pytester)) >= 4  # each worker judges its tests once
+
+
+def test_an_agents_report_has_its_own_rollout_and_counterexample_gifs_and_no_training_panel(pytester):
+    write(
+        pytester,
+        """
+        @sg.goal_spec(expect={"edges": 0.5}, falsify=True)
+        def test_lean():
+            return sg.AgentCheck(keep(), lean)
+        """,
+    )
+    report = pytester.path / "report"
+    result = run(pytester, "--goal-specs", f"--goal-specs-report={report}", "--goal-specs-no-cache")
+    result.assert_outcomes(passed=1, failed=1)
+    assert "no rollout GIF" not in result.stdout.str()
+    result.stdout.fnmatch_lines(["*seed 0: counterexample episode: *test_lean-falsify-seed0.gif (*)"])
+    data = json.loads((report / "goal-specs.json").read_text())
+    (counterexample,) = data["counterexamples"]
+    assert counterexample["gif"] == "test_agent_checks.py__test_lean-falsify-seed0.gif"
+    assert (report / counterexample["gif"]).stat().st_size > 0
+    assert (report / "test_agent_checks.py__test_lean.gif").stat().st_size > 0
+    assert [row["agent"] for row in data["goals"]] == ["lean"]
+    assert not (report / "goal-specs.png").exists()  # an agent trains nothing: no panel of empty curves
+    markdown = (report / "goal-specs.md").read_text()
+    assert "agent 'lean' (no training: an agent trained elsewhere), seed 0, one evaluation episode" in markdown
+
+
+def test_the_plot_leaves_out_an_agents_group_beside_a_trained_ones():
+    from specguard.report.plots import curves_figure
+
+    point = {"timesteps": 10, "success": {"up": 0.5}}
+    trained = {"group": "t.py::trained", "goal": "up", "threshold": 0.5, "curves": [[point]], "per_seed": []}
+    agent = {"group": "t.py::agent", "goal": "up", "threshold": 0.5, "curves": [[]], "per_seed": [], "agent": "lean"}
+    figure = curves_figure([trained, agent])
+    assert [ax.get_title() for ax in figure.axes if ax.get_visible()] == ["trained"]
+    assert curves_figure([agent]) is None
+
+
+def test_an_interrupted_session_writes_a_report_that_says_so(pytester):
+    write(
+        pytester,
+        """
+        @sg.goal_spec(expect={"edges": 0.5})
+        def test_lean():
+            return sg.AgentCheck(keep(), lean)
+
+
+        def test_stopped():
+            raise KeyboardInterrupt  # Ctrl-C while this item runs
+
+
+        def test_never_ran():
+            pass
+        """,
+    )
+    report = pytester.path / "report"
+    result = run(pytester, "--goal-specs", f"--goal-specs-report={report}")
+    assert result.ret == pytest.ExitCode.INTERRUPTED
+    data = json.loads((report / "goal-specs.json").read_text())
+    assert [row["verdict"] for row in data["goals"]] == ["passed"]
+    assert data["interrupted"] == "the session was interrupted after 1 of 3 items ran"
+    markdown = (report / "goal-specs.md").read_text()
+    assert "**Incomplete**: the session was interrupted after 1 of 3 items ran" in markdown
+    # a session that ran every item says nothing of it
+    write(pytester, AGENTS)
+    run(pytester, "--goal-specs", f"--goal-specs-report={report}")
+    assert json.loads((report / "goal-specs.json").read_text())["interrupted"] is None
+    assert "Incomplete" not in (report / "goal-specs.md").read_text()

@@ -345,6 +345,24 @@ def test_a_run_counts_the_episodes_the_env_ended_before_the_horizon(until):
     assert result.to_dict()["runs"][0]["terminated"] == run.episodes
 
 
+class DeclaresALimit(Endless):
+    """Endless, with a ``_max_episode_steps`` of its own that it never enforces (no ``TimeLimit``)."""
+
+    _max_episode_steps = 50
+
+
+def test_an_env_that_declares_a_limit_it_never_enforces_runs_under_the_cap():
+    tree = sg.Always(sg.Goal("up", x=(-2.0, None)), name="stay")
+    env = sg.make_env(sg.InitialEnv(lambda: DeclaresALimit(0.6), features=("x",)), tree)
+    env.reset(seed=0)
+    steps, truncated, info = 0, False, {}
+    while not truncated and steps <= EPISODE_CAP:
+        _, _, terminated, truncated, info = env.step(0)
+        steps += 1
+        assert not terminated
+    assert steps == EPISODE_CAP and info[CAPPED] == EPISODE_CAP
+
+
 def test_a_run_on_an_env_that_never_ends_finishes_and_says_where_it_cut(monkeypatch):
     monkeypatch.setattr(cap, "EPISODE_CAP", 50)  # in this process: train_run, not run_spec's workers
     initial = sg.InitialEnv(lambda: Endless(0.6), features=("x",))

@@ -155,3 +155,20 @@ def test_rounding_up_by_more_than_ten_percent_warns_once():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert trained_timesteps(1900, "PPO", {}, 1) == 2048  # 7.8% more: no warning
+
+
+def test_the_budget_the_docs_give_an_agent_check_is_shown_without_a_warning(tmp_path, capsys):
+    from specguard.cli.main import main
+
+    (tmp_path / "agents.py").write_text(
+        "import specguard as sg\n"
+        "cartpole = sg.InitialEnv('CartPole-v1', features=('x', 'v', 'theta', 'omega'))\n"
+        "keep = sg.Spec(cartpole, sg.Always(sg.Goal('upright', theta=(-0.2, 0.2)), name='balance'),\n"
+        "               budget=sg.Budget(timesteps=1), expect=0.5)\n"
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # docs/guide/agents.md's Budget(timesteps=1): not a budget to round
+        assert main(["show", str(tmp_path / "agents.py")]) == 0
+    assert "budget: 2048 timesteps per seed (1 asked, rounded up" in capsys.readouterr().out
+    with pytest.warns(UserWarning, match="budget of 2 timesteps trains 2048"):
+        trained_timesteps(2, "PPO", {}, 1)  # any other small budget still warns

@@ -306,3 +306,30 @@ def test_an_agent_that_raises_in_evaluation_is_named_as_the_agent_not_the_enviro
     assert "evaluation episode 0: the agent raised ValueError: logits are NaN" in e.value.message
     assert "environment" not in e.value.message.split("\nHint:")[0]
     assert "weights went NaN" in str(e.value)
+
+
+def test_a_trainer_run_reports_its_progress_at_each_tenth_of_its_budget():
+    events: list = []
+    train_run(spec(functools.partial(improving, good_from=10**9)), seed=0, progress=events.append)
+    updates = [e for e in events if e.kind == "update"]
+    assert [e.steps for e in updates] == list(range(100, 1001, 100))
+    looked = {-(-s // 100) * 100 for s in checkpoint_steps(BUDGET.timesteps, BUDGET.checkpoints)}
+    assert {e.steps for e in updates if e.episodes} == looked  # a looked-at checkpoint tells its look's success
+    assert all(e.success == 0 for e in updates if e.episodes)
+
+
+def raising_after_one(make_env, timesteps, seed, *, error):
+    yield 100, push_left
+    raise error
+
+
+def test_a_partial_trainer_is_named_by_the_function_it_wraps():
+    trainer = functools.partial(raising_after_one, error=ValueError("boom"))
+    with pytest.raises(TrainingError, match=r"trainer raising_after_one, after step 100: it raised ValueError: boom"):
+        train_run(spec(trainer), seed=0)
+
+
+def test_a_warning_of_run_spec_points_at_the_users_line(tmp_path):
+    with pytest.warns(sg.SpecWarning, match="gets nothing from it") as caught:
+        sg.run_spec(spec(), workers=1, cache_dir=None, progress=None, tensorboard_log=tmp_path / "runs")
+    assert [w.filename for w in caught if issubclass(w.category, sg.SpecWarning)] == [__file__]

@@ -517,3 +517,25 @@ def test_each_outcome_reaches_the_caller_as_its_task_ends(tmp_path):
     outcomes = run_tasks(tasks, max_workers=2, on_outcome=on_outcome)
     assert isinstance(outcomes[1], Done) and outcomes[1].value == "saw it"
     assert [key for key, _ in seen] == [0, 1] and dict(seen) == outcomes
+
+
+UNGUARDED = """
+from specguard.parallel.protocol import Task
+from specguard.parallel.workers import run_tasks
+
+def double(x, *, report):
+    return 2 * x
+
+print(run_tasks([Task(0, double, (1,))], max_workers=1)[0].cause, flush=True)
+"""
+
+
+def test_a_worker_dead_at_the_import_of_an_unguarded_script_names_the_script(tmp_path: Path) -> None:
+    script = tmp_path / "unguarded.py"
+    script.write_text(textwrap.dedent(UNGUARDED))
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    done = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True, timeout=120)
+    assert done.stdout.strip().splitlines()[-1] == (
+        f"worker process died (exit code 1) while starting: the script {script} runs run_spec at import: "
+        "put it under if __name__ == '__main__':"
+    ), done.stdout + done.stderr

@@ -30,7 +30,7 @@ from specguard.error import AgentError, AgentMismatch, SpecError, SpecWarning
 from specguard.training.policy import observation_rows
 from specguard.utils.text import MAX_SHOWN, elide, shown
 
-__all__ = ["Agent", "action_problem", "check_fits", "observation_kind", "observation_rows"]
+__all__ = ["Agent", "action_problem", "check_fits", "observation_kind", "observation_rows", "space_text"]
 
 
 class Agent:
@@ -60,7 +60,12 @@ class Agent:
         path: the file it was loaded from, if any.
         env_kwargs: what its ``env_kwargs.yml`` (or rl-zoo3's ``args.yml`` and ``config.yml``) says the env was
             made with; empty where nothing says.
+        env_id: the env id its rl-zoo3 ``args.yml`` says it was trained on (``env:``), if any.
         config: what its ``config.yml`` says it was trained with (rl-zoo3's hyperparameters); empty where none.
+        wrappers: the env wrappers its ``config.yml`` says it was trained with (``frame_stack``, ``env_wrapper``:
+            :func:`specguard.agents.wrappers.zoo_wrappers`), put around the env it is judged in unless ``wrap=`` is
+            given; ``None``: none.
+        normalizer_source: where its ``VecNormalize`` statistics came from (a file's path), for notes.
     """
 
     def __init__(
@@ -79,6 +84,9 @@ class Agent:
         path: Any = None,
         env_kwargs: Mapping[str, Any] | None = None,
         config: Mapping[str, Any] | None = None,
+        wrappers: Any = None,
+        normalizer_source: str | None = None,
+        env_id: str | None = None,
     ) -> None:
         from specguard.training.policy import Policy
 
@@ -92,6 +100,9 @@ class Agent:
         self.path = path
         self.env_kwargs: dict[str, Any] = dict(env_kwargs or {})
         self.config: dict[str, Any] = dict(config or {})
+        self.wrappers = wrappers
+        self.normalizer_source = normalizer_source
+        self.env_id = env_id
         self._source = act
         self._identity = identity
         self._check_actions = check_actions
@@ -138,6 +149,9 @@ class Agent:
             path=self.path,
             env_kwargs=self.env_kwargs,
             config=self.config,
+            wrappers=self.wrappers,
+            normalizer_source=self.normalizer_source,
+            env_id=self.env_id,
         )
         twin._expect(self._expected)
         return twin
@@ -248,8 +262,14 @@ def action_problem(space: Any, action: Any) -> str:
 
     try:
         array = np.asarray(action)
-    except Exception as e:  # a tensor that needs .detach(), an object numpy cannot read
-        return f"numpy cannot read it: {type(e).__name__}"
+    except Exception as e:  # a tensor that needs .detach(), an object numpy cannot read: in its own words
+        text = str(e).strip().splitlines()[0] if str(e).strip() else ""
+        many = isinstance(action, (tuple, list))  # (action, log_prob, ...) of an actor
+        return (
+            f"numpy cannot read it: {type(e).__name__}"
+            + (f": {elide(text, MAX_SHOWN)}" if text else "")
+            + (f"; a {type(action).__name__} of {len(action)} values: give the action alone" if many else "")
+        )
     if isinstance(space, (gym.spaces.Box, gym.spaces.Discrete, gym.spaces.MultiDiscrete, gym.spaces.MultiBinary)):
         if array.shape != space.shape:
             return f"shape {array.shape}, not {space.shape}"
@@ -289,15 +309,61 @@ def check_fits(agent: Agent, observation_space: Any, action_space: Any) -> None:
     wanted = observation_kind(observation_space)
     if agent.observation_space is not None and observation_kind(agent.observation_space) != wanted:
         raise AgentMismatch(
-            f"agent {agent.name!r} reads observations of {agent.observation_space}, and the env gives "
-            f"{observation_space}"
+            f"agent {agent.name!r} reads observations of {space_text(agent.observation_space)}, and the env gives "
+            f"{space_text(observation_space)}",
+            hint=_observation_hint(agent, agent.observation_space, observation_space),
         )
     norm = agent.normalizer
     if agent.observation_space is None and norm is not None and observation_kind(norm.observation_space) != wanted:
         raise AgentMismatch(
-            f"agent {agent.name!r} normalizes observations of {norm.observation_space}, and the env gives "
-            f"{observation_space}"
+            f"agent {agent.name!r} normalizes observations of {space_text(norm.observation_space)}, and the env "
+            f"gives {space_text(observation_space)}",
+            hint=_observation_hint(agent, norm.observation_space, observation_space),
         )
     if agent.action_space is not None and agent.action_space != action_space:
         raise AgentMismatch(f"agent {agent.name!r} acts in {agent.action_space}, and the env takes {action_space}")
     agent._expect(action_space)
+
+
+def space_text(space: Any) -> str:
+    """An observation space in a few words: what a network reads of it (its kind, shape and dtype), not its bounds.
+
+    Example:
+        >>> import gymnasium as gym
+        >>> space_text(gym.spaces.Box(-1, 1, (16,))), space_text(gym.spaces.Discrete(3))
+        ('Box(shape=(16,), float32)', 'Discrete(3)')
+        >>> space_text(gym.spaces.Dict({"a": gym.spaces.Box(0, 255, (3, 2), "uint8")}))
+        'Dict(a: Box(shape=(3, 2), uint8))'
+    """
+    import gymnasium as gym
+
+    if isinstance(space, gym.spaces.Dict):
+        return "Dict(" + ", ".join(f"{key}: {space_text(part)}" for key, part in space.spaces.items()) + ")"
+    if isinstance(space, gym.spaces.Box):
+        return f"Box(shape={space.shape}, {space.dtype})"
+    return elide(str(space), MAX_SHOWN)
+
+
+def _observation_hint(agent: Agent, reads: Any, gives: Any) -> str:
+    """What to try when the agent reads other observations than the env gives: the config's ``frame_stack``, a
+    stack the shapes suggest, the wrappers it was trained with (``wrap=``)."""
+    import gymnasium as gym
+
+    stack = agent.config.get("frame_stack")
+    where = "from specguard.agents.wrappers import FrameStack"
+    if stack is not None:
+        return (
+            f"its config.yml says frame_stack: {stack}, which check_agent applies unless wrap= is given; a wrap= must "
+            f"stack as SB3's VecFrameStack does: wrap=lambda env: FrameStack(env, {stack}) ({where})"
+        )
+    if isinstance(reads, gym.spaces.Box) and isinstance(gives, gym.spaces.Box) and reads.shape and gives.shape:
+        n, rest = divmod(reads.shape[-1], gives.shape[-1])
+        if n > 1 and not rest and reads.shape[:-1] == gives.shape[:-1]:
+            return (
+                f"trained on {n} stacked frames (SB3's VecFrameStack)? wrap=lambda env: FrameStack(env, {n}) ({where}) "
+                "stacks them as it does (rl-zoo3's config.yml frame_stack is applied on its own)"
+            )
+    return (
+        "judge the agent in the env it was trained in (its env id and env_kwargs), through the observation wrappers "
+        "it was trained with (check_agent(..., wrap=...))"
+    )

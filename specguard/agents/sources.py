@@ -41,6 +41,7 @@ import numpy as np
 
 from specguard.agents.agent import Agent, observation_kind
 from specguard.agents.decode import read_data, read_statistics
+from specguard.agents.wrappers import zoo_wrappers
 from specguard.cache.canonical import digest
 from specguard.cache.store import file_sha256
 from specguard.error import AgentError, InvalidSpec, SpecError
@@ -297,6 +298,7 @@ def _from_path(path: Path, algorithm: Any, normalizer: Any, *, deterministic: bo
     except Exception as e:
         raise AgentError(f"{str(model_zip)!r}: {cls.__name__} cannot load it: {_why(e)}") from e
     stats_file = Path(stats) if isinstance(stats, (str, os.PathLike)) else None
+    wrappers = zoo_wrappers(config, repr(str(settings / "config.yml")), trust=trust)
     return Agent(
         Policy(model, norm, deterministic=deterministic, batch=batch),
         # an rl-zoo3 run's zips share their names (<env_id>.zip in <env_id>_1/, _2/, ...): its folder tells them apart
@@ -306,6 +308,8 @@ def _from_path(path: Path, algorithm: Any, normalizer: Any, *, deterministic: bo
                 ("zip", file_sha256(model_zip)),
                 ("normalizer", file_sha256(stats_file) if stats_file is not None else _norm_digest(norm)),
                 ("deterministic", deterministic),
+                # the config's wrappers change what it sees: part of what it computes (none: as before)
+                *([("wrappers", wrappers.identity())] if wrappers is not None else []),
             ]
         ),
         observation_space=model.observation_space,
@@ -318,6 +322,9 @@ def _from_path(path: Path, algorithm: Any, normalizer: Any, *, deterministic: bo
         path=model_zip,
         env_kwargs=_env_kwargs(settings, config, args),
         config=config,
+        wrappers=wrappers,
+        normalizer_source=str(stats_file) if stats_file is not None else None,
+        env_id=args["env"] if isinstance(args.get("env"), str) else None,
     )
 
 

@@ -80,6 +80,24 @@ def _show(target: str) -> int:
     return 0
 
 
+def _specs(target: str, command: str) -> dict[str, Spec]:
+    """The specs of ``target`` for ``command``; a pytest goal-spec file that defines none (its specs are made by
+    ``@goal_spec`` functions, an agent's as an ``sg.AgentCheck``) is refused with the pytest command that runs it."""
+    from specguard.report.show import has_goal_specs
+
+    path = spec_path(target)
+    try:
+        return load_objects(target)
+    except SpecError as e:
+        if not (has_goal_specs(path) and e.message.endswith("defines no Spec objects")):
+            raise
+        raise SpecError(
+            f"{e.message}: it is a pytest goal-spec file, whose @goal_spec functions make their specs (and return "
+            f"their agents, as sg.AgentCheck) under pytest; specguard {command} takes Spec objects",
+            hint=f"pytest --goal-specs {path}",
+        ) from None
+
+
 def _plan(args: argparse.Namespace) -> int:
     from specguard.gate.plan import plan_spec
     from specguard.report.plan_lines import plan_lines
@@ -117,7 +135,7 @@ def _run(args: argparse.Namespace) -> int:
     from specguard.parallel.executors import make_executor
     from specguard.parallel.workers import resolve_workers
 
-    specs = load_objects(args.target)
+    specs = _specs(args.target, "run")
     for name, spec in specs.items():  # before anything trains: a spec with nothing to assert has no verdict
         require_thresholds(f"{args.target.partition('::')[0]}::{name}", spec.thresholds)
     json_path = _prepare_json(args.json) if args.json else None  # before training, which may take hours
@@ -500,7 +518,7 @@ def _falsify(args: argparse.Namespace) -> int:
 
     starts = StartSpace(check_unique("--starts", args.starts)) if args.starts else None  # None: the spec's own
     found_any = False
-    specs = load_objects(args.target)
+    specs = _specs(args.target, "falsify")
     for spec in specs.values():  # names and bounds checked before anything trains
         start_space(spec, starts).resolve(spec.initial_env.make())
     say = None if args.quiet else (lambda line: print(f"[specguard] {line}", file=sys.stderr))
@@ -552,7 +570,7 @@ def _check(args: argparse.Namespace) -> int:
     from specguard.gate.agent_gate import compare_agents
     from specguard.report.table import table
 
-    specs = load_objects(args.target)
+    specs = _specs(args.target, "check")
     for name, spec in specs.items():  # before any episode: a spec with nothing to assert has no verdict
         require_thresholds(f"{args.target.partition('::')[0]}::{name}", spec.thresholds)
     json_path = _prepare_json(args.json) if args.json else None

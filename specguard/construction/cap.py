@@ -54,5 +54,17 @@ class EpisodeCap(gym.wrappers.TimeLimit):
 
 
 def capped(env: gym.Env) -> gym.Env:
-    """``env`` itself where it declares an episode limit, else ``env`` under an :class:`EpisodeCap`."""
-    return env if episode_limit(env) is not None else EpisodeCap(env)
+    """``env`` itself where a ``TimeLimit`` among its wrappers enforces an episode limit, else ``env`` under an
+    :class:`EpisodeCap`. A limit that is only declared (a ``_max_episode_steps`` attribute of the env's own, a
+    spec's ``max_episode_steps``) ends nothing by itself, so it does not spare the env the cap."""
+    return env if _time_limited(env) else EpisodeCap(env)
+
+
+def _time_limited(env: gym.Env) -> bool:
+    """Whether a ``TimeLimit`` with a limit lies among ``env``'s wrappers (:func:`episode_limit` reads its limit)."""
+    inner: Any = env
+    while inner is not None:
+        if isinstance(inner, gym.wrappers.TimeLimit) and episode_limit(inner) is not None:
+            return True
+        inner = getattr(inner, "env", None)
+    return False

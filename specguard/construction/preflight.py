@@ -32,7 +32,6 @@ Example:
 
 from __future__ import annotations
 
-import sys
 import warnings
 from typing import Any
 
@@ -40,7 +39,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from specguard.construction.compiled import CompiledTree, compile_tree
-from specguard.error import GoalMetAtStart, SpecWarning, UnreachableGoal
+from specguard.error import GoalMetAtStart, SpecWarning, UnreachableGoal, user_stacklevel
 from specguard.tree.nodes import Node
 from specguard.utils.text import bounds_text
 
@@ -55,18 +54,6 @@ __all__ = [
     "episode_limit",
     "unreachable_reason",
 ]
-
-
-def _caller() -> int:
-    """The ``stacklevel`` for a warning of the calling function: the innermost frame outside ``specguard``.
-
-    That is the user's line that built the env (the caller of ``make_env``, ``Spec.make_env``, ``run_spec``),
-    however many of specguard's frames lie between.
-    """
-    frame, level = sys._getframe(1), 1  # level 1: the function that warns
-    while frame.f_back is not None and str(frame.f_globals.get("__name__", "")).startswith("specguard."):
-        frame, level = frame.f_back, level + 1
-    return level
 
 
 def _f32(values: np.ndarray) -> np.ndarray:
@@ -136,7 +123,7 @@ def check_goals_reachable(compiled: CompiledTree, low: ArrayLike, high: ArrayLik
             f"{compiled.paths[node]}: {found[0]}; {compiled.paths[escape]} is not a box and may still hold "
             "without it (e.g. through another alternative of an OR)",
             SpecWarning,
-            stacklevel=_caller(),  # the caller of make_env
+            stacklevel=user_stacklevel(),  # the caller of make_env
         )
 
 
@@ -177,7 +164,7 @@ def check_goals_off_the_edge(compiled: CompiledTree, low: ArrayLike, high: Array
             + "; ".join(names)
             + ". Widen the box into the bounds unless the edge is the point",
             SpecWarning,
-            stacklevel=_caller(),  # the caller of make_env
+            stacklevel=user_stacklevel(),  # the caller of make_env
         )
 
 
@@ -247,7 +234,7 @@ def check_root_goal_not_met_at_start(compiled: CompiledTree, inside: int, sample
             "start there end at their first step and count as successes whatever the policy does. "
             f"Hint: {_START_HINT}",
             SpecWarning,
-            stacklevel=_caller(),  # the caller of make_env
+            stacklevel=user_stacklevel(),  # the caller of make_env
         )
 
 
@@ -277,7 +264,7 @@ def check_root_goal_holds_at_start(compiled: CompiledTree, inside: int, samples:
             f"({outside / samples:.0%}): the episodes that start there fail whatever the policy does. "
             f"Hint: {_HOLD_HINT}",
             SpecWarning,
-            stacklevel=_caller(),  # the caller of make_env
+            stacklevel=user_stacklevel(),  # the caller of make_env
         )
 
 

@@ -46,8 +46,16 @@ from specguard.cache.store import Cache
 from specguard.construction.env import EnvFactory
 from specguard.engine.judging import judged
 from specguard.engine.spec_result import SpecResult
-from specguard.error import AgentError, EvaluationError, FingerprintError, InvalidSpec, SpecError, SpecWarning
-from specguard.spec.budget import Budget
+from specguard.error import (
+    AgentError,
+    EvaluationError,
+    FingerprintError,
+    InvalidSpec,
+    SpecError,
+    SpecWarning,
+    user_stacklevel,
+)
+from specguard.spec.budget import AGENT_TIMESTEPS, Budget
 from specguard.spec.spec import Spec
 from specguard.stats.anytime import evaluation_stages, final_evaluation
 from specguard.stats.intervals import failure_upper_bound
@@ -65,6 +73,7 @@ __all__ = [
     "agent_envs",
     "agent_episodes",
     "agent_stages",
+    "agent_wrap",
     "check_agent",
     "evaluation_identity",
     "seed_base",
@@ -133,7 +142,12 @@ def check_agent(
     one = dataclasses.replace(
         spec,
         budget=Budget(
-            timesteps=1, min_seeds=1, max_seeds=1, eval_episodes=first, max_eval_episodes=most, checkpoints=1
+            timesteps=AGENT_TIMESTEPS,
+            min_seeds=1,
+            max_seeds=1,
+            eval_episodes=first,
+            max_eval_episodes=most,
+            checkpoints=1,
         ),
         quorum=None,
     )
@@ -142,7 +156,7 @@ def check_agent(
     run = cache.load_key(key, seed=seed, paths=result_keys(spec.tree), model=False) if cache is not None else None
     hit = run is not None
     if run is None:
-        run = _evaluate(where, spec, one, agent, observation, wrap, seed, stages, outcomes)
+        run = _evaluate(where, spec, one, agent, observation, agent_wrap(agent, wrap), seed, stages, outcomes)
         if cache is not None:
             try:
                 cache.store_evaluation(key, run)
@@ -151,11 +165,13 @@ def check_agent(
     n = run.episodes
     base = EVAL_SEED_BASE + seed * EVAL_SEED_STRIDE
     counts = run.successes
-    result = judged(one, [run])
+    result = judged(one, [run], ends_at_goal=observation == "spec")  # the baseline env's episodes are the env's own
     seen = "the constructed env's" if observation == "spec" else "the initial env's own"
-    wrapped = f", through {function_text(wrap)}" if wrap is not None else ""
+    seen_wrap = agent_wrap(agent, wrap)
+    wrapped = f", through {function_text(seen_wrap)}" if seen_wrap is not None else ""
     result.notes[:0] = [
         *_other_env_kwargs(spec, agent),
+        *_agent_notes(agent, wrap),
         f"agent {agent.name!r}: {n} evaluation episodes (env seeds {base}..{base + n - 1}), seeing {seen} "
         f"observation{wrapped}",
         *_never_failed(counts, n, spec.confidence),
@@ -346,7 +362,7 @@ def agent_episodes(
     """Episodes ``start..start + count - 1`` of ``agent`` for seed ``seed``, as :func:`check_agent` plays them: each
     episode's own counts, in order (for a paired comparison, beyond the episodes its verdicts needed)."""
     where = f"agent_episodes({spec.label!r})"
-    env = agent_envs(spec, observation, wrap)()
+    env = agent_envs(spec, observation, agent_wrap(agent, wrap))()
     outcomes: list[dict[str, int]] = []
     try:
         check_fits(agent, env.observation_space, env.action_space)
@@ -391,9 +407,10 @@ def spec_agent(
 
 
 def agent_envs(spec: Spec, observation: str = "env", wrap: Callable[[Any], Any] | None = None) -> Callable[..., Any]:
-    """``make(*, starts=None)``: a new env the agent acts in, the baseline env (the initial env's observation) or the
-    constructed env, wrapped in ``wrap`` where given, in a start space's wrapper where ``starts`` is given
-    (:meth:`~specguard.construction.env.EnvFactory.__call__`); its ``info`` reports the goals, read beneath any
+    """``make(*, starts=None, **make_kwargs)``: a new env the agent acts in, the baseline env (the initial env's
+    observation) or the constructed env, wrapped in ``wrap`` where given, in a start space's wrapper where ``starts``
+    is given (:meth:`~specguard.construction.env.EnvFactory.__call__`; ``make_kwargs`` override the base env's
+    ``gymnasium.make`` kwargs, e.g. ``render_mode="rgb_array"``); its ``info`` reports the goals, read beneath any
     wrapper. One factory for all of them (its checks run once).
 
     Raises:
@@ -404,11 +421,47 @@ def agent_envs(spec: Spec, observation: str = "env", wrap: Callable[[Any], Any] 
     else:
         factory = EnvFactory(spec.initial_env, spec.tree, baseline=True)
 
-    def make(*, starts: Any = None) -> Any:
-        env = factory(starts=starts)
+    def make(*, starts: Any = None, **make_kwargs: Any) -> Any:
+        env = factory(starts=starts, **make_kwargs)
         return env if wrap is None else _wrapped(env, wrap)
 
     return make
+
+
+def agent_wrap(agent: Agent, wrap: Callable[[Any], Any] | None) -> Callable[[Any], Any] | None:
+    """The wrappers around the env ``agent`` sees: ``wrap`` where given, else those its rl-zoo3 ``config.yml`` says
+    it was trained with (``frame_stack``, ``env_wrapper``: :attr:`~specguard.agents.agent.Agent.wrappers`).
+
+    Example:
+        >>> agent_wrap(load_agent(lambda obs: 0), None) is None
+        True
+    """
+    return wrap if wrap is not None else agent.wrappers
+
+
+def _agent_notes(agent: Agent, wrap: Callable[[Any], Any] | None) -> list[str]:
+    """The notes on what the agent's own files changed in what it sees: its config's wrappers (applied, or not for
+    ``wrap=``, loudly) and its ``VecNormalize`` statistics."""
+    notes = []
+    if agent.wrappers is not None and wrap is None:
+        notes.append(
+            f"agent {agent.name!r}: its observations pass through its config.yml's {agent.wrappers.text} (frames "
+            "stacked on the last axis as SB3's VecFrameStack does), as it was trained"
+        )
+    elif agent.wrappers is not None and wrap is not None:
+        text = (
+            f"agent {agent.name!r}: its config.yml's {agent.wrappers.text} is not applied: wrap={function_text(wrap)} "
+            "replaces it"
+        )
+        warnings.warn(text, SpecWarning, stacklevel=3)
+        notes.append(text)
+    if agent.normalizer is not None:
+        source = f" of {agent.normalizer_source}" if agent.normalizer_source else ""
+        notes.append(
+            f"agent {agent.name!r}: its observations are normalized by the VecNormalize statistics{source} "
+            "(as saved, not updated) before it acts"
+        )
+    return notes
 
 
 def _wrapped(env: Any, wrap: Callable[[Any], Any]) -> Any:
@@ -438,18 +491,28 @@ def _wrapped(env: Any, wrap: Callable[[Any], Any]) -> Any:
 
 
 def _other_env_kwargs(spec: Spec, agent: Agent) -> list[str]:
-    """A loud note (and warning) where the agent's own files say its env was made otherwise than the spec's."""
+    """Loud notes (and warnings) where the agent's own files say its env was another id, or made otherwise, than the
+    spec's."""
+    texts = []
+    ours_id = spec.initial_env.env if isinstance(spec.initial_env.env, str) else None
+    if agent.env_id is not None and agent.env_id.rpartition(":")[2] != (ours_id or "").rpartition(":")[2]:
+        made = repr(ours_id) if ours_id is not None else "made by a factory"
+        texts.append(
+            f"agent {agent.name!r} was trained on env {agent.env_id!r}, which the spec's initial env is not "
+            f"({made}): the verdicts are about the spec's env; give InitialEnv {agent.env_id!r} to judge the agent "
+            "in the env it was trained in"
+        )
     ours = spec.initial_env.make_kwargs
     other = {k: v for k, v in agent.env_kwargs.items() if k != "render_mode" and (k not in ours or ours[k] != v)}
-    if not other:
-        return []
-    text = (
-        f"agent {agent.name!r} was trained on an env made with {other}, which the spec's initial env is not "
-        f"(its kwargs: {dict(ours)}): the verdicts are about the spec's env; give InitialEnv those kwargs to judge "
-        "the agent in the env it was trained in"
-    )
-    warnings.warn(text, SpecWarning, stacklevel=3)
-    return [text]
+    if other:
+        texts.append(
+            f"agent {agent.name!r} was trained on an env made with {other}, which the spec's initial env is not "
+            f"(its kwargs: {dict(ours)}): the verdicts are about the spec's env; give InitialEnv those kwargs to "
+            "judge the agent in the env it was trained in"
+        )
+    for text in texts:
+        warnings.warn(text, SpecWarning, stacklevel=user_stacklevel())
+    return texts
 
 
 def _never_failed(counts: Mapping[str, int], episodes: int, confidence: float) -> list[str]:

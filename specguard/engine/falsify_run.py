@@ -240,7 +240,7 @@ def falsify_agent(
 
     from specguard.agents.agent import check_fits
     from specguard.cache.fingerprint import fingerprint_spec
-    from specguard.engine.check_agent import AGENT_OBSERVATIONS, agent_envs, spec_agent
+    from specguard.engine.check_agent import AGENT_OBSERVATIONS, agent_envs, agent_wrap, spec_agent
     from specguard.error import InvalidSpec
     from specguard.utils.text import function_text, shown
 
@@ -252,7 +252,8 @@ def falsify_agent(
     acting = spec_agent(spec, agent, algorithm=algorithm, batch=True, trust=trust)
     fresh = _fresh_copy(agent) if acting.model is None else None  # a callable's, before it is ever asked
     space = start_space(spec, starts)
-    runner = EpisodeRunner(agent_envs(spec, observation, wrap), acting, space, property_keys(spec), score=score)
+    make = agent_envs(spec, observation, agent_wrap(acting, wrap))  # wrap=, else its config's frame_stack, ...
+    runner = EpisodeRunner(make, acting, space, property_keys(spec), score=score)
     check_fits(acting, runner.observation_space, runner.action_space)  # before any episode
     db, key = None, ""
     if database is not None:

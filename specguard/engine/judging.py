@@ -52,7 +52,9 @@ def seeds_still_needed(spec: Spec, goals: dict[str, GoalVerdict], done: int) -> 
     return min(missing, spec.budget.max_seeds - done)
 
 
-def judged(spec: Spec, runs: Sequence[RunResult], *, errors: Mapping[int, str] | None = None) -> SpecResult:
+def judged(
+    spec: Spec, runs: Sequence[RunResult], *, errors: Mapping[int, str] | None = None, ends_at_goal: bool | None = None
+) -> SpecResult:
     """The result of ``spec`` over ``runs`` (and the seeds that crashed, ``errors``): verdicts, notes, words.
 
     What ``run_spec`` returns for the same runs, less what only a call knows (cache hits, time, the cache).
@@ -77,12 +79,12 @@ def judged(spec: Spec, runs: Sequence[RunResult], *, errors: Mapping[int, str] |
         confidence=spec.confidence,
         undecided=spec.undecided,
         xfail=dict(spec.xfail),
-        notes=episode_notes(spec.tree, runs),
+        notes=episode_notes(spec.tree, runs, ends_at_goal=not spec.baseline if ends_at_goal is None else ends_at_goal),
         trained=spec,
     )
 
 
-def episode_notes(tree: Node | None, runs: Sequence[RunResult]) -> list[str]:
+def episode_notes(tree: Node | None, runs: Sequence[RunResult], *, ends_at_goal: bool = True) -> list[str]:
     """The facts about the evaluation episodes that every door shows beside the verdicts, one line each.
 
     First, each run whose training one of the spec's callbacks stopped before its budget (``seed 0: training
@@ -91,7 +93,10 @@ def episode_notes(tree: Node | None, runs: Sequence[RunResult]) -> list[str]:
     at specguard's step cap; where the root goal holds until the end, the episodes that started
     outside it (failed before the policy acted) and those the env ended by termination before their horizon
     (docs/semantics.md, "Goals that hold until the end"); for a reach goal, the episodes that started inside it
-    (met before the policy acted). Without a ``tree``, the root is the runs' first key.
+    (met before the policy acted where reaching the root goal ends the episode, ``ends_at_goal``: the constructed
+    env's; in the baseline env, whose episodes are the initial env's own, a reach goal is judged at the last state
+    like any episode's, docs/semantics.md, "One agent's statistics"). Without a ``tree``, the root is the runs' first
+    key.
     """
     episodes = sum(r.episodes for r in runs)
     started = sum(r.started_in_goal for r in runs)
@@ -108,7 +113,12 @@ def episode_notes(tree: Node | None, runs: Sequence[RunResult]) -> list[str]:
         if started:
             lines.append(
                 f"{started} of {episodes} evaluation episodes started inside the root goal {root!r}: "
-                "met before the policy acted"
+                + (
+                    "met before the policy acted"
+                    if ends_at_goal
+                    else "the env does not end an episode there, so each was judged at its last state, as every "
+                    "episode is"
+                )
             )
         return lines
     if episodes - started:  # a goal that must hold from the first state on

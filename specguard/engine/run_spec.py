@@ -190,7 +190,7 @@ def _seeds_of(spec: Spec, options: RunOptions) -> Iterator[tuple[Runs, SpecResul
         result.spec_key = None if runs.fingerprint is None else runs.fingerprint.spec_key
         result.cache_dir = None if runs.cache is None else runs.cache.root
         yield runs, result
-        result.notes = episode_notes(spec.tree, result.runs)
+        result.notes = episode_notes(spec.tree, result.runs, ends_at_goal=not spec.baseline)
     finally:
         if owned:
             runner.close()

@@ -30,9 +30,17 @@ def load_run(result: SpecResult, seed: int) -> tuple[Spec, Any, Any]:
     """Run ``seed`` of ``result``: the spec as run, its SB3 model and its ``VecNormalize`` statistics (or ``None``).
 
     Raises:
-        SpecError: the runs were not cached (``cache_dir=None``, or a result read back without
-            its ``trained`` spec and ``cache_dir``), or the run's cache entry is gone.
+        SpecError: the result is an agent's (:func:`~specguard.engine.check_agent.check_agent`: nothing was
+            trained, the agent is its own model), the runs were not cached (``cache_dir=None``, or a result read
+            back without its ``trained`` spec and ``cache_dir``), or the run's cache entry is gone.
     """
+    if result.agent is not None:
+        raise SpecError(
+            f"Spec {result.spec!r}: no model for seed {seed}: this result judged agent {result.agent!r}, trained "
+            "elsewhere; specguard trained nothing",
+            hint="the agent is its own model: sg.load_agent(source) loads it, and sg.falsify_agent(spec, agent) "
+            "plays and searches its episodes",
+        )
     if result.trained is None or result.cache_dir is None:
         raise SpecError(
             f"Spec {result.spec!r}: no model kept for seed {seed}: the runs were not cached",

@@ -46,6 +46,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 import signal
+import sys
 import threading
 import time
 import traceback
@@ -190,6 +191,7 @@ def _child_main(conn: Connection, payload: bytes, environ: dict[str, str], stdio
         os.environ.update(environ)
     runner = TaskRunner(conn.send)
     try:
+        conn.send(("started",))  # past the start-up (the main module imported): a death from now on is the task's
         try:
             fn, args = cloudpickle.loads(payload)
         except BaseException as e:
@@ -217,6 +219,7 @@ class _Child:
     conn: Connection
     at: Position = field(default_factory=Position)
     eof: bool = False
+    started: bool = False  # its process reached _child_main (it sends "started" first)
     deadline: float | None = None  # set once its outcome or EOF arrived: when it is terminated if still alive
 
 
@@ -229,7 +232,28 @@ def _died(child: _Child) -> Failure:
             how = f"killed by signal {-code}"
     else:
         how = f"exit code {code}"
+    script = None if child.started or code != 1 else _unguarded_script()
+    if script is not None:
+        return child.at.failure(
+            child.task.key,
+            f"worker process died ({how}) while starting: the script {script} runs run_spec at import: "
+            "put it under if __name__ == '__main__':",
+        )
     return child.at.failure(child.task.key, f"worker process died ({how})")
+
+
+def _unguarded_script() -> str | None:
+    """The parent's main script, when it is one (``python script.py``: a ``__file__``, no ``__spec__``), which a
+    worker imports again as it starts (spawn, fork server): a worker that exits with code 1 before it reaches
+    :func:`_child_main` then most likely ran the script's ``run_spec`` at import and was refused a process of its
+    own (multiprocessing's bootstrapping error), which an ``if __name__ == "__main__":`` guard prevents. ``None``
+    otherwise (``python -m``, an interactive session, pytest's own main module).
+    """
+    main = sys.modules.get("__main__")
+    path = getattr(main, "__file__", None)
+    if main is None or getattr(main, "__spec__", None) is not None or not isinstance(path, str):
+        return None
+    return path
 
 
 def _read(child: _Child, on_line: Callable[[int, str], None] | None, limit: int | None) -> TaskOutcome | None:
@@ -245,7 +269,9 @@ def _read(child: _Child, on_line: Callable[[int, str], None] | None, limit: int 
         except Exception as e:  # the result could not be unpickled here; the stream itself is intact
             return child.at.failure(child.task.key, f"result could not be read: {one_line(e)}", traceback.format_exc())
         kind = message[0]
-        if kind == "report":
+        if kind == "started":
+            child.started = True
+        elif kind == "report":
             _, phase, step, line = message
             child.at.move(phase, step)
             if line is not None and on_line is not None:

@@ -14,6 +14,7 @@ undecided goal does.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import warnings
 from pathlib import Path
@@ -32,6 +33,7 @@ COUNTEREXAMPLES = "specguard.counterexamples"
 
 def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: Any) -> None:
     """Train (or read back) the item's spec, falsify every run, and pass, fail or xfail the item."""
+    from specguard.engine.check_agent import spec_agent
     from specguard.engine.falsify_run import falsify_agent, falsify_runs, start_space
     from specguard.falsify.assertion import falsify_verdict, verdict_lines
     from specguard.stats.verdicts import UNDECIDED_AS, RunVerdict, Word
@@ -42,10 +44,13 @@ def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: 
             trained = spec.as_run(undecided=state.options.undecided)
             space = start_space(trained, check.starts)
             cache = state.options.cache_dir
+            # loaded once: falsified, then its counterexample's episode replayed for the report's GIF
+            loaded = spec_agent(trained, agent.agent, algorithm=agent.algorithm, trust=agent.trust)
+            agent = dataclasses.replace(agent, spec=trained, agent=loaded)
             found = {
                 agent.seed: falsify_agent(
                     trained,
-                    agent.agent,
+                    loaded,
                     space,
                     **check.kwargs(),
                     database=None if cache is None else Path(cache) / "falsify",
@@ -53,6 +58,7 @@ def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: 
                     observation=agent.observation,
                     wrap=agent.wrap,
                     algorithm=agent.algorithm,
+                    trust=agent.trust,
                 )
             }
             result = None
@@ -69,10 +75,10 @@ def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: 
         )
     lines = verdict_lines(found, verdicts, check.max_rate)
     gifs: dict[int, Any] = {}
-    if state.options.report_dir is not None and result is not None:  # the counterexamples' episodes, as GIFs
+    if state.options.report_dir is not None:  # the counterexamples' episodes, as GIFs (an agent's own, acting)
         from specguard.report.gifs import counterexample_gifs
 
-        gifs = counterexample_gifs(state.options.report_dir, group_of(item), result, found, space)
+        gifs = counterexample_gifs(state.options.report_dir, group_of(item), result, found, space, agent=agent)
         lines += [
             f"seed {seed}: counterexample episode: {gif.path} ({gif.text})" if gif.path else f"seed {seed}: {gif.text}"
             for seed, gif in gifs.items()

@@ -49,6 +49,8 @@ class GoalCheck:
             :class:`~specguard.gate.baseline.AgentEntry`).
         notes: the spec's facts about its evaluation episodes (:attr:`SpecResult.notes
             <specguard.engine.spec_result.SpecResult.notes>`), shown under the table as ``specguard run`` shows them.
+        agent: the agent judged, for an agent trained elsewhere (:attr:`SpecResult.agent
+            <specguard.engine.spec_result.SpecResult.agent>`): its episodes are one run that trained nothing.
     """
 
     group: str
@@ -75,6 +77,7 @@ class GoalCheck:
     baseline_runs: list[list[int]] | None = None
     agent_baseline: dict[str, Any] | None = None
     notes: list[str] = field(default_factory=list)
+    agent: str | None = None
 
     @property
     def key(self) -> str:
@@ -166,7 +169,42 @@ def _safety_hint(spec: Spec, key: str, result: SpecResult, verdicts: list[RunVer
     )
 
 
+def _agent_hint(spec: Spec, path: str, result: SpecResult, verdicts: list[RunVerdict]) -> str | None:
+    """What an agent's (trained elsewhere) failing goal or safety rate shows of its behaviour: nothing of training."""
+    episodes = sum(r.episodes for r in result.runs)
+    if not episodes:
+        return None
+    who = f"agent {result.agent!r}"
+    if RunVerdict.UNDECIDED in verdicts and RunVerdict.MISSED not in verdicts:
+        return (
+            f"{who}'s {episodes} evaluation episodes leave it undecided: their interval contains the threshold "
+            f"{spec.thresholds[path]:g}; give it more episodes (max_episodes, --max-episodes), or ask for a "
+            "threshold further from the measured rate"
+        )
+    met = sum(r.successes[path] for r in result.runs)
+    if kind(path) == SAFETY:
+        return f"{who} violated {path!r} in {episodes - met} of its {episodes} evaluation episodes"
+    fell = sum(r.terminated for r in result.runs)
+    if fell and keeps_to_horizon(spec.tree) and until_end(spec.tree):
+        return (
+            f"the env ended {fell} of {who}'s {episodes} evaluation episodes before the horizon (a fall, a crash), "
+            "which a goal held until the end does not keep; where the env's termination is a good end, say so "
+            "with sg.Always(..., until='termination')"
+        )
+    if not met:
+        return f"{who} never ended an evaluation episode in {path!r} ({episodes} episodes)"
+    node = _node(spec.tree, path)
+    if node.children:
+        kids = [child_path(path, c.name) for c in node.children]
+        rates = {kid: sum(r.successes[kid] for r in result.runs) / episodes for kid in kids}
+        worst = min(rates, key=rates.__getitem__)
+        return f"{who} fell short on {worst!r}, met in {rates[worst]:.0%} of its episodes"
+    return None
+
+
 def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[RunVerdict]) -> str | None:
+    if result.agent is not None:  # trained elsewhere: its behaviour, not advice on training
+        return _agent_hint(spec, path, result, verdicts)
     if kind(path) == SAFETY:
         return _safety_hint(spec, path, result, verdicts)
     runs = result.runs
@@ -255,6 +293,7 @@ def judge_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalChe
         hint=None if outcome is GoalOutcome.PASSED else _hint(spec, path, result, verdict.runs),
         kind=kind(path),
         notes=list(result.notes),
+        agent=result.agent,
     )
 
 

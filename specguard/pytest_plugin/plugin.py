@@ -191,7 +191,10 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
             check.baseline_runs = [[r.seed, r.successes[check.goal], r.episodes] for r in stored.runs]
         row = check.to_row()
         if state.options.report_dir is not None:
-            row["curves"] = [r.curve for r in result.runs]
+            if agent is not None:  # nothing trained: no curves; its GIF is the agent's own (state.agent_checks)
+                row["agent"], row["curves"] = result.agent, []
+            else:
+                row["curves"] = [r.curve for r in result.runs]
             state.specs.setdefault(row["group"], trained)  # the spec as trained: its cache entries
         pyfuncitem.user_properties.append((PROPERTY, json.dumps(row)))
         pyfuncitem.user_properties += [(f"{PROPERTY}.{check.goal}.{k}", v) for k, v in check.junit_properties()]

@@ -18,7 +18,7 @@ import pytest
 from specguard.pytest_plugin.falsify_item import COUNTEREXAMPLES
 from specguard.pytest_plugin.session import Session
 
-__all__ = ["PROPERTY", "Recorder", "apply_family", "unsigned_cache_note", "write_outputs"]
+__all__ = ["PROPERTY", "Recorder", "apply_family", "interruption", "unsigned_cache_note", "write_outputs"]
 
 PROPERTY = "specguard"  # the user property that carries a goal item's row
 WARNING = "specguard: warning:"  # a line saying an output was not written
@@ -42,6 +42,8 @@ class Recorder:
         self.state = state
 
     def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
+        if report.when == "teardown":
+            self.state.ran.add(report.nodeid)
         if report.when != "call":
             return
         for key, value in report.user_properties:
@@ -57,6 +59,7 @@ class Recorder:
         """Holm's procedure over the session's comparisons: a drop it flags beyond the items' own fails the session."""
         if hasattr(self.config, "workerinput"):  # an xdist worker: the controller has every row
             return
+        self.state.interrupted = interruption(session, len(self.state.ran))
         if apply_family(self.state.rows):
             session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
@@ -75,6 +78,16 @@ class Recorder:
         note = unsigned_cache_note(self.state.rows, os.environ)
         if note:
             terminalreporter.write_line(note)
+
+
+def interruption(session: pytest.Session, ran: int) -> str | None:
+    """Why ``session`` stopped before its last item (a KeyboardInterrupt, ``-x``, ``--maxfail``), with how many of
+    its items ran; ``None`` for a session that ran them all."""
+    stopped = session.exitstatus == pytest.ExitCode.INTERRUPTED or bool(session.shouldstop)
+    if not stopped or ran >= session.testscollected:
+        return None
+    why = f"stopped early ({session.shouldstop})" if isinstance(session.shouldstop, str) else "was interrupted"
+    return f"the session {why} after {ran} of {session.testscollected} items ran"
 
 
 def unsigned_cache_note(rows: list[dict[str, Any]], environ: Mapping[str, str]) -> str | None:
@@ -131,8 +144,10 @@ def _write_report(state: Session, directory: Path) -> list[str]:
 
     try:
         directory.mkdir(parents=True, exist_ok=True)  # before the GIFs: one warning, not one note per spec
-        gifs = report_gifs(directory, state.rows, state.specs, state.options.cache_dir)
-        written = write_reports(directory, state.rows, gifs=gifs, counterexamples=state.counterexamples)
+        gifs = report_gifs(directory, state.rows, state.specs, state.options.cache_dir, state.agent_checks)
+        written = write_reports(
+            directory, state.rows, gifs=gifs, counterexamples=state.counterexamples, interrupted=state.interrupted
+        )
     except OSError as e:
         return [f"{WARNING} the report was not written to {str(directory)!r}: {_reason(e)}"]
     written += [gif.path for gif in gifs.values() if gif.path is not None]

@@ -48,6 +48,7 @@ class Session:
     executor: Executor | None = None  # made once per session
     memo: dict[str, SpecResult] = dataclasses.field(default_factory=dict)
     agents: dict[str, SpecResult] = dataclasses.field(default_factory=dict)  # group -> its AgentCheck's result
+    agent_checks: dict[str, AgentCheck] = dataclasses.field(default_factory=dict)  # group -> it, agent loaded (GIFs)
     rows: list[dict[str, Any]] = dataclasses.field(default_factory=list)
     counterexamples: list[dict[str, Any]] = dataclasses.field(default_factory=list)  # falsify items' runs
     specs: dict[str, Spec] = dataclasses.field(default_factory=dict)  # group -> its trained Spec, for report GIFs
@@ -58,6 +59,8 @@ class Session:
     agent_outcomes: dict[str, list[dict[str, int]]] = dataclasses.field(default_factory=dict)  # group -> episodes'
     agent_gates: dict[str, SavedAgentGate] = dataclasses.field(default_factory=dict)  # group -> vs the saved agent
     agent_entries: dict[str, AgentEntry | str] = dataclasses.field(default_factory=dict)  # group -> saved, or why not
+    ran: set[str] = dataclasses.field(default_factory=set)  # the items that ran to their teardown (node ids)
+    interrupted: str | None = None  # why the session stopped before its last item, as its reports say it
 
 
 def run_options(state: Session) -> RunOptions:
@@ -162,13 +165,20 @@ def judge_agent(state: Session, check: AgentCheck, item: pytest.Item, group: str
     """The agent check as this session judges it (its ``--goal-specs-undecided``; there is no budget to scale, nothing
     is trained) and its result: judged once per test, shared by all its goal items; other plugins hear of it as of a
     trained spec's (``pytest_goal_spec_result``)."""
-    check = dataclasses.replace(check, spec=check.spec.as_run(undecided=state.options.undecided))
+    from specguard.engine.check_agent import spec_agent
+
+    if group in state.agent_checks:  # its agent loaded once per test, for its goal items and its report GIF
+        return state.agent_checks[group], state.agents[group]
+    spec = check.spec.as_run(undecided=state.options.undecided)
+    loaded = spec_agent(spec, check.agent, algorithm=check.algorithm, trust=check.trust)
+    check = dataclasses.replace(check, spec=spec, agent=loaded)
     if group not in state.agents:
         # each episode's outcomes where a baseline saves or pairs them (the evaluation cache keeps counts only)
         paired = state.options.save or (state.baseline is not None and group in state.baseline.agents)
         outcomes = state.agent_outcomes.setdefault(group, []) if paired else None
         result = state.agents[group] = check.run(cache_dir=state.options.cache_dir, outcomes=outcomes)
         item.config.hook.pytest_goal_spec_result(item=item, spec=check.spec, result=result)
+    state.agent_checks[group] = check
     return check, state.agents[group]
 
 

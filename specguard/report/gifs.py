@@ -8,7 +8,9 @@ that raises, Pillow not installed) never raises: :func:`write_gif` returns a
 renders off-screen (:mod:`specguard.report.offscreen`), or the note says how
 to enable it. :func:`report_gifs` is what
 ``pytest --goal-specs --goal-specs-report DIR`` writes: one GIF per spec, of
-its first seed's cached model.
+its first seed's cached model, or of the agent an agent test judged (an
+:class:`~specguard.engine.check_agent.AgentCheck`: its agent acts itself, in
+the env ``check_agent`` judges it in; nothing is read from the cache).
 """
 
 from __future__ import annotations
@@ -16,13 +18,13 @@ from __future__ import annotations
 import hashlib
 import os
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from specguard.cache.models import load_model
-from specguard.error import InitialEnvError
+from specguard.error import InitialEnvError, SpecError
 from specguard.report.offscreen import HOW, NoOffscreen, is_mujoco, offscreen
 from specguard.spec.spec import Spec
 from specguard.starts.space import START_OPTION, StartSpace
@@ -30,7 +32,7 @@ from specguard.training.policy import policy
 from specguard.training.rollout import episode
 from specguard.training.train import EVAL_SEED_BASE
 
-__all__ = ["MAX_FRAMES", "Gif", "NoFrames", "counterexample_gifs", "gif_stem", "report_gifs", "write_gif"]
+__all__ = ["MAX_FRAMES", "Gif", "NoFrames", "agent_gif", "counterexample_gifs", "gif_stem", "report_gifs", "write_gif"]
 
 MAX_FRAMES = 100  # frames a GIF keeps at most (an episode's frames are subsampled evenly)
 LAST_FRAME_MS = 2000  # how long the captioned last frame stays
@@ -107,22 +109,25 @@ def _refuses_render_mode(error: InitialEnvError) -> bool:
     return isinstance(cause, TypeError) and "render_mode" in str(cause)
 
 
-def rendering_env(spec: Spec, *, starts: StartSpace | None = None) -> Any:
+def rendering_env(spec: Spec, *, starts: StartSpace | None = None, make: Callable[..., Any] | None = None) -> Any:
     """``spec``'s env, rendering ``rgb_array`` frames: made with ``render_mode="rgb_array"``, or, where its
     factory takes no ``render_mode``, made without and its ``unwrapped.render_mode`` set.
 
     ``starts``: the start space it is made with (as ``spec.make_env(starts=...)``); ``None``: none.
+    ``make``: the env factory, ``make(starts=..., **make_kwargs)`` (an agent's,
+    :func:`~specguard.engine.check_agent.agent_envs`); default ``spec.make_env``.
 
     Raises:
         NoFrames: the env lists its render modes and ``rgb_array`` is not among them.
         SpecError: the env cannot be made (as ``spec.make_env``).
     """
+    make = spec.make_env if make is None else make
     try:
-        return spec.make_env(render_mode="rgb_array", starts=starts)
+        return make(render_mode="rgb_array", starts=starts)
     except InitialEnvError as e:
         if not _refuses_render_mode(e):
             raise
-    env = spec.make_env(starts=starts)
+    env = make(starts=starts)
     base = env.unwrapped
     modes = (getattr(base, "metadata", None) or {}).get("render_modes")
     if modes is not None and "rgb_array" not in modes:
@@ -146,8 +151,13 @@ def write_gif(
     max_frames: int = MAX_FRAMES,
     start: Mapping[str, float] | None = None,
     starts: StartSpace | None = None,
+    make: Callable[..., Any] | None = None,
 ) -> Gif:
     """Render one deterministic episode of ``model`` on ``spec``'s env into an animated GIF at ``path``.
+
+    ``model``: an SB3 model (with its ``normalizer``), a callable, or an agent trained elsewhere (an
+    :class:`~specguard.agents.agent.Agent`, acting as loaded, in the env ``make`` builds:
+    :func:`rendering_env`'s ``make``).
 
     The env is made with ``render_mode="rgb_array"`` (:func:`rendering_env`); frames are subsampled
     evenly to at most ``max_frames``; the last frame carries the caption: the
@@ -173,12 +183,22 @@ def write_gif(
         options = None
         if start is not None:  # as the falsifier's runner: made with the start space, reset seed 0
             options, seed = {START_OPTION: dict(start)}, 0
-        env = rendering_env(spec, starts=(starts or StartSpace()) if start is not None else None)
+        env = rendering_env(spec, starts=(starts or StartSpace()) if start is not None else None, make=make)
     except NoFrames as e:
         return Gif(None, f"no GIF of spec {spec.label!r}: its env does not render rgb_array frames ({e})")
     except Exception as e:
         return Gif(None, f"no GIF of spec {spec.label!r}: its env cannot be made to render rgb_array frames ({e})")
-    act = policy(model, normalizer, deterministic=True)
+    from specguard.agents.agent import Agent, check_fits
+
+    if isinstance(model, Agent):  # as check_agent has it act: its actions checked against the env's action space
+        act: Any = model if not model.batch else model.batched(False)
+        try:
+            check_fits(act, env.observation_space, env.action_space)
+        except Exception as e:
+            env.close()
+            return Gif(None, f"no GIF of spec {spec.label!r}: {_one_line(e)}")
+    else:
+        act = policy(model, normalizer, deterministic=True)
     frames: list[Any] = []
     stride = 1
     last = -1
@@ -261,13 +281,17 @@ def report_gifs(
     rows: Sequence[Mapping[str, Any]],
     specs: Mapping[str, Spec],
     cache_dir: Path | str | None,
+    agents: Mapping[str, Any] | None = None,
 ) -> dict[str, Gif]:
-    """One GIF per spec (group) of ``rows``: its first seed's cached model, written to ``directory``.
+    """One GIF per spec (group) of ``rows``: its first seed's cached model, or its agent's, written to ``directory``.
 
     Args:
         specs: the trained spec of each group; a group without one (the xdist
             controller, which built no spec) gets a note instead of a GIF.
-        cache_dir: the run cache; ``None`` (no cache): notes only.
+        cache_dir: the run cache; ``None`` (no cache): notes only, except for an agent's group.
+        agents: per agent test's group, its :class:`~specguard.engine.check_agent.AgentCheck` (its agent loaded or
+            loadable): the GIF is the agent's own first evaluation episode (the env seed of its episode 0), in the
+            env ``check_agent`` judged it in; no cache is read.
 
     Returns:
         Per group, the GIF or the note saying why there is none; never raises.
@@ -281,6 +305,11 @@ def report_gifs(
         seeds = [s["seed"] for s in row.get("per_seed") or []]
         if spec is None:
             gifs[group] = Gif(None, "no rollout GIF: the spec was built in another process (pytest-xdist worker)")
+        elif group in (agents or {}):
+            try:
+                gifs[group] = agent_gif((agents or {})[group], directory / f"{gif_stem(group)}.gif")
+            except Exception as e:  # a report must not fail the session
+                gifs[group] = Gif(None, f"no rollout GIF: {_one_line(e)}")
         elif cache_dir is None:
             gifs[group] = Gif(None, "no rollout GIF: the run cache is off (--goal-specs-no-cache), no model to load")
         elif not seeds:
@@ -295,10 +324,44 @@ def report_gifs(
     return gifs
 
 
+def agent_gif(
+    check: Any, path: Path | str, *, start: Mapping[str, float] | None = None, starts: StartSpace | None = None
+) -> Gif:
+    """A GIF of the agent of ``check`` (an :class:`~specguard.engine.check_agent.AgentCheck`), acting as loaded
+    in the env :func:`~specguard.engine.check_agent.check_agent` judges it in (its ``observation`` and ``wrap``):
+    its evaluation episode 0, or the episode from ``start`` (a counterexample's, in ``starts``).
+
+    Raises:
+        AgentError: the agent cannot be loaded (a loaded one is used as it is).
+
+    Example:
+        >>> import tempfile, specguard as sg
+        >>> cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+        >>> spec = sg.Spec(cartpole, sg.Goal("right", theta=(0.1, None)), budget=sg.Budget(timesteps=1))
+        >>> gif = agent_gif(sg.AgentCheck(spec, lambda obs: 1), Path(tempfile.mkdtemp()) / "a.gif")
+        >>> gif.path.name, gif.frames > 1
+        ('a.gif', True)
+    """
+    from specguard.engine.check_agent import agent_envs, agent_wrap, seed_base, spec_agent
+
+    spec = check.spec
+    agent = spec_agent(spec, check.agent, algorithm=check.algorithm, batch=False, trust=check.trust)
+    make = agent_envs(spec, check.observation, agent_wrap(agent, check.wrap))
+    return write_gif(agent, spec, path, seed=seed_base(check.seed), start=start, starts=starts, make=make)
+
+
 def counterexample_gifs(
-    directory: Path, group: str, result: Any, found: Mapping[int, Any], starts: StartSpace | None
+    directory: Path,
+    group: str,
+    result: Any,
+    found: Mapping[int, Any],
+    starts: StartSpace | None,
+    agent: Any = None,
 ) -> dict[int, Gif]:
     """A GIF of each run's counterexample episode (``found``: per seed, its falsification), in ``directory``.
+
+    ``agent``: the :class:`~specguard.engine.check_agent.AgentCheck` falsified (``result`` is then unused): its
+    agent's episode from the counterexample's start (:func:`agent_gif`), no cache read.
 
     Returns:
         Per seed with a counterexample, its GIF or the note saying why there is none; never raises for a
@@ -308,11 +371,17 @@ def counterexample_gifs(
     for seed, falsification in sorted(found.items()):
         if falsification.counterexample is None:
             continue
+        path = directory / f"{gif_stem(group, falsify_seed=seed)}.gif"
+        start = falsification.counterexample.start
+        if agent is not None:
+            try:
+                gifs[seed] = agent_gif(agent, path, start=start, starts=starts)
+            except SpecError as e:
+                gifs[seed] = Gif(None, f"no GIF: {e}")
+            continue
         if result.cache_dir is None or result.trained is None:
             gifs[seed] = Gif(None, "no GIF: the run cache is off, no model to load")
             continue
         model, normalizer = load_model(result.trained, seed, result.cache_dir)
-        path = directory / f"{gif_stem(group, falsify_seed=seed)}.gif"
-        start = falsification.counterexample.start
         gifs[seed] = write_gif(model, result.trained, path, normalizer=normalizer, start=start, starts=starts)
     return gifs

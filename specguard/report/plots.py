@@ -19,10 +19,11 @@ Row = dict[str, Any]
 
 
 def _goals(rows: Sequence[Row]) -> dict[str, dict[str, Any]]:
-    """Per spec (group), in order of appearance: its curves, their seeds and the thresholds of its asserted goals."""
+    """Per spec (group), in order of appearance: its curves, their seeds and the thresholds of its asserted goals;
+    a group that trained nothing (an agent trained elsewhere, ``"agent"``; curves without a point) has no panel."""
     specs: dict[str, dict[str, Any]] = {}
     for r in rows:
-        if not r.get("curves"):
+        if r.get("agent") or not any(r.get("curves") or ()):
             continue
         entry = specs.setdefault(group := r["group"], {"curves": r["curves"], "seeds": None, "thresholds": {}})
         if entry["seeds"] is None:
@@ -35,8 +36,8 @@ def _goals(rows: Sequence[Row]) -> dict[str, dict[str, Any]]:
 def curves_figure(rows: Sequence[Row]) -> Figure | None:
     """The success plot as a matplotlib ``Figure`` (no pyplot, no backend switch); ``None`` without curves.
 
-    One panel per spec (the paper's Figure 4 layout). Per asserted goal, in one
-    colour: each seed's success over its training episodes as a thin line
+    One panel per spec that trained (the paper's Figure 4 layout); an agent trained elsewhere has none.
+    Per asserted goal, in one colour: each seed's success over its training episodes as a thin line
     labelled with the seed, the seeds' mean in bold (drawn only at steps where
     every seed has a point: up to where the first seed stopped), the goal's threshold as a
     dashed horizontal line and, where curve points carry ``"evaluation"``, the

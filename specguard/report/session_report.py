@@ -54,16 +54,17 @@ def _ordered(rows: Sequence[Row]) -> list[Row]:
 
 def _cells(row: Row) -> list[str]:
     lo, hi = row["interval"]
+    agent = row.get("agent") is not None  # an agent trained elsewhere: one run of its episodes, no training
     cells = [
         row["group"],
         label(row["goal"]),
         f"{row['success']:.0%} ({row['successes']}/{row['episodes']})",
         interval_text((lo, hi)),
         f">= {row['threshold']:g}",
-        f"{row['runs_met']}/{row['runs']}",
+        f"agent: {row['episodes']} episodes" if agent else f"{row['runs_met']}/{row['runs']}",
         _per_seed(row),
         row["verdict"],
-        "cached" if row["cached"] else f"{row['train_seconds']:.1f}s",
+        "-" if agent else "cached" if row["cached"] else f"{row['train_seconds']:.1f}s",
     ]
     if row.get("comparison"):
         cells.append(row["comparison"])
@@ -75,7 +76,8 @@ HEADER = ["spec", "goal", "success", "interval", "threshold", "runs met", "per s
 
 def table_lines(rows: Sequence[Row]) -> list[str]:
     """The terminal summary: spec x goal -> success, interval, threshold, runs met, per-seed successes, verdict,
-    and training time (``cached`` for a row whose runs all came from the cache).
+    and training time (``cached`` for a row whose runs all came from the cache); an agent's row (trained elsewhere)
+    says ``agent: N episodes`` for its runs and ``-`` for its training.
 
     Safety rates follow their spec's goals, labelled ``path:name (safe)``; their
     success is the share of episodes without a violation. Each spec's notes follow the table, once
@@ -140,6 +142,7 @@ def session_markdown(
     plot: str | None = None,
     gifs: Mapping[str, Gif] | None = None,
     counterexamples: Sequence[Row] = (),
+    interrupted: str | None = None,
 ) -> str:
     """A Markdown summary ready to paste into a pull request.
 
@@ -148,6 +151,8 @@ def session_markdown(
         gifs: per spec (group), its rollout GIF (linked by file name, so it must lie beside the
             Markdown) with its caption, or the note saying why there is none.
         counterexamples: the falsify items' runs (:func:`counterexample_lines`), their GIFs beside the Markdown.
+        interrupted: why the session stopped before its last item, said under the counts
+            (:func:`specguard.pytest_plugin.recorder.interruption`).
     """
     compared = any(r.get("comparison") for r in rows)
     header = HEADER + (["vs baseline"] if compared else [])
@@ -159,6 +164,7 @@ def session_markdown(
         "",
         ", ".join(f"{n} {v}" for v, n in sorted(counts.items())) + f" ({len(rows)} goals)",
         "",
+        *([f"**Incomplete**: {interrupted}; these are the goals of the items that ran.", ""] if interrupted else []),
     ]
     table = []
     for r in _ordered(rows):
@@ -185,11 +191,15 @@ def session_markdown(
         lines += ["", "### Figures", ""]
     if plot:
         lines += [f"![success per goal over training, one panel per spec]({quote(plot)})", ""]
+    agents = {r["group"]: r["agent"] for r in rows if r.get("agent")}
     for group, gif in (gifs or {}).items():
         seed = _first_seed(rows, group)
+        head = f"**`{group}`**, seed {seed}"
+        if group in agents:  # no training panel in the plot; the GIF is the agent's own episode
+            head = f"**`{group}`**, agent {agents[group]!r} (no training: an agent trained elsewhere), seed {seed}"
         if gif.path is not None:
             lines += [
-                f"**`{group}`**, seed {seed}, one evaluation episode: {gif.text}",
+                f"{head}, one evaluation episode: {gif.text}",
                 "",
                 f"![rollout of {group}]({quote(gif.path.name)})",
                 "",
@@ -251,6 +261,7 @@ def write_reports(
     *,
     gifs: Mapping[str, Gif] | None = None,
     counterexamples: Sequence[Row] = (),
+    interrupted: str | None = None,
 ) -> list[Path]:
     """Write ``goal-specs.json``, ``goal-specs.md`` and ``goal-specs.png`` (if there are curves).
 
@@ -258,14 +269,24 @@ def write_reports(
         gifs: per spec, its rollout GIF (already written into ``directory``) or a
             note (:func:`specguard.training.rollout.report_gifs`); the Markdown links them.
         counterexamples: the falsify items' runs; the JSON lists them and the Markdown shows them with their GIFs.
+        interrupted: why the session stopped before its last item (both files say it; the JSON's ``"interrupted"``
+            is ``null`` for a session that ran every item).
     """
     directory.mkdir(parents=True, exist_ok=True)
     data = directory / "goal-specs.json"
-    write_atomic(data, json.dumps({"goals": list(rows), "counterexamples": list(counterexamples)}, indent=1))
+    report = {"goals": list(rows), "counterexamples": list(counterexamples), "interrupted": interrupted}
+    write_atomic(data, json.dumps(report, indent=1))
     png = directory / "goal-specs.png"
     plotted = plot_curves(rows, png)
     md = directory / "goal-specs.md"
     write_atomic(
-        md, session_markdown(rows, plot=png.name if plotted else None, gifs=gifs, counterexamples=counterexamples)
+        md,
+        session_markdown(
+            rows,
+            plot=png.name if plotted else None,
+            gifs=gifs,
+            counterexamples=counterexamples,
+            interrupted=interrupted,
+        ),
     )
     return [data, md] + ([png] if plotted else [])

@@ -123,6 +123,9 @@ class Budget:
 
 
 ROUNDING_WARNING = 0.10  # warn when training rounds the budget up by more than this fraction
+AGENT_TIMESTEPS = 1
+"""The budget of a spec that only judges agents trained elsewhere (docs/guide/agents.md), which trains nothing: never
+warned about for its rounding."""
 
 
 def trained_timesteps(
@@ -135,7 +138,8 @@ def trained_timesteps(
     ``ceil(timesteps / (n_steps * n_envs)) * n_steps * n_envs``; off-policy
     algorithms collect ``train_freq`` steps per env (DQN and QRDQN 4, SAC, TD3, DDPG, TQC and
     CrossQ 1); the defaults are read from the algorithm's constructor.
-    Warns once when that is more than 10% above the budget.
+    Warns once when that is more than 10% above the budget, unless the budget is :data:`AGENT_TIMESTEPS`, the one
+    the docs give a spec that only judges agents trained elsewhere.
 
     Example:
         >>> trained_timesteps(100_000, "PPO", {"n_steps": 1024}, n_envs=4)
@@ -144,7 +148,7 @@ def trained_timesteps(
     timesteps = budget.timesteps if isinstance(budget, Budget) else check_count("trained_timesteps", "budget", budget)
     chunk = collect_steps(algorithm, hyperparameters or {}) * n_envs
     trained = math.ceil(timesteps / chunk) * chunk
-    if trained > timesteps * (1 + ROUNDING_WARNING):
+    if trained > timesteps * (1 + ROUNDING_WARNING) and timesteps != AGENT_TIMESTEPS:
         warnings.warn(
             f"budget of {timesteps} timesteps trains {trained}: {algorithm_name(algorithm)} collects {chunk} steps "
             "at a time "

@@ -34,7 +34,7 @@ from typing import Any, cast
 
 from specguard.construction.env import OBSERVATIONS, BaselineEnv, EnvFactory, SpecEnv
 from specguard.construction.initial_env import InitialEnv
-from specguard.error import InvalidSpec, SpecWarning
+from specguard.error import InvalidSpec, SpecWarning, user_stacklevel
 from specguard.spec.algorithms import check_hyperparameters, check_policy, default_policy, resolve_algorithm
 from specguard.spec.budget import Budget
 from specguard.spec.zoo import SCHEDULED, LinearSchedule
@@ -44,7 +44,7 @@ from specguard.stats.verdicts import DEFAULT_UNDECIDED, UNDECIDED_OUTCOMES
 from specguard.tree.keys import check_expect, check_xfail, check_xfail_thresholded, resolve_goal
 from specguard.tree.nodes import Node
 from specguard.utils.text import function_text, shown
-from specguard.validation import check_choice, check_count, check_open_fraction, is_finite
+from specguard.validation import check_choice, check_count, check_folder, check_open_fraction, is_finite
 
 __all__ = ["Spec", "check_spec", "check_tensorboard_log"]
 
@@ -114,10 +114,10 @@ def check_tensorboard_log(where: str, folder: object) -> str:
     """A TensorBoard folder option: a path, with the ``tensorboard`` package installed to write it.
 
     Raises:
-        InvalidSpec: not a path, or ``tensorboard`` is not installed.
+        InvalidSpec: not a folder that can be made (:func:`~specguard.validation.check_folder`), or ``tensorboard``
+            is not installed.
     """
-    if not isinstance(folder, (str, os.PathLike)) or not os.fspath(folder):
-        raise InvalidSpec(where, f"expected tensorboard_log to be a folder, got {shown(folder)}")
+    folder = check_folder(where, "tensorboard_log", folder)  # checked before training: every seed would fail
     if importlib.util.find_spec("tensorboard") is None:
         raise InvalidSpec(
             where,
@@ -348,6 +348,8 @@ class Spec:
         that every door judges a spec the same way unless told otherwise.
         """
         spec = self.scaled(budget_scale, checkpoints=checkpoints)
+        if tensorboard_log is not None:
+            tensorboard_log = check_tensorboard_log(f"Spec {spec.label!r}", tensorboard_log)
         changes: dict[str, Any] = {}
         if undecided is not None and undecided != spec.undecided:
             changes["undecided"] = undecided
@@ -356,7 +358,7 @@ class Spec:
                 f"Spec {spec.label!r} trains with its own trainer ({function_text(spec.trainer)}): the TensorBoard "
                 f"folder {os.fspath(tensorboard_log)!r} gets nothing from it (a trainer logs where it likes)",
                 SpecWarning,
-                stacklevel=2,
+                stacklevel=user_stacklevel(),  # the user's call: as_run, or a door's run_spec
             )
         elif tensorboard_log is not None and os.fspath(tensorboard_log) != spec.tensorboard_log:
             changes["tensorboard_log"] = os.fspath(tensorboard_log)

@@ -37,7 +37,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from specguard.error import InvalidSpec, SpecWarning
+from specguard.error import InvalidSpec, SpecWarning, user_stacklevel
 from specguard.spec.algorithms import (
     algorithm_class,
     check_policy,
@@ -573,7 +573,9 @@ def zoo_settings(algorithm: str | type, env_id: str, *, file: str | Path | None 
     if not_taken:
         lines = "\n".join(f"  {elide(str(key), MAX_VALUE)}: {reason}" for key, reason in not_taken.items())
         warnings.warn(
-            f"{where}: {source}: not taken as written (a spec cannot say them):\n{lines}", SpecWarning, stacklevel=2
+            f"{where}: {source}: not taken as written (a spec cannot say them):\n{lines}",
+            SpecWarning,
+            stacklevel=user_stacklevel(),
         )
     return ZooSettings(
         algorithm=resolved,

@@ -17,6 +17,8 @@ verdicts, intervals, caches and baselines treat both alike.
 
 from __future__ import annotations
 
+import functools
+import inspect
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -33,9 +35,9 @@ from specguard.spec.algorithms import ALGORITHMS, algorithm_class, algorithm_nam
 from specguard.spec.spec import Spec
 from specguard.stats.anytime import checkpoint_steps, final_evaluation, interim_look
 from specguard.training.auto_weights import WeightAdapter
-from specguard.training.curve import GoalCurve, count_episode
+from specguard.training.curve import GoalCurve, count_episode, root_success
 from specguard.training.policy import policy as policy_of
-from specguard.training.progress import ProgressEvent, decode_update
+from specguard.training.progress import ProgressEvent, decode_update, encode_update
 from specguard.training.result import RunResult
 from specguard.utils.text import MAX_SHOWN, elide, function_text, shown
 
@@ -359,6 +361,27 @@ def _learn_with_trainer(run: _Run, emit: Emit) -> tuple[GoalCurve, None, dict[st
     assert spec.trainer is not None
     emit("train", 0, None)
     start = time.perf_counter()
+    tenth = max(1, budget.timesteps // CURVE_POINTS)
+    next_line = [tenth]
+
+    def report(steps: int) -> None:
+        """A checkpoint's step; a progress line at the first checkpoint past each tenth of the budget (with its
+        look's root-goal success, when it was looked at: the trainer's own episodes are not seen)."""
+        if steps < next_line[0]:
+            emit("train", steps, None)
+            return
+        next_line[0] = (steps // tenth + 1) * tenth
+        point = curve.points[-1] if curve.points and curve.points[-1]["timesteps"] == steps else {}
+        evaluation = point.get("evaluation", {})
+        line = encode_update(
+            steps,
+            budget.timesteps,
+            time.perf_counter() - start,
+            root_success(evaluation),
+            point.get("evaluation_episodes", 0),
+        )
+        emit("train", steps, line)
+
     try:
         done = drive(
             spec.trainer,
@@ -369,7 +392,7 @@ def _learn_with_trainer(run: _Run, emit: Emit) -> tuple[GoalCurve, None, dict[st
             look=at,
             label=run.label,
             wall_clock_s=budget.wall_clock_s,
-            report=lambda steps: emit("train", steps, None),
+            report=report,
         )
     except Exception:
         run.eval_env.close()
@@ -395,7 +418,7 @@ def _user_callbacks(run: _Run) -> list[UserCallback]:
     for factory in run.spec.callbacks:
         name = function_text(factory)
         try:
-            callback = factory()
+            callback = factory(**_run_arguments(factory, run))
         except Exception as e:
             raise TrainingError(
                 f"{run.label}, making callback {name}: it raised {type(e).__name__}: {elide(str(e), MAX_SHOWN)}"
@@ -406,6 +429,28 @@ def _user_callbacks(run: _Run) -> list[UserCallback]:
             )
         made.append(UserCallback(callback, run.label))
     return made
+
+
+RUN_ARGUMENTS = ("seed", "spec")
+"""The keywords a callback factory is given when its signature names them: the run's seed and its spec."""
+
+
+def _run_arguments(factory: Callable[..., Any], run: _Run) -> dict[str, Any]:
+    """``seed=`` and ``spec=`` for a factory whose signature takes them by those names (not by ``**kwargs``, nor
+    bound by a ``functools.partial``), so each run can write its own files (``f"checkpoints/seed_{seed}"``)."""
+    try:
+        parameters = inspect.signature(factory).parameters
+    except (TypeError, ValueError):  # a builtin or C callable without a signature: called bare, as before
+        return {}
+    bound = factory.keywords if isinstance(factory, functools.partial) else {}
+    given = {"seed": run.seed, "spec": run.spec}
+    return {
+        name: given[name]
+        for name in RUN_ARGUMENTS
+        if name in parameters
+        and name not in bound
+        and parameters[name].kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    }
 
 
 def _log_name(run: _Run) -> str:

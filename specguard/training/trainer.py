@@ -89,7 +89,7 @@ def drive(
         look: judges a checkpoint; True closes the generator.
         label: the run, as messages name it (``Spec 'x', seed 0``).
         wall_clock_s: the budget's wall-clock cap, or ``None``.
-        report: receives each checkpoint's steps.
+        report: receives each checkpoint's steps, after the checkpoint's look if it had one.
 
     Raises:
         InvalidSpec: the trainer returned no iterator (every seed would).
@@ -120,14 +120,14 @@ def drive(
             if item is _END:
                 break
             steps, agent = _checkpoint(item, steps, f"{label}, trainer {name}, checkpoint {count}")
-            if report is not None:
-                report(steps)
             if pending and steps >= pending[0]:
                 while pending and pending[0] <= steps:
                     pending.pop(0)
                 met_early = look(steps, agent)
-                if met_early:
-                    break
+            if report is not None:
+                report(steps)  # after its look, which the report may tell
+            if met_early:
+                break
             if steps >= timesteps:
                 break
             if deadline is not None and time.perf_counter() > deadline:

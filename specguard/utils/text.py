@@ -8,6 +8,7 @@ Example:
 
 from __future__ import annotations
 
+import functools
 import reprlib
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any
@@ -49,8 +50,10 @@ def number_text(x: float) -> str:
 def function_text(fn: Callable[..., Any]) -> str:
     """A user function's name as descriptions show it: its qualified name without ``<locals>.``.
 
-    Never ``repr(fn)``, which holds a memory address.
+    Never ``repr(fn)``, which holds a memory address. A ``functools.partial`` is named by the function it wraps.
     """
+    while isinstance(fn, functools.partial):
+        fn = fn.func
     name = getattr(fn, "__qualname__", None) or getattr(fn, "__name__", None)
     if not isinstance(name, str):
         name = type(fn).__qualname__  # a callable object: its class
