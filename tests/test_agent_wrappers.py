@@ -10,7 +10,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import stable_baselines3 as sb3
-from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack
+from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack, VecNormalize
 
 from specguard.agents.agent import check_fits
 from specguard.agents.sources import load_agent
@@ -49,9 +49,10 @@ def stacked(tmp_path_factory):
     return model, run
 
 
-def raw_replay(model, seed):
-    """One episode of ``model`` as SB3 plays it: VecFrameStack(4) around the env, reset with ``seed``."""
-    venv = VecFrameStack(DummyVecEnv([lambda: gym.make("CartPole-v1")]), 4)
+def raw_replay(model, seed, venv=None):
+    """One episode of ``model`` as SB3 plays it: ``venv`` (default: VecFrameStack(4) around the env), reset with
+    ``seed``."""
+    venv = venv or VecFrameStack(DummyVecEnv([lambda: gym.make("CartPole-v1")]), 4)
     venv.seed(seed)
     obs, actions, done = venv.reset(), [], False
     while not done:
@@ -127,3 +128,45 @@ def test_an_env_wrapper_is_refused_unless_trusted_and_applied_when_trusted(stack
     env = agent_envs(SPEC, "env", agent_wrap(agent, None))()
     check_fits(agent, env.observation_space, env.action_space)
     assert len(episode(env, agent, seed_base(0))) <= 5
+
+
+def test_the_cli_takes_the_wrappers_of_a_python_file_for_an_agent_whose_config_names_none(stacked, tmp_path, capsys):
+    _, source = stacked
+    bare = tmp_path / "model.zip"  # the zip alone: no config.yml says how it was trained
+    shutil.copy(source / "CartPole-v1.zip", bare)
+    spec_file, wrappers = tmp_path / "specs.py", tmp_path / "wrappers.py"
+    spec_file.write_text(SPEC_FILE)
+    wrappers.write_text(
+        "from specguard.agents.wrappers import FrameStack\n\ndef stacked(env):\n    return FrameStack(env, 4)\n"
+    )
+    check = ["check", f"{spec_file}::balance", "--agent", str(bare), "--no-cache"]
+    assert main(check) == 2
+    assert "reads observations of Box(shape=(16,), float32)" in capsys.readouterr().err
+    report = tmp_path / "out.json"
+    assert main([*check, "--wrap", f"{wrappers}::stacked", "--json", str(report)]) in (0, 1)
+    (judged,) = json.loads(report.read_text()).values()
+    expected = check_agent(SPEC, source, cache_dir=None)  # its config's frame_stack: 4, the same wrappers
+    assert judged["runs"][0]["successes"] == expected.runs[0].successes
+    assert main([*check, "--wrap", f"{wrappers}::nothing"]) == 2
+    assert f"wrap '{wrappers}::nothing': {wrappers} defines nothing named 'nothing'" in capsys.readouterr().err
+
+
+def test_a_zoo_agent_trained_normalized_then_stacked_normalizes_each_frame_before_the_stack(tmp_path):
+    venv = VecNormalize(DummyVecEnv([lambda: gym.make("CartPole-v1")]))  # rl-zoo3: normalize, then stack
+    model = sb3.PPO("MlpPolicy", VecFrameStack(venv, 4), n_steps=64, batch_size=32, n_epochs=1, seed=0, device="cpu")
+    model.learn(256)
+    run = tmp_path / "ppo" / "CartPole-v1_1"
+    (run / "CartPole-v1").mkdir(parents=True)
+    model.save(run / "CartPole-v1.zip")
+    venv.save(run / "CartPole-v1" / "vecnormalize.pkl")
+    (run / "CartPole-v1" / "config.yml").write_text("frame_stack: 4\nnormalize: true\n")
+    agent = load_agent(run)
+    assert agent.wrappers.text == "frame_stack: 4, each frame normalized first by vecnormalize.pkl"
+    env = agent_envs(SPEC, "env", agent_wrap(agent, None))()
+    check_fits(agent, env.observation_space, env.action_space)
+    saved = VecNormalize.load(run / "CartPole-v1" / "vecnormalize.pkl", DummyVecEnv([lambda: gym.make("CartPole-v1")]))
+    saved.training, saved.norm_reward = False, False
+    for i in range(2):
+        seed = seed_base(0) + i
+        actions = raw_replay(model, seed, VecFrameStack(saved, 4))  # as SB3 plays it
+        assert [int(step["action"]) for step in episode(env, agent, seed)] == actions

@@ -52,7 +52,7 @@ from specguard.spec.zoo import read_zoo_file
 from specguard.training.policy import Policy, normalizer_of
 from specguard.utils.text import MAX_SHOWN, elide, function_text, shown
 
-__all__ = ["STATISTICS", "load_agent"]
+__all__ = ["STATISTICS", "load_agent", "named_object"]
 
 STATISTICS = ("vecnormalize.pkl", "vec_normalize.pkl")
 """The names a model's ``VecNormalize`` statistics have beside it: rl-zoo3's and SB3's, then the Hub's."""
@@ -123,22 +123,32 @@ def load_agent(
 
 def _named(target: str) -> Any:
     """The object ``NAME`` of the Python file ``FILE.py::NAME`` (imported as spec files are)."""
+    return named_object(target, "agent", example="policies.py::lean")
+
+
+def named_object(target: str, what: str, *, example: str) -> Any:
+    """The object ``NAME`` of the Python file ``FILE.py::NAME`` (imported as spec files are), ``what`` it is for (an
+    agent, a ``wrap``), as a command line names a Python object.
+
+    Raises:
+        AgentError: one line: the file cannot be imported, defines no such name, or names another ``FILE.py::NAME``.
+    """
     path, _, name = target.partition("::")
     try:
         module = import_file(Path(path))
     except SpecError as e:
-        raise AgentError(f"agent {target!r}: {e}", hint=None) from None
+        raise AgentError(f"{what} {target!r}: {e}", hint=None) from None
     if not name or not hasattr(module, name):
         defined = [k for k, v in vars(module).items() if not k.startswith("_") and callable(v)]
         raise AgentError(
-            f"agent {target!r}: {path} defines nothing named {name!r}; its callables: {', '.join(defined) or 'none'}",
-            hint="name a policy defined in the file, e.g. policies.py::lean",
+            f"{what} {target!r}: {path} defines nothing named {name!r}; its callables: {', '.join(defined) or 'none'}",
+            hint=f"name an object defined in the file, e.g. {example}",
         )
     found = getattr(module, name)
     if isinstance(found, str) and "::" in found:  # a name for another name: followed, it may lead back to itself
         raise AgentError(
-            f"agent {target!r}: {name} is the text {found!r}, another FILE.py::NAME",
-            hint="name the policy itself (a callable, a model or a path), not a name for it",
+            f"{what} {target!r}: {name} is the text {found!r}, another FILE.py::NAME",
+            hint="name the object itself, not a name for it",
         )
     return found
 
@@ -292,13 +302,19 @@ def _from_path(path: Path, algorithm: Any, normalizer: Any, *, deterministic: bo
     if stats is None:
         # the zip's own statistics beside it first, then its rl-zoo3 run's
         stats = next((p for d in (folder, settings) for p in (d / n for n in STATISTICS) if p.is_file()), None)
-    norm = _statistics(repr(str(model_zip)), stats, data["observation_space"], trust=trust)
+    wrappers = zoo_wrappers(config, repr(str(settings / "config.yml")), trust=trust)
+    stats_file = Path(stats) if isinstance(stats, (str, os.PathLike)) else None
+    if wrappers is not None and wrappers.frame_stack is not None and stats is not None:
+        # rl-zoo3 normalizes each env's frames, then stacks them: the statistics are of one frame, applied before
+        norm = _statistics(repr(str(model_zip)), stats, None, trust=trust)
+        _check_stacked(model_zip, norm, wrappers.stacked_space(norm.observation_space), data["observation_space"])
+        wrappers, norm = wrappers.normalized(norm, stats_file.name if stats_file else "its VecNormalize"), None
+    else:
+        norm = _statistics(repr(str(model_zip)), stats, data["observation_space"], trust=trust)
     try:  # every serialized field is in custom: SB3 unpickles none of them
         model = cls.load(model_zip, device="cpu", custom_objects=custom)
     except Exception as e:
         raise AgentError(f"{str(model_zip)!r}: {cls.__name__} cannot load it: {_why(e)}") from e
-    stats_file = Path(stats) if isinstance(stats, (str, os.PathLike)) else None
-    wrappers = zoo_wrappers(config, repr(str(settings / "config.yml")), trust=trust)
     return Agent(
         Policy(model, norm, deterministic=deterministic, batch=batch),
         # an rl-zoo3 run's zips share their names (<env_id>.zip in <env_id>_1/, _2/, ...): its folder tells them apart
@@ -326,6 +342,16 @@ def _from_path(path: Path, algorithm: Any, normalizer: Any, *, deterministic: bo
         normalizer_source=str(stats_file) if stats_file is not None else None,
         env_id=args["env"] if isinstance(args.get("env"), str) else None,
     )
+
+
+def _check_stacked(model_zip: Path, norm: Any, stacked: Any, reads: Any) -> None:
+    """Refuse frame statistics that, stacked, are not what the model reads."""
+    if observation_kind(stacked) != observation_kind(reads):
+        raise AgentError(
+            f"{str(model_zip)!r}: VecNormalize statistics of frames {norm.observation_space}, stacked {stacked}, and "
+            f"the model reads {reads}",
+            hint="use the vecnormalize.pkl saved with this model (rl-zoo3: <env_id>/vecnormalize.pkl)",
+        )
 
 
 def _is_model(path: Path) -> bool:

@@ -30,7 +30,7 @@ import numpy as np
 from specguard.error import AgentError, SpecWarning
 from specguard.utils.text import shown
 
-__all__ = ["FrameStack", "ZooWrappers", "zoo_wrappers"]
+__all__ = ["FrameStack", "Normalized", "ZooWrappers", "zoo_wrappers"]
 
 
 class FrameStack(gym.Wrapper):
@@ -62,6 +62,19 @@ class FrameStack(gym.Wrapper):
         return _row(stacked), reward, terminated, truncated, info
 
 
+class Normalized(gym.ObservationWrapper):
+    """Each observation of ``env`` normalized by ``VecNormalize`` statistics (``normalizer.normalize_obs``, its
+    clipping included), as ``VecNormalize`` hands them on; its space is the env's (what a network reads of it: the
+    kind and shape)."""
+
+    def __init__(self, env: gym.Env, normalizer: Any) -> None:
+        super().__init__(env)
+        self.normalizer = normalizer
+
+    def observation(self, observation: Any) -> Any:
+        return self.normalizer.normalize_obs(observation)
+
+
 def _batch(obs: Any) -> Any:
     if isinstance(obs, Mapping):
         return {key: np.asarray(value)[None] for key, value in obs.items()}
@@ -83,16 +96,40 @@ class ZooWrappers:
         text: what the config said, for notes (``"frame_stack: 4"``).
     """
 
-    def __init__(self, frame_stack: int | None, env_wrapper: list[tuple[type, dict[str, Any]]], text: str) -> None:
+    def __init__(
+        self,
+        frame_stack: int | None,
+        env_wrapper: list[tuple[type, dict[str, Any]]],
+        text: str,
+        normalizer: Any = None,
+    ) -> None:
         self.frame_stack = frame_stack
         self.env_wrapper = env_wrapper
         self.text = text
+        self.normalizer = normalizer
         self.__qualname__ = f"config.yml's {text}"  # how function_text names it in notes and errors
+
+    def normalized(self, normalizer: Any, source: str) -> ZooWrappers:
+        """These wrappers with ``VecNormalize`` statistics applied to each frame before it is stacked, as rl-zoo3
+        trains (``VecNormalize`` around the envs, ``VecFrameStack`` around it): its statistics are of one frame."""
+        return ZooWrappers(
+            self.frame_stack, self.env_wrapper, f"{self.text}, each frame normalized first by {source}", normalizer
+        )
 
     def __call__(self, env: gym.Env) -> gym.Env:
         for cls, kwargs in self.env_wrapper:
             env = cls(env, **kwargs)
+        if self.normalizer is not None:
+            env = Normalized(env, self.normalizer)
         return env if self.frame_stack is None else FrameStack(env, self.frame_stack)
+
+    def stacked_space(self, space: gym.Space[Any]) -> gym.Space[Any]:
+        """What the agent reads of observations ``space`` (one frame's) through the frame stack."""
+        from stable_baselines3.common.vec_env.stacked_observations import StackedObservations
+
+        if self.frame_stack is None:
+            return space
+        return StackedObservations(1, self.frame_stack, space).stacked_observation_space  # type: ignore[arg-type]
 
     def identity(self) -> list[Any]:
         """What the wrappers are, for the agent's identity: the config's words."""

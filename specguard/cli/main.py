@@ -387,6 +387,20 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _wrap(args: argparse.Namespace) -> Callable[[Any], Any] | None:
+    """``--wrap FILE.py::NAME``'s function, or ``None``."""
+    from specguard.agents.sources import named_object
+
+    if args.wrap is None:
+        return None
+    if args.agent is None:
+        raise SpecError(f"--wrap names the --agent's wrappers, and no --agent is given (--wrap {args.wrap})", hint=None)
+    wrap = named_object(args.wrap, "wrap", example="wrappers.py::stacked")
+    if not callable(wrap):
+        raise SpecError(f"wrap {args.wrap!r}: expected a function env -> env, got a {type(wrap).__name__}", hint=None)
+    return wrap  # type: ignore[no-any-return]
+
+
 def _add_agent(parser: argparse.ArgumentParser, *, required: bool, instead: str = "") -> None:
     """The options naming an agent trained elsewhere and what it sees: ``--agent``, ``--algorithm``,
     ``--observation`` (``check``'s and ``falsify``'s)."""
@@ -400,6 +414,13 @@ def _add_agent(parser: argparse.ArgumentParser, *, required: bool, instead: str 
         "policy (a callable obs -> action, or an object with predict) defined in a Python file" + instead,
     )
     parser.add_argument("--algorithm", default=None, help="the zip's algorithm, e.g. PPO (default: read from the file)")
+    parser.add_argument(
+        "--wrap",
+        default=None,
+        metavar="FILE.py::NAME",
+        help="the observation wrappers the agent was trained with: a function env -> env defined in a Python file "
+        "(default: those an rl-zoo3 config.yml names, frame_stack and env_wrapper)",
+    )
     parser.add_argument(
         "--trust-agent",
         action="store_true",
@@ -539,6 +560,7 @@ def _falsify(args: argparse.Namespace) -> int:
                 algorithm=args.algorithm,
                 score=args.score,
                 trust=args.trust_agent,
+                wrap=_wrap(args),
             )
             print(f"== {name} agent {args.agent}: {'COUNTEREXAMPLE' if f.found else 'none found'}")
             print(f.report())
@@ -584,6 +606,7 @@ def _check(args: argparse.Namespace) -> int:
             "seed": args.seed,
             "algorithm": args.algorithm,
             "trust": args.trust_agent,
+            "wrap": _wrap(args),
         }
         run = spec.as_run(undecided=args.undecided)
         if args.against is None:
