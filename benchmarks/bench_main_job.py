@@ -4,8 +4,10 @@ Runs README's main job twice in a subprocess with a fresh cache directory:
 cold (every run trained) and warm (every run from the cache). Prints, per spec,
 the steps trained per seed (and whether training stopped at a checkpoint with
 every threshold met), the evaluation episodes spent (interim checkpoints plus
-the final evaluation) and the training time; how much of the wall time is
-spent waiting, spec after spec, for its slower seed while a core idles (the
+the final evaluation), the training time and the digest of each seed's judged
+weights (with the numerics the runs computed with: two machines that print the
+same digests trained the same agents); how much of the wall time is spent
+waiting, spec after spec, for its slower seed while a core idles (the
 seeds of one spec train in parallel, the specs one after another); then the
 totals against the targets: at most 3 million environment steps trained in
 all, at most 5 minutes cold on 2 cores, under 10 s warm.
@@ -83,6 +85,14 @@ def main() -> int:
         totals["longest"] = max([totals["longest"], *(s["train_seconds"] for s in seeds)])
         print(f"{group.split('::', 1)[-1]:<55} {steps:<28} {evaluated:>13} {row['train_seconds']:>8.0f}s")
     print("(* training stopped at a checkpoint: every threshold met)")
+    computed = sorted({s.get("numerics") or "unrecorded" for row in specs.values() for s in row["per_seed"]})
+    print(
+        f"the judged weights per seed (the first 12 hex digits of each run's digest; {', '.join(computed)} numerics):"
+    )
+    for group, row in specs.items():
+        digests = ", ".join((s.get("weights_digest") or "-")[:12] for s in row["per_seed"])
+        if any(s.get("weights_digest") for s in row["per_seed"]):
+            print(f"  {group.split('::', 1)[-1]:<53} {digests}")
     print(
         f"total: {totals['steps'] / 1e6:.2f}M steps trained (target <= {STEPS_TARGET / 1e6:g}M: "
         f"{totals['steps'] / STEPS_TARGET:.2f}x), {totals['evaluated']:.0f} evaluation episodes, "

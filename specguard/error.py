@@ -27,6 +27,7 @@ __all__ = [
     "GoalMissed",
     "InitialEnvError",
     "InvalidSpec",
+    "NumericsError",
     "PluginWarning",
     "SpecError",
     "SpecWarning",
@@ -208,6 +209,18 @@ class AgentMismatch(AgentError):
     before any episode: the message names both spaces."""
 
     default_hint = "judge the agent in the env it was trained in (its env id and env_kwargs), or load the agent for it"
+
+
+class NumericsError(SpecError):
+    """A process cannot compute with the numerics a run asks for (:mod:`specguard.utils.numerics`): its environment
+    lacks the portable settings, or its torch chose its kernels before they were held (read once, at the first
+    computation)."""
+
+    default_hint = (
+        "start the process with the settings in its environment (for a Dask worker: ATEN_CPU_CAPABILITY=default "
+        "MKL_CBWR=COMPATIBLE dask worker ADDRESS), or run with numerics='native' (--numerics native, ini "
+        "goal_specs_numerics = native) for machine-dependent results"
+    )
 
 
 class CacheLockTimeout(SpecError):

@@ -105,6 +105,11 @@ def test_every_door_gives_the_same_figures_and_verdicts(spec_file: Path, tmp_pat
     }
 
     assert api == cli == plugin, (api, cli, plugin)
+    # The same weights judged at every door: each seed's digest, in the API's runs, the CLI's JSON, the plugin's rows.
+    digests = [r.weights_digest for r in result.runs]
+    assert all(digests) and len(set(digests)) == len(digests)
+    assert [r["weights_digest"] for r in data["runs"]] == digests
+    assert all([s["weights_digest"] for s in row["per_seed"]] == digests for row in rows), rows
     # each seed's own training time (the main job's benchmark sums each spec's slower seed)
     assert all(s["train_seconds"] > 0 for row in rows for s in row["per_seed"]), rows
     # Judged at checkpoints, as every door does by default: met at the first one, training stopped there.

@@ -11,6 +11,7 @@ import pytest
 import specguard as sg
 from example_specs import pendulum
 from specguard.parallel.executors import DaskExecutor, ExecutorError, LocalExecutor, check_address, make_executor
+from specguard.utils.numerics import numerics_environ, with_libm
 
 distributed = pytest.importorskip("distributed")
 
@@ -35,12 +36,19 @@ def cluster():
     import dask
 
     os.environ[DRIVER] = str(os.getpid())  # the workers inherit it: they kill themselves, never the driver
+    # Portable numerics on a cluster: its workers start with the settings (a worker without them is refused).
+    before = dict(os.environ)
+    os.environ.update(with_libm({**os.environ, **numerics_environ("portable")}))
     # Fail a seed at the first dead worker (the default retries it on up to 3 more workers first).
-    with (
-        dask.config.set({"distributed.scheduler.allowed-failures": 0}),
-        distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as c,
-    ):
-        yield c
+    try:
+        with (
+            dask.config.set({"distributed.scheduler.allowed-failures": 0}),
+            distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as c,
+        ):
+            yield c
+    finally:
+        os.environ.clear()
+        os.environ.update({**before, DRIVER: str(os.getpid())})
 
 
 @pytest.mark.parametrize(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import textwrap
 import xml.etree.ElementTree as ET
 
@@ -108,7 +109,10 @@ def test_pass_fail_xfail_summary_and_junit(pytester):
     assert props["specguard.pendulum.threshold"] == "0.9"
     assert props["specguard.pendulum.episodes"] == "4"
     assert props["specguard.pendulum.interval"].startswith("[0.0000, 0.60")
-    assert json.loads(props["specguard"])["outcome"] == "failed"
+    assert re.fullmatch("seed 0: [0-9a-f]{12}", props["specguard.pendulum.weights"])  # the judged weights' digest
+    row = json.loads(props["specguard"])
+    assert row["outcome"] == "failed"
+    assert props["specguard.pendulum.weights"] == f"seed 0: {row['per_seed'][0]['weights_digest'][:12]}"
 
 
 def test_safety_thresholds_are_items_rows_and_junit_properties(pytester):

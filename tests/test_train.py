@@ -293,3 +293,72 @@ def test_auto_weights_see_the_safety_of_the_nodes_own_constraints():
     # "up" reached and "never" kept in every episode: "low" takes the weight, both others keep the floor.
     assert result.weights == {"p": pytest.approx([0.1 / 1.3, 1.1 / 1.3, 0.1 / 1.3])}
     assert result.curve[0]["weights"] == {"p": [0.5, 0.5, 1.0]}
+
+
+# -- what a run computed: the digest of the judged weights -------------------------------------------------------
+
+CARTPOLE = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+BALANCE = sg.Always(sg.Goal("upright", theta=(-0.2, 0.2)), name="balance")
+
+
+@pytest.fixture(scope="module")
+def digested(tmp_path_factory):
+    """Two seeds of a normalizing CartPole spec, a few hundred steps each, run through a cache."""
+    budget = sg.Budget(timesteps=256, eval_episodes=2, max_eval_episodes=4, min_seeds=2, max_seeds=2, checkpoints=1)
+    spec = sg.Spec(CARTPOLE, BALANCE, budget=budget, hyperparameters=TINY, normalize=True, expect=0.5)
+    return spec, sg.run_spec(spec, workers=1, cache_dir=tmp_path_factory.mktemp("digests"), progress=None)
+
+
+def test_a_runs_weights_digest_is_the_digest_of_its_model_loaded_back_from_the_cache(digested):
+    from specguard.cache.weights import weights_digest
+
+    spec, result = digested
+    digests = [run.weights_digest for run in result.runs]
+    assert all(re.fullmatch("[0-9a-f]{64}", d) for d in digests) and len(set(digests)) == 2  # each seed its own
+    for run in result.runs:
+        model, normalizer = sg.load_model(result, run.seed), sg.load_normalizer(result, run.seed)
+        assert normalizer is not None
+        assert weights_digest(model, normalizer, name="PPO") == run.weights_digest
+        assert weights_digest(model, None, name="PPO") != run.weights_digest  # its statistics are part of it
+        # the same digest as the loaded model's own identity as an agent: a check of it says the same weights
+        assert sg.load_agent(model, normalizer=normalizer).identity == run.weights_digest
+    again = sg.run_spec(spec, workers=1, cache_dir=None, progress=None)  # each seed again, uncached
+    assert [run.weights_digest for run in again.runs] == digests  # the same seed, the same weights
+
+
+def test_a_runs_weights_digest_is_in_its_json_the_table_and_the_junit_properties(digested):
+    from specguard.pytest_plugin.judge import judge_goal
+
+    spec, result = digested
+    data = json.loads(json.dumps(result.to_dict()))
+    assert [r["weights_digest"] for r in data["runs"]] == [r.weights_digest for r in result.runs]
+    assert [r.weights_digest for r in sg.SpecResult.from_dict(data).runs] == [r.weights_digest for r in result.runs]
+    short = "; ".join(f"seed {r.seed}: {r.weights_digest[:12]}" for r in result.runs)
+    assert f"weights {short} (portable numerics)" in sg.table(result).splitlines()
+    check = judge_goal(result, spec, "balance", "s")
+    assert dict(check.junit_properties())["weights"] == short
+    assert dict(check.junit_properties())["numerics"] == "portable numerics"
+    assert [s["weights_digest"] for s in check.to_row()["per_seed"]] == [r.weights_digest for r in result.runs]
+
+
+def test_an_agent_checked_against_a_spec_carries_its_identity_as_its_weights_digest(digested):
+    spec, result = digested
+    run = result.runs[0]
+    agent = sg.load_agent(sg.load_model(result, run.seed), normalizer=sg.load_normalizer(result, run.seed))
+    checked = sg.check_agent(spec, agent, episodes=2, max_episodes=2, observation="spec", cache_dir=None)
+    assert checked.runs[0].weights_digest == agent.identity == run.weights_digest  # the trained run's weights
+    assert f"weights seed 0: {run.weights_digest[:12]}" in sg.table(checked).splitlines()
+
+
+def test_a_run_stored_before_weights_digests_were_recorded_still_reads():
+    from specguard.training.result import RunResult
+
+    run = RunResult(spec="p", seed=0, timesteps=64, episodes=4, successes={"p": 1}, train_seconds=1.0)
+    old = run.to_dict()
+    del old["weights_digest"]
+    assert RunResult.from_dict(old, seed=0, paths=["p"]) == run and run.weights_digest is None
+    digest = "3c61144ad8e8" + "0" * 52
+    assert RunResult.from_dict({**old, "weights_digest": digest}, seed=0, paths=["p"]).weights_digest == digest
+    for bad in (3, "3c61144ad8e8", digest.upper()):
+        with pytest.raises(ValueError, match=r"weights_digest .* is neither a SHA-256 hex digest nor null"):
+            RunResult.from_dict({**old, "weights_digest": bad}, seed=0, paths=["p"])

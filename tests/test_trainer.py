@@ -333,3 +333,22 @@ def test_a_warning_of_run_spec_points_at_the_users_line(tmp_path):
     with pytest.warns(sg.SpecWarning, match="gets nothing from it") as caught:
         sg.run_spec(spec(), workers=1, cache_dir=None, progress=None, tensorboard_log=tmp_path / "runs")
     assert [w.filename for w in caught if issubclass(w.category, sg.SpecWarning)] == [__file__]
+
+
+def test_a_trainers_agent_has_its_weights_digest_or_none_where_it_cannot_be_digested():
+    from specguard.engine.train_task import judged_digest
+
+    result, agent = train_run(spec(), seed=0)
+    assert agent is lean and judged_digest(spec(), agent) == sg.load_agent(lean).identity  # as a check of it says
+    lock = threading.Lock()
+
+    def locked(obs):
+        with lock:  # a lock has no canonical form: nothing to digest
+            return lean(obs)
+
+    def once(make_env, timesteps, seed):
+        yield timesteps, locked
+
+    result, agent = train_run(spec(once), seed=0)
+    assert agent is locked and judged_digest(spec(once), agent) is None  # judged all the same
+    assert result.successes["balance"] == result.episodes

@@ -29,11 +29,9 @@ Example:
 
 from __future__ import annotations
 
-import hashlib
-import json
 import os
 import zipfile
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -42,8 +40,8 @@ import numpy as np
 from specguard.agents.agent import Agent, observation_kind
 from specguard.agents.decode import read_data, read_statistics
 from specguard.agents.wrappers import zoo_wrappers
-from specguard.cache.canonical import digest
 from specguard.cache.store import file_sha256
+from specguard.cache.weights import normalizer_digest, parts_digest, weights_digest
 from specguard.error import AgentError, InvalidSpec, SpecError
 from specguard.spec.algorithms import ALGORITHMS, CONTRIB, SB3, algorithm_class, hyperparameter_names
 from specguard.spec.algorithms import resolve_algorithm as _resolve
@@ -166,7 +164,7 @@ def _from_model(model: Any, normalizer: Any, *, deterministic: bool, batch: bool
     return Agent(
         Policy(model, norm, deterministic=deterministic, batch=batch),
         name=name,
-        identity=lambda: _digest([("model", _parameters(model, name)), ("normalizer", _norm_digest(norm))]),
+        identity=lambda: weights_digest(model, norm, name=name),
         observation_space=observation_space,
         action_space=getattr(model, "action_space", None),
         normalizer=norm,
@@ -183,7 +181,7 @@ def _from_callable(fn: Callable[[Any], Any], normalizer: Any, *, batch: bool, tr
     return Agent(
         _torch_acting(fn),
         name=name,
-        identity=lambda: _digest([("callable", _parameters(fn, name)), ("normalizer", _norm_digest(norm))]),
+        identity=lambda: weights_digest(fn, norm, name=name, kind="callable"),
         normalizer=norm,
         batch=batch,
     )
@@ -211,35 +209,6 @@ def _torch_acting(fn: Callable[[Any], Any]) -> Callable[[Any], Any]:
             return action_of(fn(x))
 
     return act
-
-
-def _parameters(obj: Any, name: str) -> str:
-    """A digest of what ``obj`` computes: a torch module's code and parameters (an SB3 model's policy's), else its
-    canonical form (a function's code, as a spec's functions are fingerprinted)."""
-    import torch
-
-    module = getattr(obj, "policy", obj)
-    if not isinstance(module, torch.nn.Module):
-        return digest(obj, f"agent {name!r}")
-    h = hashlib.sha256(digest(type(obj), f"agent {name!r}").encode())
-    for key, tensor in module.state_dict().items():
-        flat = tensor.detach().cpu().reshape(-1)
-        h.update(f"{key}:{flat.dtype}:{tuple(tensor.shape)}".encode())
-        h.update(flat.view(torch.uint8).numpy().tobytes())
-    return h.hexdigest()
-
-
-def _norm_digest(norm: Any) -> str | None:
-    if norm is None:
-        return None
-    rms = norm.obs_rms
-    parts = rms.items() if isinstance(rms, Mapping) else [("", rms)]
-    stats = [(key, part.mean, part.var, float(part.count)) for key, part in parts]
-    return digest([stats, norm.norm_obs, float(norm.clip_obs), float(norm.epsilon)], "the agent's VecNormalize")
-
-
-def _digest(parts: Iterable[tuple[str, Any]]) -> str:
-    return hashlib.sha256(json.dumps(list(parts)).encode()).hexdigest()
 
 
 # -- VecNormalize statistics ---------------------------------------------------------------------------------------
@@ -319,10 +288,10 @@ def _from_path(path: Path, algorithm: Any, normalizer: Any, *, deterministic: bo
         Policy(model, norm, deterministic=deterministic, batch=batch),
         # an rl-zoo3 run's zips share their names (<env_id>.zip in <env_id>_1/, _2/, ...): its folder tells them apart
         name=f"{cls.__name__} ({model_zip.name if settings == folder else f'{folder.name}/{model_zip.name}'})",
-        identity=lambda: _digest(
+        identity=lambda: parts_digest(
             [
                 ("zip", file_sha256(model_zip)),
-                ("normalizer", file_sha256(stats_file) if stats_file is not None else _norm_digest(norm)),
+                ("normalizer", file_sha256(stats_file) if stats_file is not None else normalizer_digest(norm)),
                 ("deterministic", deterministic),
                 # the config's wrappers change what it sees: part of what it computes (none: as before)
                 *([("wrappers", wrappers.identity())] if wrappers is not None else []),

@@ -45,8 +45,9 @@ from typing import Any
 
 from specguard.cache.canonical import digest
 from specguard.cache.probe import probe
-from specguard.cache.versions import versions
+from specguard.cache.versions import torch_capability, versions
 from specguard.spec.algorithms import SB3, algorithm_class, default_policy
+from specguard.utils.numerics import numerics_key
 
 __all__ = ["SpecFingerprint", "fingerprint_spec"]
 
@@ -108,6 +109,7 @@ def _algorithm_fields(spec: Any, fields: dict[str, Any]) -> dict[str, Any]:
         del out["callbacks"]
     if out["trainer"] is None:  # a spec trained by SB3 keeps the key it had before specs took trainers
         del out["trainer"]
+    out["numerics"] = numerics_key(spec.numerics, torch_capability)  # a native run is this CPU's: its key names it
     return out
 
 

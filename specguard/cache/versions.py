@@ -18,7 +18,7 @@ from pathlib import Path
 from specguard.error import VersionMismatch
 from specguard.version import __version__
 
-__all__ = ["check_versions", "library_module", "source_digest", "versions"]
+__all__ = ["check_versions", "library_module", "source_digest", "torch_capability", "versions"]
 
 _VERSIONED = ("gymnasium", "stable-baselines3", "torch", "numpy", "scipy", "cloudpickle")
 
@@ -143,3 +143,11 @@ def check_versions(expected: Mapping[str, str], where: str) -> None:
     if differing:
         named = "; ".join(differing)
         raise VersionMismatch(f"{where}: this process runs other code than the run's cache key names: {named}")
+
+
+def torch_capability() -> str:
+    """The vector kernels torch computes with in this process (``DEFAULT``, ``AVX2``, ``AVX512``): chosen once, when
+    torch first computes (:mod:`specguard.utils.numerics`)."""
+    import torch
+
+    return str(torch.backends.cpu.get_cpu_capability())

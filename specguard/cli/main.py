@@ -59,6 +59,7 @@ from specguard.stats.verdicts import UNDECIDED_OUTCOMES
 from specguard.tree.keys import require_thresholds
 from specguard.tree.nodes import Node
 from specguard.utils.atomic import DEFAULT_CACHE_DIR, write_atomic
+from specguard.utils.numerics import NUMERICS
 from specguard.utils.parsing import parse_choice, parse_count, parse_natural, parse_positive
 from specguard.validation import check_unique
 from specguard.version import __version__
@@ -186,6 +187,7 @@ def _run_all(args: argparse.Namespace, specs: dict[str, Any], executor: Any) -> 
             checkpoints=args.checkpoints,
             undecided=args.undecided,
             tensorboard_log=args.tensorboard_log,
+            numerics=args.numerics,
         )
         result = run_spec(
             spec,
@@ -343,6 +345,14 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="what a goal whose runs stayed undecided counts as: fail, xfail or pass "
         "(default: the spec's own Spec.undecided, fail unless set)",
+    )
+    run.add_argument(
+        "--numerics",
+        choices=NUMERICS,
+        default=None,
+        help="what runs compute with: portable (kernels every x86-64 CPU computes alike: the same weights and "
+        "verdicts on any machine) or native (this CPU's own, machine-dependent); default: the spec's own "
+        "Spec.numerics, portable unless set",
     )
     run.add_argument("--json", metavar="FILE", help="also write the results as JSON (missing directories are created)")
     run.add_argument("--quiet", action="store_true", help="no progress lines on stderr")

@@ -222,7 +222,18 @@ def _evaluate(
         started_in_goal=sum(started_in),
         terminated=sum(terminated),
         capped=sum(capped),
+        weights_digest=_weights_digest(agent),
     )
+
+
+def _weights_digest(agent: Agent) -> str | None:
+    """The agent's identity as its run's weights digest (:attr:`RunResult.weights_digest
+    <specguard.training.result.RunResult>`): a model in memory digested as a trained run's is, so the two agree on
+    the same weights; files by their bytes. ``None`` where it has none (a callable holding what has no exact form)."""
+    try:
+        return agent.identity
+    except (FingerprintError, AgentError):
+        return None
 
 
 def _cache_entry(

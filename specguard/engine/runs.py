@@ -18,6 +18,7 @@ from specguard.spec.spec import Spec
 from specguard.training.progress import ProgressEvent, decode_update
 from specguard.training.result import RunResult
 from specguard.tree.keys import label, result_keys
+from specguard.utils.numerics import numerics_environ
 
 __all__ = ["Runs"]
 
@@ -112,7 +113,7 @@ class Runs:
         keyed = versions() if self.fingerprint is not None and self.cache is not None else None
         for seed in seeds:
             self.say(ProgressEvent(self.spec.label, seed, "start", budget=self.spec.budget.timesteps))
-            tasks.append(Task(seed, train_task, (self.spec, seed, keyed)))
+            tasks.append(Task(seed, train_task, (self.spec, seed, keyed), numerics_environ(self.spec.numerics)))
         trained: dict[int, RunResult] = {}
 
         def finished(seed: int, outcome: TaskOutcome) -> None:

@@ -11,8 +11,8 @@ import contextlib
 import pickle
 import threading
 import traceback
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 import cloudpickle
@@ -42,11 +42,15 @@ class Task:
         key: identifies the task in the outcomes (e.g. the seed); unique within one :func:`run_tasks` call.
         fn: called in the child as ``fn(*args, report=report)``; shipped with cloudpickle, so it may be a lambda.
         args: positional arguments of ``fn``, shipped with cloudpickle too.
+        environ: environment variables the task's process starts with, beside the parent's (what a library reads
+            once, at its first use: :func:`specguard.utils.numerics.numerics_environ`); an executor whose workers
+            outlive a task (a cluster's) cannot set them, and the task checks them itself.
     """
 
     key: int
     fn: Callable[..., Any]
     args: tuple[Any, ...] = ()
+    environ: Mapping[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -43,6 +43,7 @@ Example:
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
 import signal
@@ -51,7 +52,7 @@ import threading
 import time
 import traceback
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from multiprocessing import reduction
 from multiprocessing.connection import Connection, wait
@@ -64,6 +65,7 @@ import cloudpickle
 from specguard.error import InvalidSpec
 from specguard.parallel.protocol import Failure, Position, Task, TaskOutcome, TaskRunner, one_line, outcome_of
 from specguard.parallel.signals import STOP_POLL_S, SigtermGuard, raise_if_stopping
+from specguard.utils.numerics import started_with, with_libm
 from specguard.utils.parsing import parse_count
 
 __all__ = ["parse_workers", "resolve_workers", "run_tasks"]
@@ -186,6 +188,7 @@ def _child_main(conn: Connection, payload: bytes, environ: dict[str, str], stdio
     _exit_when_parent_dies()
     if stdio is not None:
         stdio.adopt()
+    started_with(os.environ)  # what glibc read as this process started (a fork server's), before the parent's
     if os.environ != environ:
         os.environ.clear()
         os.environ.update(environ)
@@ -308,7 +311,33 @@ def _context() -> BaseContext:
         return multiprocessing.get_context("spawn")
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload(list(PRELOAD))  # read when this process's server starts, at its first task
+    _start_fork_server()
     return context
+
+
+def _start_fork_server() -> None:
+    """Start this process's fork server, if it is not running, with libm's portable variants (glibc reads
+    ``GLIBC_TUNABLES`` as a process starts; a forked task keeps its server's): :mod:`specguard.utils.numerics`."""
+    from multiprocessing import forkserver
+
+    with _environ(with_libm(os.environ)):
+        forkserver.ensure_running()
+
+
+@contextlib.contextmanager
+def _environ(environ: Mapping[str, str]) -> Iterator[None]:
+    """This process's environment is ``environ`` inside the block (a process started there inherits it)."""
+    before = dict(os.environ)
+    if before == environ:
+        yield
+        return
+    os.environ.clear()
+    os.environ.update(environ)
+    try:
+        yield
+    finally:
+        os.environ.clear()
+        os.environ.update(before)
 
 
 def _start(context: BaseContext, task: Task, payload: bytes) -> _Child:
@@ -318,14 +347,16 @@ def _start(context: BaseContext, task: Task, payload: bytes) -> _Child:
         args=(
             writer,
             payload,
-            dict(os.environ),
+            {**os.environ, **task.environ},
             _ParentStdio() if context.get_start_method() == "forkserver" else None,
         ),
         name=f"specguard-task-{task.key}",
         daemon=False,
     )
+    spawned = context.get_start_method() != "forkserver"
     try:
-        process.start()
+        with _environ(with_libm({**os.environ, **task.environ}) if spawned else os.environ):  # read as it starts
+            process.start()
     except BaseException:
         reader.close()
         raise

@@ -20,7 +20,7 @@ from specguard.stats.verdicts import OUTCOME_VERBS, GoalOutcome, RunVerdict
 from specguard.tree.keys import GOAL, SAFETY, kind, require_thresholds, resolve_goal
 from specguard.tree.nodes import keeps_to_horizon
 from specguard.utils.node_paths import child_path
-from specguard.utils.text import interval_text
+from specguard.utils.text import digests_text, interval_text, numerics_text
 
 if TYPE_CHECKING:
     from specguard.gate.baseline import Baseline
@@ -91,12 +91,21 @@ class GoalCheck:
     def junit_properties(self) -> list[tuple[str, Any]]:
         """The figures as ``(name, value)`` pairs for JUnit XML properties; ``stopped`` only where one of the
         spec's callbacks stopped a run's training (``seed 0: stopped by <callback> at <steps> of <budget> steps``,
-        one clause a seed)."""
+        one clause a seed); ``weights``, each run's weights digest (``seed 0: 3c61144ad8e8; seed 1: ...``, the first
+        12 hex digits of :attr:`RunResult.weights_digest <specguard.training.result.RunResult>`), where any has one;
+        ``numerics``, what the runs computed with (``portable numerics``)."""
         lo, hi = self.interval
         names = ("kind", "success", "threshold", "successes", "episodes", "runs_met", "runs", "train_seconds", "cached")
         properties = [(n, getattr(self, n)) for n in names] + [("interval", interval_text((lo, hi), digits=4))]
         stopped = [f"seed {s['seed']}: {s['stop_reason']}" for s in self.per_seed if s.get("stop_reason")]
-        return properties + ([("stopped", "; ".join(stopped))] if stopped else [])
+        digests = digests_text((s["seed"], s.get("weights_digest")) for s in self.per_seed)
+        computed = numerics_text(s.get("numerics") for s in self.per_seed)
+        return (
+            properties
+            + ([("stopped", "; ".join(stopped))] if stopped else [])
+            + ([("weights", digests)] if digests else [])
+            + ([("numerics", computed)] if computed else [])
+        )
 
     def message(self) -> str:
         verb = OUTCOME_VERBS[self.outcome]
@@ -265,6 +274,8 @@ def judge_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalChe
             "timesteps": r.timesteps,
             "met_early": r.met_early,
             "stop_reason": r.stop_reason,
+            "weights_digest": r.weights_digest,
+            "numerics": r.numerics,
             "train_seconds": r.train_seconds,
             "evaluated": sum(p.get("evaluation_episodes", 0) for p in r.curve) or r.episodes,
             **({"weights": r.weights} if r.weights else {}),

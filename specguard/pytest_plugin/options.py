@@ -41,6 +41,7 @@ class Options:
     plan: bool = False
     progress_every: int = PROGRESS_EVERY_S  # in a log: seconds between progress lines (0: each seed's last only)
     tensorboard_log: str | None = None  # None: each spec's own Spec.tensorboard_log
+    numerics: str | None = None  # None: each spec's own Spec.numerics
 
 
 # (option, ini name, ini type, default, help)
@@ -75,6 +76,15 @@ _SETTINGS: list[tuple[str, str, str, Any, str]] = [
         "",
         "what a goal whose runs stayed undecided counts as: fail, xfail or pass (with a warning); "
         "default: the spec's own Spec.undecided, fail unless set",
+    ),
+    (
+        "--goal-specs-numerics",
+        "goal_specs_numerics",
+        "string",
+        "",
+        "what runs compute with: portable (torch's and MKL's kernels held to those every x86-64 CPU computes alike: "
+        "the same weights and verdicts on any machine) or native (the CPU's own, machine-dependent); default: the "
+        "spec's own Spec.numerics, portable unless set",
     ),
     (
         "--goal-specs-tensorboard-log",
@@ -211,6 +221,7 @@ def parse_options(config: pytest.Config) -> Options:
     from specguard.parallel.workers import resolve_workers
     from specguard.stats.anytime import parse_checkpoints
     from specguard.stats.verdicts import UNDECIDED_OUTCOMES
+    from specguard.utils.numerics import NUMERICS
 
     try:
         text = get("--goal-specs-checkpoints")
@@ -228,6 +239,11 @@ def parse_options(config: pytest.Config) -> Options:
         undecided = None if undecided is None else parse_choice(undecided, UNDECIDED_OUTCOMES)
     except ValueError as e:
         raise pytest.UsageError(f"--goal-specs-undecided: {e}") from None
+    numerics = get("--goal-specs-numerics") or None  # None: each spec's own Spec.numerics
+    try:
+        numerics = None if numerics is None else parse_choice(numerics, NUMERICS)
+    except ValueError as e:
+        raise pytest.UsageError(f"--goal-specs-numerics: {e}") from None
     try:
         compare_seeds = parse_count(get("--goal-specs-compare-seeds"))
     except ValueError as e:
@@ -252,6 +268,7 @@ def parse_options(config: pytest.Config) -> Options:
         workers=workers,
         cache_dir=None if config.getoption("goal_specs_no_cache") else get("--goal-specs-cache-dir"),
         undecided=undecided,
+        numerics=numerics,
         report_dir=Path(report) if report else None,
         save=config.getoption("goal_specs_save"),
         compare=config.getoption("goal_specs_compare"),

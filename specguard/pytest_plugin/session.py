@@ -83,6 +83,7 @@ def scaled(state: Session, spec: Spec) -> Spec:
         checkpoints=options.checkpoints,
         undecided=options.undecided,
         tensorboard_log=options.tensorboard_log,
+        numerics=options.numerics,
     )
 
 

@@ -23,7 +23,7 @@ from specguard.engine.spec_result import SpecResult
 from specguard.stats.intervals import success_interval
 from specguard.stats.verdicts import RunVerdict
 from specguard.tree.keys import GOAL, kind, label
-from specguard.utils.text import interval_text, render_table, weights_text
+from specguard.utils.text import digests_text, interval_text, numerics_text, render_table, weights_text
 
 __all__ = ["table"]
 
@@ -35,7 +35,8 @@ def table(result: SpecResult) -> str:
     Goals first, then the safety rates, labelled ``path:name (safe)``; a measured goal without a
     threshold shows ``-`` for what it lacks. Under the table: the result's notes (the episodes that
     started inside the root goal, or ended before their horizon, how many), the weights each run
-    adapted, and the seeds that failed.
+    adapted, each run's weights digest (its first 12 hex digits: ``weights seed 0: 3c61144ad8e8; seed 1: ...``,
+    :attr:`RunResult.weights_digest <specguard.training.result.RunResult>`), and the seeds that failed.
     """
     paths = [p for r in result.runs[:1] for p in r.successes] or list(result.goals)
     paths.sort(key=lambda p: kind(p) != GOAL)  # stable: each kind keeps its order
@@ -64,6 +65,10 @@ def table(result: SpecResult) -> str:
     for run in result.runs:
         if run.weights:
             lines.append(f"seed {run.seed} adapted weights: {weights_text(run.weights)}")
+    digests = digests_text((run.seed, run.weights_digest) for run in result.runs)
+    computed = numerics_text(run.numerics for run in result.runs)
+    if digests:
+        lines.append(f"weights {digests}" + (f" ({computed})" if computed else ""))
     for seed, message in result.errors.items():
         lines.append(f"seed {seed} failed: {message}")
     return "\n".join(lines)

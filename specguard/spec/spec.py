@@ -43,6 +43,7 @@ from specguard.starts.space import StartSpace, as_start_space
 from specguard.stats.verdicts import DEFAULT_UNDECIDED, UNDECIDED_OUTCOMES
 from specguard.tree.keys import check_expect, check_xfail, check_xfail_thresholded, resolve_goal
 from specguard.tree.nodes import Node
+from specguard.utils.numerics import NUMERICS
 from specguard.utils.text import function_text, shown
 from specguard.validation import check_choice, check_count, check_folder, check_open_fraction, is_finite
 
@@ -210,6 +211,12 @@ class Spec:
             code, as the tree's functions); the SB3 fields mean nothing with it and are refused (``algorithm``
             left at its default is not used, ``callbacks``, ``hyperparameters``, ``normalize``, ``n_envs``,
             ``policy``, ``tensorboard_log``, a tree with ``weights="auto"``).
+        numerics: what the runs compute with (:mod:`specguard.utils.numerics`): ``"portable"`` (default), torch's
+            and MKL's kernels held to those every x86-64 CPU computes alike, so that the same spec and seed train
+            the same weights, and reach the same verdict, on any x86-64 machine with the same versions; or
+            ``"native"``, the kernels each library picks for this CPU (faster where vector kernels pay, and
+            machine-dependent). Part of a run's key (a native run's names this CPU). A run option too
+            (:meth:`as_run`: ``--numerics``, ini ``goal_specs_numerics``).
     """
 
     initial_env: InitialEnv
@@ -233,6 +240,7 @@ class Spec:
     callbacks: Sequence[Callable[[], Any]] = ()
     tensorboard_log: str | None = None
     trainer: Callable[..., Any] | None = None
+    numerics: str = "portable"
 
     def __post_init__(self) -> None:
         label = f"Spec {self.label!r}"
@@ -266,6 +274,7 @@ class Spec:
             object.__setattr__(self, "quorum", self._checked_quorum(label))
         check_open_fraction(label, "confidence", self.confidence)
         check_choice(label, "undecided", self.undecided, UNDECIDED_OUTCOMES)
+        check_choice(label, "numerics", self.numerics, NUMERICS)
         object.__setattr__(self, "expect", self._resolve_thresholds(label))
         object.__setattr__(self, "xfail", self._resolve_xfail(label))
         object.__setattr__(self, "starts", as_start_space(f"{label}.starts", self.starts))
@@ -339,13 +348,14 @@ class Spec:
         checkpoints: int | None = None,
         undecided: str | None = None,
         tensorboard_log: str | os.PathLike[str] | None = None,
+        numerics: str | None = None,
     ) -> Spec:
         """This spec as a door (``specguard run``, ``pytest --goal-specs``) runs it, with the door's options.
 
-        ``budget_scale`` and ``checkpoints`` as for :meth:`scaled`; ``undecided`` and ``tensorboard_log``,
-        if given, replace the spec's own (``tensorboard_log`` is SB3's folder: a spec with a ``trainer`` keeps
-        none). ``None`` keeps the spec's own, so
-        that every door judges a spec the same way unless told otherwise.
+        ``budget_scale`` and ``checkpoints`` as for :meth:`scaled`; ``undecided``, ``tensorboard_log`` and
+        ``numerics``, if given, replace the spec's own (``tensorboard_log`` is SB3's folder: a spec with a
+        ``trainer`` keeps none). ``None`` keeps the spec's own, so that every door judges a spec the same way unless
+        told otherwise.
         """
         spec = self.scaled(budget_scale, checkpoints=checkpoints)
         if tensorboard_log is not None:
@@ -353,6 +363,8 @@ class Spec:
         changes: dict[str, Any] = {}
         if undecided is not None and undecided != spec.undecided:
             changes["undecided"] = undecided
+        if numerics is not None and numerics != spec.numerics:
+            changes["numerics"] = check_choice(f"Spec {spec.label!r}", "numerics", numerics, NUMERICS)
         if tensorboard_log is not None and spec.trainer is not None:  # kept as it is, but not in silence
             warnings.warn(
                 f"Spec {spec.label!r} trains with its own trainer ({function_text(spec.trainer)}): the TensorBoard "

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from collections.abc import Collection
 from dataclasses import asdict, dataclass, field
 from typing import Any
@@ -55,6 +56,16 @@ class RunResult:
             (``Spec(callbacks=...)``) stopped it, as every door says it: ``"stopped by <callback> at <steps> of
             <budget> steps"`` (and why, when its ``_on_step`` returned None); ``None`` when none did. A stored
             run without it (written before it was recorded) reads as ``None``.
+        numerics: what the run computed with, as its worker held it (:func:`specguard.utils.numerics.hold_numerics`):
+            ``"portable"``, or ``"native (AVX512)"`` with the vector kernels torch picked; ``None`` for a run stored
+            before it was recorded.
+        weights_digest: the SHA-256 hex digest of the policy judged (:func:`specguard.cache.weights.weights_digest`:
+            an SB3 model's policy's parameters in ``state_dict`` order, with the ``VecNormalize`` statistics it
+            reads; a trainer's agent's torch parameters, else its canonical form), computed in the worker once that
+            policy is final: two machines tell whether they judged the same weights without sharing a file. It is
+            :attr:`Agent.identity <specguard.agents.agent.Agent.identity>` of that model in memory; for an agent
+            trained elsewhere (:func:`~specguard.engine.check_agent.check_agent`), the agent's identity. ``None``:
+            the agent cannot be digested, or a stored run written before it was recorded.
     """
 
     spec: str
@@ -71,6 +82,8 @@ class RunResult:
     terminated: int = 0
     capped: int = 0
     stop_reason: str | None = None
+    numerics: str | None = None
+    weights_digest: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -88,7 +101,11 @@ class RunResult:
         return cls(**data)
 
 
-_ADDED_LATER: dict[str, Any] = {"stop_reason": None}  # fields a stored run may lack, with the value it reads as
+# fields a stored run may lack, with the value it reads as
+_ADDED_LATER: dict[str, Any] = {"stop_reason": None, "numerics": None, "weights_digest": None}
+
+
+_HEX_DIGEST = re.compile("[0-9a-f]{64}")
 
 
 def _is_int(v: Any) -> bool:
@@ -136,7 +153,11 @@ def check_run_result(result: Any, seed: int, paths: Collection[str]) -> None:
     for flag in ("hit_wall_clock", "met_early"):
         if not isinstance(result[flag], bool):
             raise ValueError(f"{flag} is not a boolean")
-    if result["stop_reason"] is not None and not isinstance(result["stop_reason"], str):
-        raise ValueError(f"stop_reason {result['stop_reason']!r} is neither a string nor null")
+    for text in ("stop_reason", "numerics"):
+        if result[text] is not None and not isinstance(result[text], str):
+            raise ValueError(f"{text} {result[text]!r} is neither a string nor null")
+    digest = result["weights_digest"]
+    if digest is not None and not (isinstance(digest, str) and _HEX_DIGEST.fullmatch(digest)):
+        raise ValueError(f"weights_digest {digest!r} is neither a SHA-256 hex digest nor null")
     if not isinstance(result["curve"], list) or not all(isinstance(p, dict) for p in result["curve"]):
         raise ValueError("curve is not a list of points")

@@ -17,8 +17,10 @@ __all__ = [
     "MAX_CELL",
     "MAX_SHOWN",
     "MAX_VALUE",
+    "SHORT_DIGEST",
     "aside",
     "bounds_text",
+    "digests_text",
     "elide",
     "function_text",
     "interval_text",
@@ -169,6 +171,33 @@ def per_seed_text(seeds: Iterable[tuple[int, Mapping[str, Sequence[float]]]]) ->
         'seed 0 p (0.75, 0.25)'
     """
     return ", ".join(f"seed {seed} {weights_text(weights)}" for seed, weights in seeds if weights)
+
+
+SHORT_DIGEST = 12
+"""The hex digits of a digest a report shows (a run's weights digest): enough to tell two apart at a glance."""
+
+
+def digests_text(seeds: Iterable[tuple[int, str | None]]) -> str:
+    """Each seed's weights digest, its first :data:`SHORT_DIGEST` hex digits: ``seed 0: 3c61144ad8e8; seed 1: ...``
+    (seeds without one left out).
+
+    Example:
+        >>> digests_text([(0, "3c61144ad8e8" + "0" * 52), (1, None)])
+        'seed 0: 3c61144ad8e8'
+    """
+    return "; ".join(f"seed {seed}: {digest[:SHORT_DIGEST]}" for seed, digest in seeds if digest)
+
+
+def numerics_text(numerics: Iterable[str | None]) -> str:
+    """What runs computed with (:attr:`RunResult.numerics <specguard.training.result.RunResult>`), each kind once:
+    ``"portable numerics"``; ``""`` where no run says.
+
+    Example:
+        >>> numerics_text(["portable", "portable", None]), numerics_text(["native (AVX512)", "portable"])
+        ('portable numerics', 'native (AVX512), portable numerics')
+    """
+    kinds = sorted({n for n in numerics if n})
+    return f"{', '.join(kinds)} numerics" if kinds else ""
 
 
 def interval_text(interval: Sequence[float], digits: int = 2) -> str:
