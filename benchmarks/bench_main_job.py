@@ -85,10 +85,9 @@ def main() -> int:
         totals["longest"] = max([totals["longest"], *(s["train_seconds"] for s in seeds)])
         print(f"{group.split('::', 1)[-1]:<55} {steps:<28} {evaluated:>13} {row['train_seconds']:>8.0f}s")
     print("(* training stopped at a checkpoint: every threshold met)")
-    computed = sorted({s.get("numerics") or "unrecorded" for row in specs.values() for s in row["per_seed"]})
-    print(
-        f"the judged weights per seed (the first 12 hex digits of each run's digest; {', '.join(computed)} numerics):"
-    )
+    computed = sorted({s["numerics"] for row in specs.values() for s in row["per_seed"] if s.get("numerics")})
+    numerics = ", ".join(computed) or "unrecorded"
+    print(f"the judged weights per seed (each digest's first 12 hex digits; an agent's identity; {numerics} numerics):")
     for group, row in specs.items():
         digests = ", ".join((s.get("weights_digest") or "-")[:12] for s in row["per_seed"])
         if any(s.get("weights_digest") for s in row["per_seed"]):

@@ -217,9 +217,10 @@ class NumericsError(SpecError):
     computation)."""
 
     default_hint = (
-        "start the process with the settings in its environment (for a Dask worker: ATEN_CPU_CAPABILITY=default "
-        "MKL_CBWR=COMPATIBLE dask worker ADDRESS), or run with numerics='native' (--numerics native, ini "
-        "goal_specs_numerics = native) for machine-dependent results"
+        "start the process with the settings in its environment (a Dask worker: ATEN_CPU_CAPABILITY=default "
+        "MKL_CBWR=COMPATIBLE ONEDNN_MAX_CPU_ISA=SSE41 GLIBC_TUNABLES=glibc.cpu.hwcaps=-AVX2,-AVX512F,-FMA,-AVX dask "
+        "worker ADDRESS), or run with numerics='native' (--numerics native, ini goal_specs_numerics = native) for "
+        "machine-dependent results"
     )
 
 

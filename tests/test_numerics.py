@@ -13,18 +13,23 @@ from specguard.training.result import RunResult
 from specguard.utils import numerics
 from specguard.utils.numerics import LIBM, PORTABLE, hold_numerics, numerics_environ, numerics_key, with_libm
 
-CARTPOLE = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+SPEC_FILE = """
+import specguard as sg
+
+balance = sg.Spec(
+    sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega")),
+    sg.Always(sg.Goal("upright", theta=(-0.2, 0.2)), name="balance"),
+    expect=0.5,
+    budget=sg.Budget(timesteps=1024, eval_episodes=2, max_eval_episodes=2, min_seeds=1, max_seeds=1, checkpoints=1),
+    hyperparameters={"n_steps": 256, "batch_size": 64, "n_epochs": 2},
+)
+"""
+_FILE: dict = {}
+exec(SPEC_FILE, _FILE)  # the spec the command line reads, as Python's doors take it
 
 
 def _spec(numerics: str = "portable") -> sg.Spec:
-    return sg.Spec(
-        CARTPOLE,
-        sg.Always(sg.Goal("upright", theta=(-0.2, 0.2)), name="balance"),
-        expect=0.5,
-        budget=sg.Budget(timesteps=1024, eval_episodes=2, max_eval_episodes=2, min_seeds=1, max_seeds=1, checkpoints=1),
-        hyperparameters={"n_steps": 256, "batch_size": 64, "n_epochs": 2},
-        numerics=numerics,
-    )
+    return _FILE["balance"].as_run(numerics=numerics)
 
 
 def _trained(numerics: str) -> RunResult:
@@ -98,20 +103,38 @@ def test_a_process_whose_torch_chose_its_kernels_first_is_refused(monkeypatch):
 
 
 def test_portable_weights_do_not_follow_the_kernels_the_machine_would_pick_and_native_ones_do(monkeypatch):
-    # Another CPU, as far as one machine can show it: the parent's environment picks other kernels for torch (AVX2
-    # against this CPU's own) and MKL (its AVX2 branch), as a CPU without AVX-512 would.
+    # Another CPU, as far as one machine can show it: the parent's environment picks torch's AVX2 kernels, then its
+    # DEFAULT ones (and MKL's AVX2 branch), as CPUs with and without AVX2 would pick them.
     import torch
 
-    if torch.backends.cpu.get_cpu_capability() != "AVX512":
-        pytest.skip("needs an AVX-512 CPU, whose native kernels differ from AVX2's and DEFAULT's")
-    for key in PORTABLE:  # this machine's own choice first
+    if torch.backends.cpu.get_cpu_capability() not in ("AVX2", "AVX512"):
+        pytest.skip("needs a CPU with AVX2, whose kernels differ from DEFAULT's")
+    for key in PORTABLE:
         monkeypatch.delenv(key, raising=False)
-    here = {"portable": _trained("portable"), "native": _trained("native")}
+    monkeypatch.setenv("ATEN_CPU_CAPABILITY", "avx2")
+    avx2 = {"portable": _trained("portable"), "native": _trained("native")}
     monkeypatch.setenv("ATEN_CPU_CAPABILITY", "default")
     monkeypatch.setenv("MKL_CBWR", "AVX2")
-    there = {"portable": _trained("portable"), "native": _trained("native")}
-    assert here["portable"].numerics == there["portable"].numerics == "portable"
-    assert (here["native"].numerics, there["native"].numerics) == ("native (AVX512)", "native (DEFAULT)")
-    assert here["portable"].weights_digest == there["portable"].weights_digest  # the promise
-    assert here["native"].weights_digest != there["native"].weights_digest  # what it holds against
-    assert here["portable"].weights_digest != here["native"].weights_digest
+    default = {"portable": _trained("portable"), "native": _trained("native")}
+    assert avx2["portable"].numerics == default["portable"].numerics == "portable"
+    assert (avx2["native"].numerics, default["native"].numerics) == ("native (AVX2)", "native (DEFAULT)")
+    assert avx2["portable"].weights_digest == default["portable"].weights_digest  # the promise
+    assert avx2["native"].weights_digest != default["native"].weights_digest  # what it holds against
+    assert avx2["portable"].weights_digest != avx2["native"].weights_digest
+
+
+def test_the_command_line_gives_the_same_digest_whatever_kernels_its_environment_picks(monkeypatch, tmp_path):
+    import json
+
+    from specguard.cli.main import main
+
+    spec_file = tmp_path / "specs.py"
+    spec_file.write_text(SPEC_FILE)
+    digests = {}
+    for capability in ("avx2", "default"):
+        monkeypatch.setenv("ATEN_CPU_CAPABILITY", capability)
+        out = tmp_path / f"{capability}.json"
+        main(["run", str(spec_file), "--no-cache", "--quiet", "--json", str(out)])
+        (result,) = json.loads(out.read_text()).values()
+        digests[capability] = [(run["numerics"], run["weights_digest"]) for run in result["runs"]]
+    assert digests["avx2"] == digests["default"] and digests["avx2"][0][0] == "portable"
