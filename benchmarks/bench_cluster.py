@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import sys
 import time
 from pathlib import Path
@@ -37,9 +38,18 @@ def _timed(spec: sg.Spec, **kwargs: object) -> float:
 
 
 def _cluster(workers: int):  # type: ignore[no-untyped-def]
+    """A local Dask cluster whose workers start with portable numerics (a worker without them is refused)."""
     from distributed import LocalCluster
 
-    return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0")
+    from specguard.utils.numerics import portable_environ
+
+    before = dict(os.environ)
+    os.environ.update(portable_environ(os.environ))  # the worker processes start with this environment
+    try:
+        return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0")
+    finally:
+        os.environ.clear()
+        os.environ.update(before)
 
 
 def main() -> None:

@@ -11,7 +11,7 @@ import pytest
 import specguard as sg
 from example_specs import pendulum
 from specguard.parallel.executors import DaskExecutor, ExecutorError, LocalExecutor, check_address, make_executor
-from specguard.utils.numerics import numerics_environ, with_libm
+from specguard.utils.numerics import portable_environ
 
 distributed = pytest.importorskip("distributed")
 
@@ -38,7 +38,7 @@ def cluster():
     os.environ[DRIVER] = str(os.getpid())  # the workers inherit it: they kill themselves, never the driver
     # Portable numerics on a cluster: its workers start with the settings (a worker without them is refused).
     before = dict(os.environ)
-    os.environ.update(with_libm({**os.environ, **numerics_environ("portable")}))
+    os.environ.update(portable_environ(os.environ))
     # Fail a seed at the first dead worker (the default retries it on up to 3 more workers first).
     try:
         with (

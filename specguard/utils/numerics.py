@@ -60,6 +60,7 @@ __all__ = [
     "hold_numerics",
     "numerics_environ",
     "numerics_key",
+    "portable_environ",
     "started_with",
     "with_libm",
 ]
@@ -100,6 +101,18 @@ def with_libm(environ: Mapping[str, str]) -> dict[str, str]:
 def numerics_environ(numerics: str) -> dict[str, str]:
     """The environment variables a worker that computes with ``numerics`` starts with (none for native)."""
     return dict(PORTABLE) if numerics == "portable" else {}
+
+
+def portable_environ(environ: Mapping[str, str]) -> dict[str, str]:
+    """``environ`` with every portable setting, :data:`PORTABLE` and :data:`LIBM`: the environment to start a
+    long-lived worker of one's own with (a Dask ``LocalCluster``'s, ``dask worker``'s), whose tasks specguard cannot
+    set before they start.
+
+    Example:
+        >>> sorted(portable_environ({}))
+        ['ATEN_CPU_CAPABILITY', 'GLIBC_TUNABLES', 'MKL_CBWR', 'ONEDNN_MAX_CPU_ISA']
+    """
+    return with_libm({**environ, **PORTABLE})
 
 
 def _holds(environ: Mapping[str, str], key: str) -> bool:
