@@ -137,6 +137,7 @@ def check_agent(
     check_choice(where, "observation", observation, AGENT_OBSERVATIONS)
     seed = check_natural(where, "seed", seed, "the evaluation seeds' run")
     agent = spec_agent(spec, agent, algorithm=algorithm, batch=False, trust=trust)
+    seen_wrap = agent_wrap(agent, wrap)  # what the agent sees through: wrap=, else its config's wrappers
     # The agent as one run: one seed, judged at the looks of its stages (no checkpoints), as a trained run's final
     # evaluation is judged; the quorum of one run is that run.
     one = dataclasses.replace(
@@ -156,7 +157,7 @@ def check_agent(
     run = cache.load_key(key, seed=seed, paths=result_keys(spec.tree), model=False) if cache is not None else None
     hit = run is not None
     if run is None:
-        run = _evaluate(where, spec, one, agent, observation, agent_wrap(agent, wrap), seed, stages, outcomes)
+        run = _evaluate(where, spec, one, agent, observation, seen_wrap, seed, stages, outcomes)
         if cache is not None:
             try:
                 cache.store_evaluation(key, run)
@@ -167,7 +168,6 @@ def check_agent(
     counts = run.successes
     result = judged(one, [run], ends_at_goal=observation == "spec")  # the baseline env's episodes are the env's own
     seen = "the constructed env's" if observation == "spec" else "the initial env's own"
-    seen_wrap = agent_wrap(agent, wrap)
     wrapped = f", through {function_text(seen_wrap)}" if seen_wrap is not None else ""
     result.notes[:0] = [
         *_other_env_kwargs(spec, agent),
