@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from specguard.cache.store import Cache
+from specguard.engine.ahead import TrainAhead
 from specguard.engine.judging import episode_notes, judge, seeds_still_needed
 from specguard.engine.runs import Runs
 from specguard.engine.spec_result import SpecResult
@@ -63,6 +64,7 @@ class RunOptions:
     """How one call trains a spec's seeds: :func:`run_spec`'s keyword arguments as one value (see them there).
 
     The pytest plugin makes one per session and passes it to :func:`run_with` and :func:`train_seeds`.
+    ``ahead``: the session's runs trained ahead (:mod:`specguard.engine.ahead`), taken from there where planned.
     """
 
     workers: int | str = "auto"
@@ -70,6 +72,7 @@ class RunOptions:
     progress: Progress | None = print_event
     lock_timeout: float = 3600.0
     executor: str | Executor = LOCAL
+    ahead: TrainAhead | None = None
 
 
 def run_spec(
@@ -186,7 +189,7 @@ def _seeds_of(spec: Spec, options: RunOptions) -> Iterator[tuple[Runs, SpecResul
     owned = isinstance(executor, str)
     runner = make_executor(executor, workers=n_workers) if isinstance(executor, str) else executor
     try:
-        runs = Runs(spec, result, cache, runner, options.lock_timeout, say)  # its probes build checked envs
+        runs = Runs(spec, result, cache, runner, options.lock_timeout, say, options.ahead)  # its probes check envs
         result.spec_key = None if runs.fingerprint is None else runs.fingerprint.spec_key
         result.cache_dir = None if runs.cache is None else runs.cache.root
         yield runs, result

@@ -9,16 +9,16 @@ from typing import Any, Literal
 from specguard.cache.fingerprint import fingerprint_spec
 from specguard.cache.store import Cache, try_acquire, wait_for
 from specguard.cache.versions import versions
+from specguard.engine.ahead import TrainAhead, seed_task
 from specguard.engine.spec_result import SpecResult
-from specguard.engine.train_task import describe_failure, is_spec_error, train_task
+from specguard.engine.train_task import describe_failure, is_spec_error
 from specguard.error import CacheWarning
 from specguard.parallel.executors import Executor
-from specguard.parallel.protocol import Failure, Task, TaskOutcome
+from specguard.parallel.protocol import Failure, TaskOutcome
 from specguard.spec.spec import Spec
 from specguard.training.progress import ProgressEvent, decode_update
 from specguard.training.result import RunResult
 from specguard.tree.keys import label, result_keys
-from specguard.utils.numerics import numerics_environ
 
 __all__ = ["Runs"]
 
@@ -26,7 +26,11 @@ Progress = Callable[[ProgressEvent], None]
 
 
 class Runs:
-    """The seeds of one ``run_spec`` call: looked up in the cache, locked, trained in workers, recorded."""
+    """The seeds of one ``run_spec`` call: looked up in the cache, locked, trained in workers, recorded.
+
+    ``ahead``: the session's runs trained ahead (:mod:`specguard.engine.ahead`); a seed planned there is taken from
+    it, with its lock, and recorded as one trained here.
+    """
 
     def __init__(
         self,
@@ -36,6 +40,7 @@ class Runs:
         executor: Executor,
         lock_timeout: float,
         say: Progress,
+        ahead: TrainAhead | None = None,
     ) -> None:
         self.spec = spec
         self.result = result
@@ -43,6 +48,7 @@ class Runs:
         self.executor = executor
         self.lock_timeout = lock_timeout
         self.say = say
+        self.ahead = ahead
         self.paths = result_keys(spec.tree)  # what a cached run must have measured
         self.fingerprint = None if cache is None else fingerprint_spec(spec)
         if self.fingerprint is not None and not self.fingerprint.reproducible:
@@ -65,12 +71,20 @@ class Runs:
         return True
 
     def run(self, seeds: list[int]) -> None:
-        """Get every seed's run: from the cache, from another process training it, or trained here."""
+        """Get every seed's run: trained ahead, from the cache, from another process training it, or trained here."""
         locks: dict[int, Any] = {}
         busy: list[int] = []
+        handed: dict[int, TaskOutcome] = {}
         try:
             todo = []
             for seed in seeds:
+                key = self._key(seed)
+                given = None if self.ahead is None or key is None else self.ahead.take(key)
+                if given is not None:
+                    locks[seed] = given.lock
+                    handed[seed] = given.outcome
+                    given.replay_output()
+                    continue
                 if self._hit(seed):
                     continue
                 key = self._key(seed)
@@ -89,7 +103,7 @@ class Runs:
                     if self._hit(seed):  # stored while we looked
                         continue
                 todo.append(seed)
-            self._train(todo)
+            self._train(todo, handed)
             for seed in busy:
                 key = self._key(seed)
                 if key is None or self.cache is None:  # the cache failed meanwhile
@@ -106,14 +120,16 @@ class Runs:
             for lock in locks.values():
                 lock.release()
 
-    def _train(self, seeds: list[int]) -> None:
-        if not seeds:
+    def _train(self, seeds: list[int], handed: dict[int, TaskOutcome] | None = None) -> None:
+        """Train ``seeds`` on the executor; ``handed``: the outcomes of seeds trained ahead, recorded as its own."""
+        handed = handed or {}
+        if not seeds and not handed:
             return
         tasks = []
         keyed = versions() if self.fingerprint is not None and self.cache is not None else None
         for seed in seeds:
             self.say(ProgressEvent(self.spec.label, seed, "start", budget=self.spec.budget.timesteps))
-            tasks.append(Task(seed, train_task, (self.spec, seed, keyed), numerics_environ(self.spec.numerics)))
+            tasks.append(seed_task(self.spec, seed, keyed))
         trained: dict[int, RunResult] = {}
 
         def finished(seed: int, outcome: TaskOutcome) -> None:
@@ -149,19 +165,24 @@ class Runs:
             trained[seed] = run
             self._event(seed, "done", run, message=self._rates(run))
 
-        outcomes = self.executor.run(
-            tasks,
-            on_line=lambda seed, line: self.say(decode_update(self.spec.label, seed, line)),
-            stop_on=is_spec_error,
-            on_outcome=finished,
-        )
+        for seed, outcome in handed.items():
+            finished(seed, outcome)
+        stopped = any(isinstance(o, Failure) and is_spec_error(o) for o in handed.values())
+        outcomes = dict(handed)
+        if tasks and not stopped:
+            outcomes |= self.executor.run(
+                tasks,
+                on_line=lambda seed, line: self.say(decode_update(self.spec.label, seed, line)),
+                stop_on=is_spec_error,
+                on_outcome=finished,
+            )
         for outcome in outcomes.values():
             if isinstance(outcome, Failure) and is_spec_error(outcome):
                 assert outcome.exception is not None
                 if outcome.traceback:
                     outcome.exception.add_note(f"worker traceback (seed {outcome.key}):\n{outcome.traceback}")
                 raise outcome.exception
-        for seed in outcomes:  # the runs in seed order, whatever order they finished in
+        for seed in sorted(outcomes):  # the runs in seed order, whatever order they finished in
             if seed in trained:
                 self.result.runs.append(trained[seed])
                 self.result.cached[seed] = False

@@ -45,12 +45,16 @@ class Task:
         environ: environment variables the task's process starts with, beside the parent's (what a library reads
             once, at its first use: :func:`specguard.utils.numerics.numerics_environ`); an executor whose workers
             outlive a task (a cluster's) cannot set them, and the task checks them itself.
+        output: a file the task's process writes its standard output and error to (appended), instead of the
+            parent's: a task run ahead of the item it belongs to keeps what it wrote for that item
+            (:mod:`specguard.engine.ahead`); a cluster's workers keep their own.
     """
 
     key: int
     fn: Callable[..., Any]
     args: tuple[Any, ...] = ()
     environ: Mapping[str, str] = field(default_factory=dict)
+    output: str | None = None
 
 
 @dataclass(frozen=True)

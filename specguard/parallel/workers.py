@@ -178,16 +178,20 @@ class _ParentStdio:
                 os.close(new)
 
 
-def _child_main(conn: Connection, payload: bytes, environ: dict[str, str], stdio: _ParentStdio | None) -> None:
+def _child_main(
+    conn: Connection, payload: bytes, environ: dict[str, str], stdio: _ParentStdio | None, output: str | None = None
+) -> None:
     """Process entry point: unpickle ``(fn, args)``, run it and send its reports and outcome to the parent.
 
     ``environ`` and ``stdio`` are the parent's environment and standard streams when the task started (a
     forked process has the fork server's, taken when the server started; ``stdio`` is ``None`` for a spawned
-    one, which inherits the parent's).
+    one, which inherits the parent's). ``output``: the task's own file for both streams (:attr:`Task.output`).
     """
     _exit_when_parent_dies()
     if stdio is not None:
         stdio.adopt()
+    if output is not None:
+        _write_to(output)
     started_with(os.environ)  # what glibc read as this process started (a fork server's), before the parent's
     if os.environ != environ:
         os.environ.clear()
@@ -207,6 +211,17 @@ def _child_main(conn: Connection, payload: bytes, environ: dict[str, str], stdio
             conn.send(("error", runner.at.phase, runner.at.step, one_line(e), traceback.format_exc(), None))
     finally:
         conn.close()
+
+
+def _write_to(path: str) -> None:
+    """This process's standard output and error (the descriptors and Python's streams) appended to ``path``."""
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o600)
+    for target in (1, 2):
+        os.dup2(fd, target)
+    os.close(fd)
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -348,7 +363,8 @@ def _start(context: BaseContext, task: Task, payload: bytes) -> _Child:
             writer,
             payload,
             {**os.environ, **task.environ},
-            _ParentStdio() if context.get_start_method() == "forkserver" else None,
+            _ParentStdio() if context.get_start_method() == "forkserver" and task.output is None else None,
+            task.output,
         ),
         name=f"specguard-task-{task.key}",
         daemon=False,
@@ -372,6 +388,7 @@ def run_tasks(
     on_line: Callable[[int, str], None] | None = None,
     stop_on: Callable[[Failure], bool] | None = None,
     on_outcome: Callable[[int, TaskOutcome], None] | None = None,
+    cancel: threading.Event | None = None,
 ) -> dict[int, TaskOutcome]:
     """Run every task in a process of its own (module docstring), at most ``max_workers`` at once.
 
@@ -389,6 +406,9 @@ def run_tasks(
         on_outcome: called in the parent as ``on_outcome(key, outcome)`` as each task ends, before
             ``stop_on`` sees it, so a caller can keep a finished task's result even if the batch is
             interrupted later.
+        cancel: once set (from any thread), the children still running are terminated and the outcomes so far
+            are returned, within :data:`~specguard.parallel.signals.STOP_POLL_S` (a pool's slot drops a task it
+            no longer needs: :mod:`specguard.parallel.slots`).
 
     Returns:
         The outcome of each finished task by key, in the order of ``tasks``.
@@ -419,6 +439,8 @@ def run_tasks(
 
     try:
         while pending or children:
+            if cancel is not None and cancel.is_set():
+                return _in_task_order(tasks, outcomes)  # the finally below stops and reaps the children
             while pending and len(children) < max_workers:
                 with guard.deferred():  # a started child is always registered, hence always stopped
                     task = pending.popleft()

@@ -42,6 +42,7 @@ class Options:
     progress_every: int = PROGRESS_EVERY_S  # in a log: seconds between progress lines (0: each seed's last only)
     tensorboard_log: str | None = None  # None: each spec's own Spec.tensorboard_log
     numerics: str | None = None  # None: each spec's own Spec.numerics
+    ahead: bool = True  # train the seeds of specs to come on cores the running item leaves idle
 
 
 # (option, ini name, ini type, default, help)
@@ -69,6 +70,14 @@ _SETTINGS: list[tuple[str, str, str, Any, str]] = [
         "parallel training processes per pytest process: N, or auto = the usable cores (shared among xdist workers)",
     ),
     ("--goal-specs-cache-dir", "goal_specs_cache_dir", "string", DEFAULT_CACHE_DIR, "where trained runs are cached"),
+    (
+        "--goal-specs-ahead",
+        "goal_specs_ahead",
+        "string",
+        "on",
+        "on: while an item's spec trains, a core it leaves idle trains the seeds of the session's next specs "
+        "(those of sg.goal_specs; with the local executor and a cache, not under xdist); off: one spec at a time",
+    ),
     (
         "--goal-specs-undecided",
         "goal_specs_undecided",
@@ -252,6 +261,10 @@ def parse_options(config: pytest.Config) -> Options:
         progress_every = parse_natural(get("--goal-specs-progress-every"), "seconds")
     except ValueError as e:
         raise pytest.UsageError(f"--goal-specs-progress-every: {e}") from None
+    try:
+        ahead = parse_choice(get("--goal-specs-ahead"), ("on", "off")) == "on"
+    except ValueError as e:
+        raise pytest.UsageError(f"--goal-specs-ahead: {e}") from None
     report = get("--goal-specs-report")
     tensorboard_log = get("--goal-specs-tensorboard-log") or None
     if tensorboard_log is not None:
@@ -278,6 +291,7 @@ def parse_options(config: pytest.Config) -> Options:
         plan=bool(config.getoption("goal_specs_plan")),
         progress_every=progress_every,
         tensorboard_log=tensorboard_log,
+        ahead=ahead,
     )
 
 

@@ -29,6 +29,7 @@ from specguard.pytest_plugin.session import (
     Session,
     agent_gate_of,
     baseline_name,
+    close_ahead,
     gate_of,
     judge_agent,
     run,
@@ -36,6 +37,7 @@ from specguard.pytest_plugin.session import (
     saved_runs,
     scaled,
     terminal_progress,
+    upcoming_specs,
 )
 
 __all__ = ["GoalMissed"]
@@ -86,6 +88,8 @@ def pytest_configure(config: pytest.Config) -> None:
 
 def pytest_unconfigure(config: pytest.Config) -> None:
     state = config.stash.get(_SESSION, None)
+    if state is not None:
+        close_ahead(state)
     if state is not None and state.executor is not None:
         state.executor.close()
 
@@ -145,6 +149,18 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             goal, reasons = param.goal, ({param.goal: param.xfail} if param.xfail else {})
         if goal is not None and goal in reasons:
             item.add_marker(pytest.mark.xfail(reason=reasons[goal], raises=GoalMissed, strict=False))
+
+
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """The specs to train ahead (``--goal-specs-ahead``): the session's items are known, deselection done."""
+    config = session.config
+    state = config.stash[_SESSION]
+    options = state.options
+    local = options.executor == "local" and state.executor is None
+    shows = config.getoption("goal_specs_show", False) or config.getoption("goal_specs_plan", False)
+    worker = hasattr(config, "workerinput")  # an xdist worker runs only some of the items it collected
+    if options.enabled and options.ahead and local and options.cache_dir is not None and not shows and not worker:
+        state.upcoming = upcoming_specs(state, session.items)
 
 
 # -- running -------------------------------------------------------------------

@@ -6,6 +6,7 @@ import contextlib
 import dataclasses
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import pytest
@@ -13,6 +14,7 @@ import pytest
 from specguard.pytest_plugin.options import Options
 
 if TYPE_CHECKING:
+    from specguard.engine.ahead import TrainAhead
     from specguard.engine.check_agent import AgentCheck
     from specguard.engine.run_spec import RunOptions
     from specguard.engine.spec_result import SpecResult
@@ -20,6 +22,7 @@ if TYPE_CHECKING:
     from specguard.gate.comparison import SpecGate
     from specguard.gate.saved_agent import SavedAgentGate
     from specguard.parallel.executors import Executor
+    from specguard.parallel.slots import SlotPool
     from specguard.spec.spec import Spec
     from specguard.training.progress import ProgressEvent
 
@@ -27,6 +30,7 @@ __all__ = [
     "Session",
     "agent_gate_of",
     "baseline_name",
+    "close_ahead",
     "gate_of",
     "judge_agent",
     "run",
@@ -36,6 +40,7 @@ __all__ = [
     "scaled",
     "terminal_lines",
     "terminal_progress",
+    "upcoming_specs",
 ]
 
 
@@ -61,18 +66,78 @@ class Session:
     agent_entries: dict[str, AgentEntry | str] = dataclasses.field(default_factory=dict)  # group -> saved, or why not
     ran: set[str] = dataclasses.field(default_factory=set)  # the items that ran to their teardown (node ids)
     interrupted: str | None = None  # why the session stopped before its last item, as its reports say it
+    upcoming: list[Spec] | None = None  # the specs its items will train, in order, to train ahead (None: none)
+    pool: SlotPool | None = None  # the training slots, shared by the foreground and the runs trained ahead
+    ahead: TrainAhead | None = None  # the runs trained ahead (specguard.engine.ahead), made at the first training
 
 
 def run_options(state: Session) -> RunOptions:
     """How this session trains: its workers, cache, progress sink and executor, one value for every call."""
     from specguard.engine.run_spec import RunOptions
+    from specguard.parallel.slots import PooledExecutor
 
     return RunOptions(
         workers=state.options.workers,
         cache_dir=state.options.cache_dir,
         progress=state.progress,
-        executor=state.executor or "local",
+        executor=PooledExecutor(state.pool) if state.pool is not None else state.executor or "local",
+        ahead=state.ahead,
     )
+
+
+def upcoming_specs(state: Session, items: list[pytest.Item]) -> list[Spec]:
+    """The specs ``items`` will train, in their order, as the session trains them (its options, the items'
+    thresholds): those of ``sg.goal_specs``, known at collection (a ``@goal_spec`` function's spec is known only
+    once it runs with its fixtures); an item a mark skips, or an agent's (nothing to train), is left out."""
+    from _pytest.skipping import evaluate_skip_marks
+
+    from specguard.pytest_plugin.declare import GOAL_FIXTURE, SpecItem
+    from specguard.pytest_plugin.judge import with_thresholds
+    from specguard.spec.spec import Spec
+
+    specs: list[Spec] = []
+    for item in items:
+        callspec = getattr(item, "callspec", None)
+        case = callspec.params.get(GOAL_FIXTURE) if callspec is not None else None
+        if not isinstance(case, SpecItem) or not isinstance(item, pytest.Function):
+            continue
+        try:
+            if evaluate_skip_marks(item) is not None:
+                continue
+            returned = item.obj(**{GOAL_FIXTURE: case})
+            if isinstance(returned, Spec):
+                specs.append(scaled(state, with_thresholds(returned, None, None)[0]))
+        except Exception:  # the item says what is wrong when it runs
+            continue
+    return specs
+
+
+def _start_ahead(state: Session) -> None:
+    """At the session's first training: its slots, and the seeds of its upcoming specs queued behind the item."""
+    if state.upcoming is None:
+        return
+    from specguard.cache.store import Cache
+    from specguard.engine.ahead import TrainAhead
+    from specguard.parallel.slots import SlotPool
+
+    assert state.options.cache_dir is not None
+    upcoming, state.upcoming = state.upcoming, None
+    workers = state.options.workers
+    state.pool = SlotPool(workers if isinstance(workers, int) else 1)
+    state.ahead = TrainAhead(state.pool, Cache(Path(state.options.cache_dir)), say=state.progress)
+    state.ahead.plan(upcoming)
+
+
+def close_ahead(state: Session) -> None:
+    """Stop what trains ahead, store what finished, and close the slots (the session's end, Ctrl-C)."""
+    ahead, pool = state.ahead, state.pool
+    state.ahead, state.pool = None, None
+    try:
+        if ahead is not None:
+            ahead.close()
+    finally:
+        if pool is not None:
+            pool.close()
 
 
 def scaled(state: Session, spec: Spec) -> Spec:
@@ -155,6 +220,7 @@ def run(state: Session, spec: Spec, item: pytest.Item) -> SpecResult:
     # (seeds, quorum and `undecided` included), the one the cache and baselines use.
     key = fingerprint_spec(spec).spec_key
     if key not in state.memo:
+        _start_ahead(state)
         result = run_with(spec, run_options(state))
         result.spec_key = key
         state.memo[key] = result
