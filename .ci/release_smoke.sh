@@ -6,9 +6,21 @@
 # `specguard --help` and one tiny spec under `pytest --goal-specs` (128 training steps).
 #
 # Usage: .ci/release_smoke.sh [PYTHON ...]   (default: python3.11 python3.13, the oldest and the newest)
+#        .ci/release_smoke.sh --build DIR      build and check the four archives into DIR, and stop there
+#        .ci/release_smoke.sh --dist DIR [PYTHON ...]   install the archives built before into DIR (no build)
+# (.ci/run builds once, lets the suite's packaging tests read the sdists, then installs the wheels.)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
+BUILD_ONLY=""
+BUILT=""
+case "${1:-}" in
+--build | --dist)
+    [ $# -ge 2 ] || { echo "release smoke: $1 needs a folder" >&2; exit 2; }
+    [ "$1" = --build ] && BUILD_ONLY=$2 || BUILT=$2
+    shift 2
+    ;;
+esac
 NAMES=("$@")
 [ ${#NAMES[@]} -gt 0 ] || NAMES=(python3.11 python3.13)
 
@@ -36,15 +48,20 @@ done
 unset PYTHONPATH
 WORK=$(mktemp -d)
 trap 'rm -rf "$WORK"' EXIT
+DIST=${BUILD_ONLY:-${BUILT:-$WORK/dist}}
 
-echo "release smoke: build and check (${PYTHONS[0]}; then installs on ${PYTHONS[*]})"
+if [ -n "$BUILT" ]; then
+    echo "release smoke: the archives built before, in $BUILT: $(cd "$BUILT" && echo *)"
+else
+echo "release smoke: build and check (${PYTHONS[0]}; into $DIST)"
 start=$SECONDS
+mkdir -p "$DIST"
 "${PYTHONS[0]}" -m venv "$WORK/tools"
 "$WORK/tools/bin/pip" install -q -c constraints.txt build twine
-"$WORK/tools/bin/python" -m build -q --outdir "$WORK/dist" .
-"$WORK/tools/bin/python" -m build -q --outdir "$WORK/dist" plugins
-"$WORK/tools/bin/twine" check --strict "$WORK"/dist/*
-"$WORK/tools/bin/python" - "$WORK"/dist/* <<'EOF'
+"$WORK/tools/bin/python" -m build -q --outdir "$DIST" .
+"$WORK/tools/bin/python" -m build -q --outdir "$DIST" plugins
+"$WORK/tools/bin/twine" check --strict "$DIST"/*
+"$WORK/tools/bin/python" - "$DIST"/* <<'EOF'
 """Each archive holds the license, there are exactly the four archives of the two distributions, and the sdists'
 tests are none (specguard's read example_specs/ and docs/, which its sdist leaves out) or whole (the plugins')."""
 import sys
@@ -75,6 +92,8 @@ for archive in archives:
     print(f"{archive.name}: {len(names)} files, LICENSE included")
 EOF
 echo "release smoke: built and checked in $((SECONDS - start)) s"
+fi
+[ -z "$BUILD_ONLY" ] || exit 0
 
 # The tiny spec: a plugin operator (found through its entry point) over Pendulum goals, 128 steps, 2 episodes.
 mkdir "$WORK/project"
@@ -99,7 +118,7 @@ for python in "${PYTHONS[@]}"; do
     start=$SECONDS
     venv="$WORK/venv-$(basename "$python")"
     "$python" -m venv "$venv"
-    "$venv/bin/pip" install -q -c "$ROOT/constraints.txt" "$WORK"/dist/*.whl
+    "$venv/bin/pip" install -q -c "$ROOT/constraints.txt" "$DIST"/*.whl
     installed=$((SECONDS - start))
     (
         cd "$WORK/project"

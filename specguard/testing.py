@@ -85,7 +85,9 @@ def parametrize_with_checks(classes: Iterable[type]) -> pytest.MarkDecorator:
 
     Each item's id is ``<class name>-<check name>`` (``AnyOf-check_markov``),
     so a failure names the class and the invariant; the test calls
-    ``check(operator)``.
+    ``check(operator)``. The items of a check that starts a fresh interpreter
+    (``check_description_is_exact``) carry the ``slow`` mark, so ``pytest -m
+    "not slow"`` leaves them out.
 
     Args:
         classes: the operator and annotation classes under test.
@@ -98,10 +100,25 @@ def parametrize_with_checks(classes: Iterable[type]) -> pytest.MarkDecorator:
     """
     import pytest
 
+    from specguard.contract.invariants import FRESH_INTERPRETER
+
     params = [
-        pytest.param(cls, check, id=f"{cls.__name__}-{check.__name__}") for cls in classes for check in checks_for(cls)
+        pytest.param(
+            cls,
+            check,
+            id=f"{cls.__name__}-{check.__name__}",
+            marks=[pytest.mark.slow] if check in FRESH_INTERPRETER else [],
+        )
+        for cls in classes
+        for check in checks_for(cls)
     ]
     return pytest.mark.parametrize("operator, check", params)
+
+
+def _marks(slow: bool) -> list[pytest.MarkDecorator]:
+    import pytest
+
+    return [pytest.mark.slow] if slow else []
 
 
 def check_operator(cls: type, max_examples: int | None = None) -> None:

@@ -76,6 +76,7 @@ def test_frame_stack_stacks_on_the_last_axis_with_zeros_at_reset_as_vec_frame_st
         np.testing.assert_array_equal(obs, theirs.step(np.array([action]))[0][0])
 
 
+@pytest.mark.slow
 def test_a_frame_stacked_zoo_agent_acts_as_a_raw_replay_with_vec_frame_stack(stacked):
     model, run = stacked
     agent = load_agent(run)
@@ -88,6 +89,7 @@ def test_a_frame_stacked_zoo_agent_acts_as_a_raw_replay_with_vec_frame_stack(sta
         assert ours == raw_replay(model, seed)
 
 
+@pytest.mark.slow
 def test_check_agent_and_the_cli_judge_a_frame_stacked_zoo_agent(stacked, tmp_path, capsys):
     _, run = stacked
     outcomes: list[dict[str, int]] = []
@@ -103,6 +105,7 @@ def test_check_agent_and_the_cli_judge_a_frame_stacked_zoo_agent(stacked, tmp_pa
     assert judged["runs"][0]["successes"] == result.runs[0].successes  # the same episodes, the same actions
 
 
+@pytest.mark.slow
 def test_a_mismatched_observation_is_one_short_line_whose_hint_names_frame_stack_and_wrap(stacked):
     _, run = stacked
     with pytest.raises(AgentMismatch) as e:
@@ -114,6 +117,7 @@ def test_a_mismatched_observation_is_one_short_line_whose_hint_names_frame_stack
     assert "frame_stack: 4" in e.value.hint and "wrap=" in e.value.hint and "FrameStack(env, 4)" in e.value.hint
 
 
+@pytest.mark.slow
 def test_an_env_wrapper_is_refused_unless_trusted_and_applied_when_trusted(stacked, tmp_path):
     _, source = stacked
     run = tmp_path / "CartPole-v1_2"
@@ -130,6 +134,7 @@ def test_an_env_wrapper_is_refused_unless_trusted_and_applied_when_trusted(stack
     assert len(episode(env, agent, seed_base(0))) <= 5
 
 
+@pytest.mark.slow
 def test_the_cli_takes_the_wrappers_of_a_python_file_for_an_agent_whose_config_names_none(stacked, tmp_path, capsys):
     _, source = stacked
     bare = tmp_path / "model.zip"  # the zip alone: no config.yml says how it was trained
@@ -151,6 +156,7 @@ def test_the_cli_takes_the_wrappers_of_a_python_file_for_an_agent_whose_config_n
     assert f"wrap '{wrappers}::nothing': {wrappers} defines nothing named 'nothing'" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_a_zoo_agent_trained_normalized_then_stacked_normalizes_each_frame_before_the_stack(tmp_path):
     venv = VecNormalize(DummyVecEnv([lambda: gym.make("CartPole-v1")]))  # rl-zoo3: normalize, then stack
     model = sb3.PPO("MlpPolicy", VecFrameStack(venv, 4), n_steps=64, batch_size=32, n_epochs=1, seed=0, device="cpu")

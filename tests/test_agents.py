@@ -78,6 +78,7 @@ def _stats(path, shift: float = 3.0, env_id: str = "CartPole-v1") -> VecNormaliz
 # -- each source acts as its model ---------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["PPO", "A2C", "DQN", "QRDQN"])
 def test_a_zip_acts_as_its_model_predicts(saved, name):
     model, path = saved[name]
@@ -89,6 +90,7 @@ def test_a_zip_acts_as_its_model_predicts(saved, name):
         assert agent(obs) == int(model.predict(obs, deterministic=True)[0])
 
 
+@pytest.mark.slow
 def test_a_vecnormalize_beside_the_zip_normalizes_every_observation(saved, tmp_path):
     model, path = saved["PPO"]
     shutil.copy(path, tmp_path / "model.zip")
@@ -102,6 +104,7 @@ def test_a_vecnormalize_beside_the_zip_normalizes_every_observation(saved, tmp_p
     assert [agent(o) for o in observations] == expected
 
 
+@pytest.mark.slow
 def test_an_rl_zoo_run_folder_loads_its_final_model_statistics_and_settings(saved, tmp_path):
     model, path = saved["PPO"]
     run = tmp_path / "logs" / "ppo" / "CartPole-v1_1"
@@ -123,6 +126,7 @@ def test_an_rl_zoo_run_folder_loads_its_final_model_statistics_and_settings(save
     assert agent(obs) == int(model.predict(norm.normalize_obs(obs), deterministic=True)[0])
 
 
+@pytest.mark.slow
 def test_a_hub_folder_loads_its_model_beside_other_zips(saved, tmp_path):
     shutil.copy(saved["DQN"][1], tmp_path / "dqn-CartPole-v1.zip")
     with zipfile.ZipFile(tmp_path / "train_eval_metrics.zip", "w") as z:
@@ -135,6 +139,7 @@ def test_a_hub_folder_loads_its_model_beside_other_zips(saved, tmp_path):
     assert agent.config == {"batch_size": 64} and agent.env_kwargs == {"sutton_barto_reward": False}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("source", ["zip", "memory"])
 def test_a_recurrent_agent_carries_its_state_from_step_to_step(saved, source):
     model, path = saved["RecurrentPPO"]
@@ -158,6 +163,7 @@ def test_a_recurrent_agent_carries_its_state_from_step_to_step(saved, source):
     assert stateless != [agent(o) for o in observations], "its state changes no action: the test could not see it lost"
 
 
+@pytest.mark.slow
 def test_a_batch_of_rows_acts_row_by_row(saved):
     model, path = saved["PPO"]
     agent = load_agent(path).batched()
@@ -197,6 +203,7 @@ def test_a_callable_acts_and_its_identity_is_its_code():
     assert load_agent(lambda obs: 0).identity != load_agent(lambda obs: 1).identity
 
 
+@pytest.mark.slow
 def test_identities_tell_files_statistics_and_parameters_apart(saved, tmp_path):
     _, path = saved["PPO"]
     shutil.copy(path, tmp_path / "model.zip")
@@ -286,6 +293,7 @@ def test_a_path_that_does_not_exist(tmp_path):
     assert "Hugging Face Hub repo id? specguard downloads nothing" in info.value.hint
 
 
+@pytest.mark.slow
 def test_a_folder_without_a_model_and_one_with_two(saved, tmp_path):
     (tmp_path / "notes.txt").write_text("")
     assert "holds no stable-baselines3 model" in _message(lambda: load_agent(tmp_path))
@@ -306,6 +314,7 @@ def test_a_file_that_is_not_an_sb3_model(tmp_path, content):
     assert message.startswith(f"{str(path)!r}: not a stable-baselines3 model (") and "\n" not in message
 
 
+@pytest.mark.slow
 def test_an_algorithm_that_does_not_match_the_zip(saved):
     path = saved["PPO"][1]
     assert (
@@ -316,6 +325,7 @@ def test_an_algorithm_that_does_not_match_the_zip(saved):
     assert load_agent(path, algorithm="PPO").algorithm is sb3.PPO
 
 
+@pytest.mark.slow
 def test_statistics_of_another_observation_shape(saved, tmp_path):
     shutil.copy(saved["PPO"][1], tmp_path / "model.zip")
     _stats(tmp_path / "vecnormalize.pkl", env_id="Pendulum-v1")
@@ -324,6 +334,7 @@ def test_statistics_of_another_observation_shape(saved, tmp_path):
     assert "(3,)" in message and "(4,)" in message
 
 
+@pytest.mark.slow
 def test_check_fits_refuses_another_env_s_spaces_naming_both(saved):
     agent = load_agent(saved["PPO"][1])
     pendulum = gym.make("Pendulum-v1")

@@ -3,10 +3,12 @@
 
 from __future__ import annotations
 
+import queue
 import time
 from pathlib import Path
 
 import pytest
+from test_slots import stamp
 
 import specguard as sg
 from example_specs import pendulum
@@ -14,8 +16,8 @@ from specguard.cache.fingerprint import fingerprint_spec
 from specguard.cache.store import Cache, try_acquire
 from specguard.engine.ahead import TrainAhead
 from specguard.engine.run_spec import RunOptions, run_with
-from specguard.parallel.protocol import Done
-from specguard.parallel.slots import PooledExecutor, SlotPool
+from specguard.parallel.protocol import Done, Task
+from specguard.parallel.slots import FOREGROUND, PooledExecutor, SlotPool
 
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 pytest_plugins = ["pytester"]
@@ -38,6 +40,7 @@ def options(cache: Path, pool: SlotPool, ahead: TrainAhead | None) -> RunOptions
     return RunOptions(workers=2, cache_dir=cache, progress=None, executor=PooledExecutor(pool), ahead=ahead)
 
 
+@pytest.mark.slow
 def test_planned_runs_are_handed_over_with_their_lock_and_recorded_as_trained(tmp_path, slots):
     first, second = spec(), spec(timesteps=192)
     ahead = TrainAhead(slots, Cache(tmp_path))
@@ -60,6 +63,35 @@ def test_planned_runs_are_handed_over_with_their_lock_and_recorded_as_trained(tm
     ahead.close()
 
 
+def _wait_for_start(planned, deadline_s=60.0):
+    deadline = time.monotonic() + deadline_s
+    while not any(run.ticket.started for run in planned) and time.monotonic() < deadline:
+        time.sleep(0.05)
+
+
+@pytest.mark.slow
+def test_planned_runs_start_longest_ceiling_first(tmp_path):
+    """The longest-processing-time rule: a spec planned later with a larger ceiling starts first (its seeds in
+    order), so one long seed does not start last and keep a core busy alone at the session's end."""
+    pool = SlotPool(1)
+    try:
+        inbox: queue.Queue = queue.Queue()
+        blocker = pool.submit(Task(9, stamp, (str(tmp_path / "blocker"), 1.0)), rank=FOREGROUND, inbox=inbox)
+        while not blocker.started:
+            time.sleep(0.01)
+        short, long = spec(), spec(timesteps=100_000)
+        ahead = TrainAhead(pool, Cache(tmp_path / "cache"))
+        ahead.plan([short, long])  # queued behind the blocker, all four: the order is the ranks' alone
+        names = {fingerprint_spec(short).spec_key: "short", fingerprint_spec(long).spec_key: "long"}
+        _wait_for_start(ahead._planned.values())
+        started = [(names[r.spec_key], r.seed) for r in ahead._planned.values() if r.ticket.started]
+        assert started == [("long", 0)], f"started first: {started}"
+        ahead.close()
+    finally:
+        pool.close()
+
+
+@pytest.mark.slow
 def test_a_run_another_process_holds_or_the_cache_has_is_not_planned(tmp_path, slots):
     s = spec()
     run_with(s, RunOptions(workers=2, cache_dir=tmp_path, progress=None))
@@ -82,6 +114,7 @@ def test_planning_checks_a_copy_so_the_spec_warns_in_its_own_item(tmp_path, slot
     ahead.close()
 
 
+@pytest.mark.slow
 def test_close_stores_the_finished_runs_nobody_asked_for(tmp_path, slots):
     s = spec()
     ahead = TrainAhead(slots, Cache(tmp_path))
@@ -94,6 +127,7 @@ def test_close_stores_the_finished_runs_nobody_asked_for(tmp_path, slots):
     assert run_with(s, RunOptions(workers=2, cache_dir=tmp_path, progress=None)).cached == {0: True, 1: True}
 
 
+@pytest.mark.slow
 def test_close_stops_the_runs_still_training_and_releases_their_locks(tmp_path, slots):
     s = spec(timesteps=100_000)
     ahead = TrainAhead(slots, Cache(tmp_path))

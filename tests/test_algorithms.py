@@ -195,6 +195,7 @@ def test_a_policy_among_the_hyperparameters_is_refused_with_a_hint_to_the_field(
     assert e.value.hint == "use Spec(..., policy=...)"
 
 
+@pytest.mark.slow
 def test_the_policy_trains():
     from stable_baselines3.common.policies import ActorCriticPolicy
 
@@ -308,6 +309,7 @@ def test_the_policy_is_in_the_key_only_when_it_is_not_the_default():
 # -- training, judging, caching ---------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("algorithm", "hyperparameters"),
     [("RecurrentPPO", TINY), ("TQC", {"learning_starts": 32, "batch_size": 32})],
@@ -364,6 +366,7 @@ def masked_spec(initial=Masked, **kwargs):
     return sg.Spec(env, CLEAN, budget=sg.Budget(timesteps=64, min_seeds=1, eval_episodes=4, checkpoints=1), **kwargs)
 
 
+@pytest.mark.slow
 def test_maskable_ppo_acts_on_the_initial_envs_masks_in_training_and_evaluation():
     s = masked_spec(expect=0.5)
     result, model = train_run(s, seed=0)
@@ -374,11 +377,13 @@ def test_maskable_ppo_acts_on_the_initial_envs_masks_in_training_and_evaluation(
     assert untrained_ppo.successes["clean"] < untrained_ppo.episodes  # without masks, 64 steps do not learn them
 
 
+@pytest.mark.slow
 def test_maskable_ppo_without_masks_is_refused_before_training():
     with pytest.raises(sg.InvalidSpec, match=r"MaskablePPO acts on action masks, and the initial env \(Unmasked\) "):
         train_run(masked_spec(Unmasked, expect=0.5), seed=0)
 
 
+@pytest.mark.slow
 def test_maskable_ppo_refuses_masks_of_actions_execute_changes():
     with pytest.raises(sg.InvalidSpec, match=r"acts on action masks, and the agent's actions go through execute\(\)"):
         train_run(masked_spec(env_kwargs={"execute": lambda a: (a + 1) % 3}, expect=0.5), seed=0)

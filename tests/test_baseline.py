@@ -188,6 +188,7 @@ for i in range(60):
 """
 
 
+@pytest.mark.slow
 def test_concurrent_saves_to_one_baseline_all_survive(tmp_path):
     import os
     import subprocess

@@ -321,6 +321,7 @@ def scalars(folder):
     return found
 
 
+@pytest.mark.slow
 def test_a_users_callback_runs_in_every_training_worker(tmp_path):
     result = sg.run_spec(
         quick_spec(callbacks=[functools.partial(MarkTraining, tmp_path)]), workers=2, cache_dir=None, progress=None
@@ -331,6 +332,7 @@ def test_a_users_callback_runs_in_every_training_worker(tmp_path):
     assert str(os.getpid()) not in {m.split("-")[0] for m in marks}  # in the workers, not here
 
 
+@pytest.mark.slow
 def test_a_callback_that_raises_fails_its_seeds_in_one_line_naming_it():
     result = sg.run_spec(quick_spec(callbacks=[Raises]), workers=1, cache_dir=None, progress=None)
     assert sorted(result.errors) == [0, 1] and not result.passed
@@ -376,6 +378,7 @@ def checkpoints_of_the_run(root, seed, spec):
     return CheckpointCallback(save_freq=128, save_path=str(Path(root) / spec.label / f"seed_{seed}"))
 
 
+@pytest.mark.slow
 def test_a_factory_that_takes_the_seed_and_spec_gets_them_so_each_run_writes_its_own_folder(tmp_path):
     from specguard.training.train import train_run
 
@@ -419,6 +422,7 @@ def test_a_tensorboard_folder_that_cannot_be_made_is_refused_in_one_line_naming_
             assert message in str(error.value).splitlines()[0], str(error.value)
 
 
+@pytest.mark.slow
 def test_run_spec_writes_each_goals_curve_to_tensorboard_one_folder_per_spec_and_seed(tmp_path):
     result = sg.run_spec(
         quick_spec(), workers=2, cache_dir=tmp_path / "cache", progress=None, tensorboard_log=tmp_path / "tb"
@@ -483,6 +487,7 @@ def scalar_events(folder, tag):
     return [(e.step, e.value) for e in accumulator.Scalars(tag)] if tag in accumulator.Tags()["scalars"] else []
 
 
+@pytest.mark.slow
 def test_a_met_checkpoint_is_written_to_tensorboard_at_its_step(tmp_path):
     # A look at step 128 meets every threshold (>= 0) and stops training in the middle of SB3's second rollout,
     # after SB3's last write: the look is the run's result, and TensorBoard has it at its step.
@@ -524,6 +529,7 @@ def test_a_users_callback_that_stops_training_is_recorded_and_one_that_returns_n
     assert forgetful.stopped_at == 1 and forgetful.returned_none
 
 
+@pytest.mark.slow
 def test_a_callback_that_stops_training_says_so_in_the_result_the_table_the_failure_and_junit(tmp_path):
     from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
 

@@ -120,6 +120,7 @@ def test_a_random_policy_fails_keep_the_pole_up_until_the_end():
     assert not result.passed
 
 
+@pytest.mark.slow
 def test_an_sb3_zip_trained_outside_specguard_is_judged_as_its_replay(ppo_zip):
     model = sb3.PPO.load(ppo_zip, device="cpu")
     result = check_agent(KEEP, ppo_zip, episodes=20, max_episodes=20)
@@ -241,6 +242,7 @@ def spec_file(tmp_path):
     return path
 
 
+@pytest.mark.slow
 def test_check_exits_0_when_the_agent_passes_and_1_when_it_fails(spec_file, ppo_zip, tmp_path, capsys):
     from specguard.cli.main import main
 

@@ -53,6 +53,7 @@ def test_show_lists_everything_without_a_name(spec_file, capsys):
     assert "== easy" in out and "== hard" in out and "== tree" in out
 
 
+@pytest.mark.slow
 def test_run_passes_and_fails_with_exit_status(spec_file, tmp_path, capsys):
     report = tmp_path / "out.json"
     args = ["--workers", "1", "--cache-dir", str(tmp_path / "cache"), "--quiet"]
@@ -64,6 +65,7 @@ def test_run_passes_and_fails_with_exit_status(spec_file, tmp_path, capsys):
     assert "== hard: FAILED" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_run_reports_safety_rates_in_the_table_and_the_json(tmp_path, capsys):
     path = tmp_path / "safe_specs.py"
     path.write_text(
@@ -92,6 +94,7 @@ def test_run_reports_safety_rates_in_the_table_and_the_json(tmp_path, capsys):
     assert data["runs"][0]["successes"]["pendulum:spin"] == 4
 
 
+@pytest.mark.slow
 def test_run_prints_progress_lines(spec_file, tmp_path, capsys):
     main(["run", f"{spec_file}::easy", "--workers", "1", "--no-cache", "--budget-scale", "2"])
     err = capsys.readouterr().err
@@ -212,6 +215,7 @@ def test_a_spec_file_that_exits_at_import_is_one_line_naming_it(tmp_path, capsys
         assert f"specguard: error: {path}: importing it called sys.exit(3)" in err and "Traceback" not in err
 
 
+@pytest.mark.slow
 def test_falsify_searches_each_run_and_prints_the_failure_rate(spec_file, tmp_path, capsys):
     argv = ["falsify", f"{spec_file}::easy", "--cache-dir", str(tmp_path / "c"), "--examples", "5", "--uniform", "4"]
     code = main([*argv, "--starts", "theta=-0.5:0.5", "--quiet"])
@@ -221,6 +225,7 @@ def test_falsify_searches_each_run_and_prints_the_failure_rate(spec_file, tmp_pa
     assert ("COUNTEREXAMPLE" in out) == (code == 1)
 
 
+@pytest.mark.slow
 def test_falsify_searches_the_spec_s_own_start_space_and_checks_it_before_training(tmp_path, capsys):
     path = tmp_path / "own.py"
     path.write_text(SPEC_FILE + "import dataclasses\nown = dataclasses.replace(easy, starts={'speed': (0.0, 1.0)})\n")
@@ -261,6 +266,7 @@ def _python(*args: str, cwd=None, env=None):
     return subprocess.run([sys.executable, *args], capture_output=True, text=True, cwd=cwd, env=env, timeout=300)
 
 
+@pytest.mark.slow
 def test_pytest_help_works_with_the_plugin_loaded(tmp_path):
     import os
 
@@ -272,6 +278,7 @@ def test_pytest_help_works_with_the_plugin_loaded(tmp_path):
     assert "family-wise 5%" in done.stdout
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("argv", [["--help"], *[[command, "--help"] for command in SUBCOMMANDS]])
 def test_every_command_s_help_works(argv):
     done = _python("-m", "specguard", *argv)
@@ -319,6 +326,7 @@ def test_a_target_that_is_no_spec_file_is_one_line_naming_it(tmp_path, monkeypat
     assert _one_error_line(capsys.readouterr().err) == f"specguard: error: {message}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("exit_call", ["os._exit(0)", "os._exit(3)", "sys.exit()", "raise SystemExit('bye')"])
 def test_a_spec_file_that_ends_the_process_at_import_is_an_error_naming_it(tmp_path, exit_call):
     path = tmp_path / "quits.py"
@@ -329,6 +337,7 @@ def test_a_spec_file_that_ends_the_process_at_import_is_an_error_naming_it(tmp_p
     assert line.startswith(f"specguard: error: {path}: importing it called ") and "exit" in line
 
 
+@pytest.mark.slow
 def test_a_json_write_that_fails_at_the_end_warns_and_keeps_the_results(spec_file, tmp_path, monkeypatch, capsys):
     import specguard.cli.main as cli
 
@@ -352,6 +361,7 @@ def test_a_json_write_that_fails_at_the_end_warns_and_keeps_the_results(spec_fil
     fallback.unlink()
 
 
+@pytest.mark.slow
 def test_a_json_write_that_fails_twice_prints_the_results(spec_file, tmp_path, monkeypatch, capsys):
     import specguard.cli.main as cli
 

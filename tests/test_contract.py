@@ -11,6 +11,7 @@ import pytest
 import specguard as sg
 from specguard.construction.env import SpecEnv
 from specguard.contract import invariants as contract
+from specguard.contract.invariants import FRESH_INTERPRETER
 from specguard.testing import check_operator, parametrize_with_checks
 
 
@@ -19,7 +20,18 @@ def test_builtins_keep_the_contract(operator, check):
     check(operator)
 
 
-@pytest.mark.parametrize("cls, check_name", list(broken.CAUGHT_BY.items()), ids=[c.__name__ for c in broken.CAUGHT_BY])
+@pytest.mark.parametrize(
+    "cls, check_name",
+    [
+        pytest.param(
+            cls,
+            name,
+            id=cls.__name__,
+            marks=[pytest.mark.slow] if getattr(contract, name) in FRESH_INTERPRETER else [],
+        )
+        for cls, name in broken.CAUGHT_BY.items()
+    ],
+)
 def test_broken_operator_is_caught_by_the_right_check(cls, check_name):
     check = getattr(contract, check_name)
     # 150 examples: Hypothesis draws some values from the constants of the local modules loaded, so which examples a
@@ -93,6 +105,7 @@ def test_a_contains_that_reads_what_other_methods_left_is_caught():
         contract.check_contains_depends_on_ctx_alone(broken.HiddenSequence)
 
 
+@pytest.mark.slow
 def test_check_operator_runs_every_applicable_check_and_reports_each_failure():
     check_operator(sg.Distance, max_examples=5)
     with pytest.raises(AssertionError) as caught:
@@ -102,6 +115,7 @@ def test_check_operator_runs_every_applicable_check_and_reports_each_failure():
     assert "check_description_is_exact failed for AddressInDescribe." in message
 
 
+@pytest.mark.slow
 def test_operator_author_example_from_extend_passes():
     # The "at least k of the children" operator of specguard.extend's docstring keeps the contract.
     from specguard.extend import ChildWeights, Context, Node

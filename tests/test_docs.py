@@ -29,6 +29,7 @@ def tracked_files() -> list[str]:
     return [name for name in out.decode().split("\0") if name]
 
 
+@pytest.mark.slow
 def test_no_tracked_file_points_outside_the_repository():
     found = []
     for name in tracked_files():

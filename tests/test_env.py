@@ -63,6 +63,7 @@ def test_env_is_recreated_from_its_spec():
     assert rollouts[0] == rollouts[1]
 
 
+@pytest.mark.slow
 def test_env_works_with_sb3_vector_envs():
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import SubprocVecEnv
@@ -77,6 +78,7 @@ def test_env_works_with_sb3_vector_envs():
         venv.close()
 
 
+@pytest.mark.slow
 def test_a_factory_that_has_compiled_its_tree_builds_subprocess_envs():
     # The factory travels pickled (cloudpickle) with its compiled tree, less the generated code object.
     from stable_baselines3.common.env_util import make_vec_env

@@ -83,6 +83,7 @@ def test_an_address_nobody_answers_fails_before_anything_trains():
         DaskExecutor("tcp://127.0.0.1:9", timeout=1)
 
 
+@pytest.mark.slow
 def test_the_cluster_gives_the_local_pools_figures_and_a_warm_cache_submits_nothing(cluster, tmp_path):
     s = spec()
     local = sg.run_spec(s, workers=2, cache_dir=None, progress=None)
@@ -125,6 +126,7 @@ def make_killed():
     return KilledOnSeed(gym.make("Pendulum-v1"))
 
 
+@pytest.mark.slow
 def test_a_cluster_worker_killed_mid_run_fails_one_seed(cluster, tmp_path):
     s = spec(initial=sg.InitialEnv(make_killed, features=("x", "y", "omega")))
     result = sg.run_spec(s, executor=cluster.scheduler_address, cache_dir=tmp_path, progress=None)
@@ -145,6 +147,7 @@ def make_failing_evaluation():
     return FailsInEvaluation(gym.make("Pendulum-v1"))
 
 
+@pytest.mark.slow
 def test_errors_on_the_cluster_are_the_same_one_line_per_seed(cluster):
     s = spec(initial=sg.InitialEnv(make_failing_evaluation, features=("x", "y", "omega")))
     result = sg.run_spec(s, executor=cluster.scheduler_address, cache_dir=None, progress=None)
@@ -155,6 +158,7 @@ def test_errors_on_the_cluster_are_the_same_one_line_per_seed(cluster):
     }
 
 
+@pytest.mark.slow
 def test_spec_errors_found_on_the_cluster_reach_the_caller(cluster):
     with pytest.raises(sg.InvalidSpec, match=r"Spec 'pendulum'.algorithm: DQN cannot act in a Box action space"):
         dqn = spec(algorithm="DQN", hyperparameters={})
@@ -197,6 +201,7 @@ def test_a_bad_executor_is_a_usage_error_before_anything_trains(pytester, addres
     result.stderr.fnmatch_lines([message])
 
 
+@pytest.mark.slow
 def test_specguard_run_takes_an_executor(cluster, tmp_path, capsys):
     from specguard.cli.main import main
 

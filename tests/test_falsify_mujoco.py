@@ -36,6 +36,7 @@ def cache(tmp_path_factory):
     return tmp_path_factory.mktemp("mujoco") / "cache"
 
 
+@pytest.mark.slow
 def test_the_command_line_falsifies_by_joint_name_with_no_setter_written(tmp_path, cache, capsys):
     path = tmp_path / "ip_specs.py"
     path.write_text(SPEC + "balance = sg.Spec(PENDULUM, BALANCE, budget=BUDGET, hyperparameters=TINY)\n")
@@ -101,6 +102,7 @@ def factory_spec():
     return sg.Spec(initial, namespace["BALANCE"], budget=namespace["BUDGET"])
 
 
+@pytest.mark.slow
 def test_a_factory_without_render_mode_renders_off_screen_and_leaves_mujoco_gl_unset(tmp_path, monkeypatch):
     monkeypatch.delenv("MUJOCO_GL", raising=False)
     monkeypatch.delenv("DISPLAY", raising=False)

@@ -328,6 +328,7 @@ def test_the_probe_records_an_env_that_raises_instead_of_raising():
     assert probe(s) == probe(s)
 
 
+@pytest.mark.slow
 def test_the_key_is_the_same_across_processes_and_hash_seeds(tmp_path):
     script = textwrap.dedent(
         """

@@ -6,6 +6,8 @@ import importlib
 import subprocess
 import sys
 
+import pytest
+
 import specguard as sg
 
 
@@ -22,6 +24,7 @@ def test_unknown_attribute():
         sg.Nope  # noqa: B018
 
 
+@pytest.mark.slow
 def test_import_is_light():
     heavy = "{'torch', 'scipy', 'gymnasium', 'stable_baselines3'}"
     code = f"import sys, specguard, specguard.pytest_plugin.plugin; print(sorted({heavy} & set(sys.modules)))"
@@ -29,6 +32,7 @@ def test_import_is_light():
     assert out.strip() == "[]"
 
 
+@pytest.mark.slow
 def test_star_import_is_silent_under_warnings_as_errors():
     # A fresh interpreter: every public name is imported for the first time, and any warning fails the import.
     code = "from specguard import *; print(len([n for n in dir() if not n.startswith('_')]))"

@@ -124,6 +124,7 @@ def specguard_run(args: list[str], cwd: Path, *on_path: Path) -> subprocess.Comp
     )
 
 
+@pytest.mark.slow
 def test_specguard_run_trains_a_registered_id_in_worker_processes(tmp_path):
     write_package(tmp_path, "sgreg_cli")
     spec_file = tmp_path / "registered_specs.py"

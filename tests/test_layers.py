@@ -493,6 +493,7 @@ def collected_files(root: Path, *args: str) -> set[str]:
     return {line.split("::")[0] for line in out.splitlines() if "::" in line}
 
 
+@pytest.mark.slow
 def test_every_docstring_example_is_collected_by_the_readme_test_command():
     """README's test command is ``pytest`` over its ``testpaths``; a folder pytest skips (``build``) hides examples."""
     root = PACKAGE.parent

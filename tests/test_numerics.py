@@ -102,6 +102,7 @@ def test_a_process_whose_torch_chose_its_kernels_first_is_refused(monkeypatch):
 # -- the weights -------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_portable_weights_do_not_follow_the_kernels_the_machine_would_pick_and_native_ones_do(monkeypatch):
     # Another CPU, as far as one machine can show it: the parent's environment picks torch's AVX2 kernels, then its
     # DEFAULT ones (and MKL's AVX2 branch), as CPUs with and without AVX2 would pick them.
@@ -123,6 +124,7 @@ def test_portable_weights_do_not_follow_the_kernels_the_machine_would_pick_and_n
     assert avx2["portable"].weights_digest != avx2["native"].weights_digest
 
 
+@pytest.mark.slow
 def test_the_command_line_gives_the_same_digest_whatever_kernels_its_environment_picks(monkeypatch, tmp_path):
     import json
 

@@ -5,6 +5,7 @@ Building and installing them is `.ci/release_smoke.sh`'s part; these read the me
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
@@ -101,7 +102,14 @@ SDIST_INPUTS = {ROOT: ["specguard", "tests"], ROOT / "plugins": ["specguard_plug
 
 
 def sdist_names(project: Path, tmp_path: Path) -> set[str]:
-    """The files of ``project``'s sdist (paths inside its top folder), built from a copy by setuptools itself."""
+    """The files of ``project``'s sdist (paths inside its top folder): the one in ``$SPECGUARD_DIST_DIR`` where
+    that is set (``.ci/run`` builds the release once, with ``.ci/release_smoke.sh --build``), else built from a
+    copy by setuptools itself."""
+    built = os.environ.get("SPECGUARD_DIST_DIR")
+    if built:
+        name = tomllib.loads((project / "pyproject.toml").read_text())["project"]["name"].replace("-", "_")
+        (archive,) = Path(built).glob(f"{name}-*.tar.gz")
+        return _members(archive)
     pytest.importorskip("setuptools", minversion="77")  # the build backend both pyproject.toml name
     source, out = tmp_path / "source", tmp_path / "out"
     ignore = shutil.ignore_patterns("__pycache__", "*.py[cod]", "*.egg-info")
@@ -113,16 +121,22 @@ def sdist_names(project: Path, tmp_path: Path) -> set[str]:
     build = "import sys; from setuptools import build_meta; build_meta.build_sdist(sys.argv[1])"
     subprocess.run([sys.executable, "-c", build, str(out)], cwd=source, check=True, capture_output=True)
     (archive,) = out.glob("*.tar.gz")
+    return _members(archive)
+
+
+def _members(archive: Path) -> set[str]:
     with tarfile.open(archive) as tar:
         return {m.name.split("/", 1)[1] for m in tar.getmembers() if m.isfile()}
 
 
+@pytest.mark.slow
 def test_specguards_sdist_leaves_out_the_tests_that_need_the_checkout(tmp_path):
     names = sdist_names(ROOT, tmp_path)
     assert "specguard/__init__.py" in names and "LICENSE" in names
     assert [n for n in names if n.startswith("tests/")] == []
 
 
+@pytest.mark.slow
 def test_the_plugins_sdist_ships_its_tests_whole(tmp_path):
     tests = ROOT / "plugins" / "tests"
     shipped = {n for n in sdist_names(ROOT / "plugins", tmp_path) if n.startswith("tests/")}
@@ -154,6 +168,7 @@ print(f"{tried} examples, {failed} failed")
 """
 
 
+@pytest.mark.slow
 def test_the_docstring_examples_pass_without_the_checkout(tmp_path):
     """An installed wheel's examples: every module's, run with the repository root (example_specs/) off sys.path."""
     done = subprocess.run(

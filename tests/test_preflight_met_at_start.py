@@ -137,6 +137,7 @@ def test_specguard_run_refuses_in_one_line_with_status_2(tmp_path, capsys):
     assert "up" in err and f"all {START_SAMPLES} of {START_SAMPLES} sampled starts" in err
 
 
+@pytest.mark.slow
 def test_the_verdict_counts_evaluation_episodes_that_started_in_the_root_goal():
     from specguard.training.train import EVAL_SEED_BASE, EVAL_SEED_STRIDE
 

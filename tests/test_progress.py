@@ -96,6 +96,7 @@ def test_a_workers_update_round_trips_and_foreign_lines_pass_through():
     assert format_event(decode_update("p", 2, "hello")) == "[specguard] p seed 2: hello"
 
 
+@pytest.mark.slow
 def test_two_seeds_lines_never_share_a_line(tmp_path):
     budget = sg.Budget(timesteps=640, min_seeds=2, eval_episodes=2)
     spec = sg.Spec(pendulum.initial_env, pendulum.trees["b"], budget=budget, hyperparameters=TINY)

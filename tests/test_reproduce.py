@@ -54,6 +54,7 @@ def test_sized_trains_every_seed_its_whole_scaled_budget():
     assert (out.budget.min_seeds, out.budget.max_seeds, out.required_runs) == (5, 5, 5)
 
 
+@pytest.mark.slow
 def test_reproduce_writes_a_table_beside_the_paper_and_a_plot_per_case(tmp_path, capsys):
     case = tmp_path / "tiny_case.py"
     case.write_text(textwrap.dedent(CASE))
@@ -88,6 +89,7 @@ def test_reproduce_writes_a_table_beside_the_paper_and_a_plot_per_case(tmp_path,
     assert png.read_bytes() == drawn
 
 
+@pytest.mark.slow
 def test_a_reproduction_rewrites_its_own_cases_and_keeps_the_sections_of_others(tmp_path):
     case = tmp_path / "tiny_case.py"
     case.write_text(textwrap.dedent(CASE))
@@ -112,6 +114,7 @@ def test_a_case_scale_names_a_given_case(tmp_path, capsys):
     assert "case scale: no case named 'lunar'; the cases are ['tiny_case']" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_a_case_scale_replaces_the_budget_scale_for_its_case(tmp_path):
     case = tmp_path / "tiny_case.py"
     case.write_text(textwrap.dedent(CASE))
@@ -150,6 +153,7 @@ def _signal_masks(pid: int) -> str:
     return ", ".join(line.replace("\t", " ") for line in lines if line.startswith(("SigBlk", "SigIgn", "SigCgt")))
 
 
+@pytest.mark.slow
 def test_an_interruption_stops_the_running_specs_at_once_and_starts_no_other(tmp_path):
     case = tmp_path / "long_case.py"
     case.write_text(textwrap.dedent(LONG_CASE))

@@ -32,6 +32,7 @@ def trained():
     return spec, result, model
 
 
+@pytest.mark.slow
 def test_rollout_returns_the_steps_of_each_episode(trained):
     spec, _, model = trained
     episodes = rollout(model, spec, episodes=2)
@@ -46,6 +47,7 @@ def test_rollout_returns_the_steps_of_each_episode(trained):
     assert np.array_equal(again[1][-1]["obs"], episodes[1][-1]["obs"])
 
 
+@pytest.mark.slow
 def test_gif_has_the_episode_and_a_caption_naming_the_goals(trained, tmp_path):
     spec, _, model = trained
     gif = write_gif(model, spec, tmp_path / "cartpole.gif")
@@ -65,6 +67,7 @@ def test_gif_has_the_episode_and_a_caption_naming_the_goals(trained, tmp_path):
     assert all(path in gif.text for path in goals)
 
 
+@pytest.mark.slow
 def test_a_gif_from_a_start_replays_the_falsifiers_episode_from_it(trained, tmp_path):
     from specguard.engine.falsify_run import batch_policy, property_keys
     from specguard.falsify.search import EpisodeRunner
@@ -80,6 +83,7 @@ def test_a_gif_from_a_start_replays_the_falsifiers_episode_from_it(trained, tmp_
         assert gif.written and f"{outcome.steps} steps;" in gif.text
 
 
+@pytest.mark.slow
 def test_long_episodes_are_subsampled(trained, tmp_path):
     spec, _, model = trained
     gif = write_gif(model, spec, tmp_path / "few.gif", max_frames=5)
@@ -122,6 +126,7 @@ def test_an_env_without_rgb_array_frames_gives_a_note(tmp_path):
     assert not (tmp_path / "blind.gif").exists()
 
 
+@pytest.mark.slow
 def test_a_factory_without_render_mode_is_told_to_render_rgb_array_frames(trained, tmp_path):
     spec, _, model = trained
 
@@ -158,6 +163,7 @@ def test_a_render_that_raises_gives_a_note(tmp_path, monkeypatch):
     assert not gif.written and "rendering failed (RuntimeError: no display)" in gif.text
 
 
+@pytest.mark.slow
 def test_report_gifs_load_the_first_seeds_cached_model(trained, tmp_path):
     spec, result, model = trained
     Cache(tmp_path / "cache").store(spec, 0, result, model)
@@ -178,6 +184,7 @@ def test_report_gifs_load_the_first_seeds_cached_model(trained, tmp_path):
     assert "cache is off" in report_gifs(tmp_path / "r", rows[:1], specs, None)["t.py::test_cart"].text
 
 
+@pytest.mark.slow
 def test_writing_a_gif_prints_nothing_to_stderr(tmp_path):
     # SDL complains on stderr about a missing display ("XDG_RUNTIME_DIR is invalid") unless told it has none.
     import os
@@ -209,6 +216,7 @@ def test_writing_a_gif_prints_nothing_to_stderr(tmp_path):
     assert done.stderr.strip() == ""
 
 
+@pytest.mark.slow
 def test_a_policy_acts_on_one_torch_thread_and_the_process_keeps_its_setting(trained, monkeypatch):
     # Two threads for a few-row batch of a small network were 60 times slower on a busy 2-core machine.
     import torch

@@ -28,6 +28,7 @@ def spec(tree="w", **kwargs):
     return sg.Spec(pendulum.initial_env, pendulum.trees[tree], **kwargs)
 
 
+@pytest.mark.slow
 def test_clearly_missed_goal_stops_after_the_minimum_seeds(tmp_path):
     # 128 steps of PPO never hold the pendulum up in 95% of episodes: missed in both runs.
     result = sg.run_spec(spec(expect={"pendulum": 0.95}), workers=2, cache_dir=tmp_path, progress=None)
@@ -39,6 +40,7 @@ def test_clearly_missed_goal_stops_after_the_minimum_seeds(tmp_path):
     assert "pendulum" in sg.table(result) and "failed" in sg.table(result)
 
 
+@pytest.mark.slow
 def test_trivially_met_goal_passes_with_a_quorum(tmp_path):
     s = spec(expect={"stabilization": 0.0}, quorum=2)
     result = sg.run_spec(s, workers=1, cache_dir=None, progress=None)
@@ -47,6 +49,7 @@ def test_trivially_met_goal_passes_with_a_quorum(tmp_path):
     assert len(result.runs) == 2
 
 
+@pytest.mark.slow
 def test_open_quorum_trains_more_seeds(tmp_path):
     # Quorum 3 of 4 with a goal met by every run: after 2 runs the quorum is open, one more settles it.
     s = spec(expect={"stabilization": 0.0}, quorum=3)
@@ -70,6 +73,7 @@ def make_failing():
     return FailsOnSeed(gym.make("Pendulum-v1"))
 
 
+@pytest.mark.slow
 def test_a_failing_seed_keeps_the_others(tmp_path):
     initial = sg.InitialEnv(make_failing, features=("x", "y", "omega"))
     s = sg.Spec(initial, pendulum.trees["b"], budget=sg.Budget(timesteps=128, eval_episodes=2), hyperparameters=TINY)
@@ -81,6 +85,7 @@ def test_a_failing_seed_keeps_the_others(tmp_path):
     assert any("seed 1: failed" in line for line in lines)
 
 
+@pytest.mark.slow
 def test_spec_errors_from_workers_reach_the_caller(tmp_path):
     with pytest.raises(sg.InvalidSpec, match=r"Spec 'pendulum'.algorithm: DQN cannot act in a Box action space"):
         sg.run_spec(spec(algorithm="DQN", hyperparameters={}), workers=1, cache_dir=None, progress=None)
@@ -119,6 +124,7 @@ def make_killed():
     return KilledOnSeed(gym.make("Pendulum-v1"))
 
 
+@pytest.mark.slow
 def test_a_killed_worker_fails_its_seed_alone_and_the_other_seed_is_stored(tmp_path, monkeypatch):
     monkeypatch.setenv(PARENT, str(os.getpid()))
     initial = sg.InitialEnv(make_killed, features=("x", "y", "omega"))
@@ -164,6 +170,7 @@ def test_an_env_that_cannot_be_built_is_a_spec_error_naming_it(tmp_path, initial
         sg.run_spec(s, workers=2, cache_dir=tmp_path if cached else None, progress=None)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cached", [True, False], ids=["cache", "no cache"])
 def test_env_failures_are_one_clean_line_per_seed(tmp_path, cached):
     initial = sg.InitialEnv(lambda: FailsInEvaluation(gym.make("Pendulum-v1")), features=("x", "y", "omega"))
@@ -235,6 +242,7 @@ def _wait_for_line(process: subprocess.Popen[str], needle: str, timeout: float =
     raise AssertionError(f"never saw {needle!r}; stderr so far:\n{seen}")
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads child processes from /proc")
 def test_sigterm_to_specguard_run_ends_every_worker_promptly_and_stores_nothing(tmp_path):
     spec_file = tmp_path / "long.py"
@@ -258,6 +266,7 @@ def test_sigterm_to_specguard_run_ends_every_worker_promptly_and_stores_nothing(
     assert entries == []
 
 
+@pytest.mark.slow
 def test_two_processes_asking_for_the_same_run_train_it_once(tmp_path):
     spec_file = tmp_path / "same.py"
     spec_file.write_text(CLI_SPEC.format(steps=6_000, threshold=0.0))  # met: both processes exit 0
@@ -327,6 +336,7 @@ def test_progress_lines_label_safety_rates():
     assert _Runs._rates(run).startswith("pendulum:fast (safe) 12/30, pendulum 30/30")
 
 
+@pytest.mark.slow
 def test_a_safety_threshold_is_asserted_end_to_end(tmp_path):
     # A constraint nothing violates (|omega| <= 8 in Pendulum): its safety rate is 100%, met in both runs.
     never = sg.Constraint(lambda s, a: abs(s.omega) > 8.5, name="never")
@@ -340,6 +350,7 @@ def test_a_safety_threshold_is_asserted_end_to_end(tmp_path):
     assert row.split()[:4] == ["pendulum:never", "(safe)", "100%", "(8/8)"] and digests.startswith("weights seed ")
 
 
+@pytest.mark.slow
 def test_a_script_without_a_main_guard_fails_fast_instead_of_hanging(tmp_path):
     import subprocess
     import sys
@@ -371,6 +382,7 @@ def test_the_table_lists_each_seeds_adapted_weights():
     assert "adapted weights" not in sg.table(_safety_result([30], {"fast": 0.8}))
 
 
+@pytest.mark.slow
 def test_a_worker_running_other_code_than_the_key_names_refuses_to_train(tmp_path, monkeypatch):
     # The driver keyed its runs with one specguard; the spawned workers import another (sources edited meanwhile).
     from specguard.cache.versions import versions
@@ -408,6 +420,7 @@ def test_a_local_version_label_alone_is_the_installed_library(monkeypatch):
     check_versions(keyed, "seed 0")
 
 
+@pytest.mark.slow
 def test_a_worker_with_the_keyed_versions_trains():
     from specguard.cache.versions import versions
     from specguard.engine.train_task import train_task as _train_task
@@ -434,6 +447,7 @@ class WaitsForAStoredRun(gym.Wrapper):
         return self.env.reset(seed=seed, options=options)
 
 
+@pytest.mark.slow
 def test_a_finished_seed_is_stored_while_the_other_still_trains(tmp_path):
     cache = tmp_path / "cache"
     initial = sg.InitialEnv(lambda: WaitsForAStoredRun(gym.make("Pendulum-v1"), cache), features=("x", "y", "omega"))
@@ -506,6 +520,7 @@ def _a_read_only_cache(tmp_path):
     return path
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("make_cache", [_a_file_in_the_cache_dirs_place, _a_read_only_cache], ids=["file", "read-only"])
 def test_a_cache_that_cannot_be_written_warns_once_and_keeps_the_trained_result(tmp_path, make_cache):
     import os
@@ -521,6 +536,7 @@ def test_a_cache_that_cannot_be_written_warns_once_and_keeps_the_trained_result(
     assert result.passed == expected.passed and not result.errors
 
 
+@pytest.mark.slow
 def test_a_full_disk_warns_with_its_cause_and_keeps_every_run(tmp_path, monkeypatch):
     import errno
 
@@ -536,6 +552,7 @@ def test_a_full_disk_warns_with_its_cause_and_keeps_every_run(tmp_path, monkeypa
     assert len(result.runs) == 2 and not result.errors  # both seeds kept, judged
 
 
+@pytest.mark.slow
 def test_a_lock_that_cannot_be_created_warns_and_keeps_every_run(tmp_path, monkeypatch):
     import errno
 

@@ -218,6 +218,7 @@ def test_the_reach_hint_names_always():
     assert "sg.Always" in e.value.hint
 
 
+@pytest.mark.slow
 def test_a_spec_trains_on_it_and_its_table_counts_the_episodes_that_started_outside():
     initial = sg.InitialEnv(sometimes_inside, features=("x",))
     tree = sg.Always(sg.Goal("up", x=(0.5, None)), name="stay")
@@ -327,6 +328,7 @@ def test_the_baseline_env_reports_the_fall_too():
         assert info["goals"] == {"stay": False, "stay/tall": True}  # tall, and fallen: not kept
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("until", ["horizon", "termination"])
 def test_a_run_counts_the_episodes_the_env_ended_before_the_horizon(until):
     initial = sg.InitialEnv(lambda: gym.wrappers.TimeLimit(Hopper(0.6), 20), features=("x",))
@@ -363,6 +365,7 @@ def test_an_env_that_declares_a_limit_it_never_enforces_runs_under_the_cap():
     assert steps == EPISODE_CAP and info[CAPPED] == EPISODE_CAP
 
 
+@pytest.mark.slow
 def test_a_run_on_an_env_that_never_ends_finishes_and_says_where_it_cut(monkeypatch):
     monkeypatch.setattr(cap, "EPISODE_CAP", 50)  # in this process: train_run, not run_spec's workers
     initial = sg.InitialEnv(lambda: Endless(0.6), features=("x",))

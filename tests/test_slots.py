@@ -55,6 +55,7 @@ def ends(inbox: queue.Queue, count: int) -> list:
     return got
 
 
+@pytest.mark.slow
 def test_a_free_slot_takes_the_lowest_rank_then_the_first_submitted(pool, tmp_path):
     slots = pool(1)
     inbox: queue.Queue = queue.Queue()
@@ -69,6 +70,7 @@ def test_a_free_slot_takes_the_lowest_rank_then_the_first_submitted(pool, tmp_pa
     assert [t for t, _ in done] == [blocker, tickets["now"], tickets["now too"], tickets["late"], tickets["later"]]
 
 
+@pytest.mark.slow
 def test_rerank_moves_a_queued_task_to_the_front(pool, tmp_path):
     slots = pool(1)
     inbox: queue.Queue = queue.Queue()
@@ -81,6 +83,7 @@ def test_rerank_moves_a_queued_task_to_the_front(pool, tmp_path):
     assert [t for t, _ in done][1:] == [wanted, first]
 
 
+@pytest.mark.slow
 def test_an_idle_slot_trains_work_queued_ahead_while_the_foreground_batch_waits_for_its_slower_task(pool, tmp_path):
     """The main job's gap: a spec's faster seed ends, and the core it frees trains the next spec's seed at once."""
     slots = pool(2)
@@ -94,6 +97,7 @@ def test_an_idle_slot_trains_work_queued_ahead_while_the_foreground_batch_waits_
     assert [k for k in outcomes] == [0, 1] and all(isinstance(o, Done) for o in outcomes.values())
 
 
+@pytest.mark.slow
 def test_stop_on_ends_the_batch_and_terminates_its_running_task(pool, tmp_path):
     slots = pool(2)
     start = time.monotonic()
@@ -105,6 +109,7 @@ def test_stop_on_ends_the_batch_and_terminates_its_running_task(pool, tmp_path):
     assert not slots._running
 
 
+@pytest.mark.slow
 def test_cancelling_a_running_task_ends_it_without_an_outcome(pool, tmp_path):
     slots = pool(1)
     inbox: queue.Queue = queue.Queue()
@@ -119,6 +124,7 @@ def test_cancelling_a_running_task_ends_it_without_an_outcome(pool, tmp_path):
     assert not (tmp_path / "never").exists()
 
 
+@pytest.mark.slow
 def test_close_stops_what_runs_and_what_is_queued(pool, tmp_path):
     slots = SlotPool(1)
     inbox: queue.Queue = queue.Queue()
@@ -134,6 +140,7 @@ def test_close_stops_what_runs_and_what_is_queued(pool, tmp_path):
         slots.submit(Task(2, fail), rank=FOREGROUND, inbox=inbox)
 
 
+@pytest.mark.slow
 def test_a_task_with_an_output_file_writes_there_not_to_the_parent(pool, tmp_path, capfd):
     out = tmp_path / "task.out"
     outcomes = PooledExecutor(pool(1)).run([Task(0, shout, ("hello from the task",), output=str(out))])

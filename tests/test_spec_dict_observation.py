@@ -259,6 +259,7 @@ def test_the_observation_is_in_a_runs_key_only_when_it_is_not_the_default():
 # -- training, caching, acting ----------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_a_dict_spec_trains_with_multi_input_policy_is_judged_and_served_from_the_cache(tmp_path):
     from stable_baselines3.common.policies import MultiInputActorCriticPolicy
 
@@ -279,6 +280,7 @@ def test_a_dict_spec_trains_with_multi_input_policy_is_judged_and_served_from_th
     assert again.cached == {0: True} and again.runs[0].successes == result.runs[0].successes
 
 
+@pytest.mark.slow
 def test_normalize_normalizes_the_features_and_own_state_only(tmp_path):
     result, model = train_run(spec(observation="features+env", normalize=True), 0)
     normalizer = model.get_env()

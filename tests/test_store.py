@@ -36,6 +36,7 @@ def trained():
     return s, result, model
 
 
+@pytest.mark.slow
 def test_store_then_load_and_the_model_loads_with_sb3(tmp_path, trained):
     from stable_baselines3 import PPO
 
@@ -49,6 +50,7 @@ def test_store_then_load_and_the_model_loads_with_sb3(tmp_path, trained):
     assert not [p for p in folder.parent.iterdir() if p.name.startswith(".tmp-")]
 
 
+@pytest.mark.slow
 def test_run_spec_uses_the_cache(tmp_path):
     s = spec()
     first = sg.run_spec(s, workers=1, cache_dir=tmp_path, progress=None)
@@ -99,6 +101,7 @@ DAMAGE = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("damage", sorted(DAMAGE))
 def test_damaged_forged_or_malformed_entries_are_discarded_never_trusted(tmp_path, trained, damage):
     s, result, model = trained
@@ -112,6 +115,7 @@ def test_damaged_forged_or_malformed_entries_are_discarded_never_trusted(tmp_pat
     assert cache.load(s, 0) == result
 
 
+@pytest.mark.slow
 def test_a_forged_entry_is_retrained_by_run_spec(tmp_path):
     s = spec(expect={"pendulum": 0.5})
     first = sg.run_spec(s, workers=1, cache_dir=tmp_path, progress=None)
@@ -123,6 +127,7 @@ def test_a_forged_entry_is_retrained_by_run_spec(tmp_path):
     assert again.cached == {0: False} and not again.passed
 
 
+@pytest.mark.slow
 def test_an_entry_without_the_safety_rates_is_discarded_and_retrained(tmp_path):
     # An entry stored before safety rates were measured (same key, no "path:name" counts) must not crash the
     # verdicts with a KeyError: it fails validation, is discarded with a warning, and the run is trained again.
@@ -140,6 +145,7 @@ def test_an_entry_without_the_safety_rates_is_discarded_and_retrained(tmp_path):
     assert Cache(tmp_path).load(s, 0) is not None
 
 
+@pytest.mark.slow
 def test_with_a_secret_only_entries_signed_with_it_are_trusted(tmp_path, trained):
     s, result, model = trained
     unsigned = Cache(tmp_path)
@@ -183,6 +189,7 @@ class _SlowModel:
 RESULT = RunResult(spec="s", seed=0, timesteps=1, episodes=1, successes={"pendulum": 1}, train_seconds=0.0)
 
 
+@pytest.mark.slow
 def test_a_store_killed_midway_leaves_no_entry_only_a_temporary_folder(tmp_path):
     # A separate process dies (os._exit, no cleanup) while writing the entry's model file.
     script = textwrap.dedent(
@@ -235,6 +242,7 @@ def test_concurrent_stores_of_the_same_entry_leave_one_intact_entry(tmp_path):
     assert not [p for p in folders[0].parent.iterdir() if p.name.startswith(".tmp-")]
 
 
+@pytest.mark.slow
 def test_lock_is_released_by_the_os_when_its_holder_dies(tmp_path):
     cache = Cache(tmp_path)
     script = textwrap.dedent(

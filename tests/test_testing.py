@@ -34,6 +34,7 @@ def test_needs_two_observations():
 # -- the contract kit's pytest side (tests/test_contract.py runs the checks) --
 
 
+@pytest.mark.slow
 def test_importing_the_kit_imports_neither_pytest_nor_hypothesis():
     code = "import sys, specguard.testing; print(sorted({'pytest', 'hypothesis'} & set(sys.modules)))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

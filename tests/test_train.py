@@ -26,6 +26,7 @@ def tiny_spec(**kwargs):
     return sg.Spec(pendulum.initial_env, pendulum.trees["w"], **kwargs)
 
 
+@pytest.mark.slow
 def test_run_result_is_plain_data_and_deterministic_per_seed():
     spec = tiny_spec(expect={"position": 0.2})
     first, model = train_run(spec, seed=3)
@@ -38,6 +39,7 @@ def test_run_result_is_plain_data_and_deterministic_per_seed():
     assert hasattr(model, "predict")
 
 
+@pytest.mark.slow
 def test_a_run_leaves_no_logger_folder_in_the_temporary_directory(tmp_path, monkeypatch):
     # SB3's learn() makes a quiet model's logger in a new empty folder, <tmp>/SB3-<time>, at every call
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
@@ -47,6 +49,7 @@ def test_a_run_leaves_no_logger_folder_in_the_temporary_directory(tmp_path, monk
     assert model.logger.output_formats == []  # SB3's own logger writes nothing either
 
 
+@pytest.mark.slow
 def test_a_run_compiles_its_tree_once_for_all_its_envs(build_counts):
     train_run(tiny_spec(n_envs=2), seed=0)  # two training envs and the evaluation env
     assert build_counts == {"compile": 1, "codegen": 1}
@@ -83,11 +86,13 @@ def test_evaluate_tells_an_episode_policy_as_each_episode_starts():
     assert policy.starts == [[env]] * 3 and policy.steps == [1, 1, 1]  # each episode reaches "up" in one step
 
 
+@pytest.mark.slow
 def test_algorithm_must_fit_the_action_space():
     with pytest.raises(sg.InvalidSpec, match=r"Spec 'pendulum'.algorithm: DQN cannot act in a Box action space"):
         train_run(tiny_spec(algorithm="DQN", hyperparameters={}), seed=0)
 
 
+@pytest.mark.slow
 def test_hyperparameters_sb3_rejects_are_attributed_to_the_spec():
     # A value SB3 refuses (names it does not take are refused by the Spec: tests/test_algorithms.py).
     with pytest.raises(sg.InvalidSpec, match=r"Spec 'pendulum'.hyperparameters: PPO rejected them: .*batch_size"):
@@ -106,6 +111,7 @@ class Exploding(gym.Wrapper):
         return self.env.step(action)
 
 
+@pytest.mark.slow
 def test_env_failures_name_the_seed_and_step():
     initial = sg.InitialEnv(lambda: Exploding(gym.make("Pendulum-v1"), at=50), features=("x", "y", "omega"))
     spec = sg.Spec(initial, pendulum.trees["b"], budget=sg.Budget(timesteps=128), hyperparameters=TINY)
@@ -124,6 +130,7 @@ class ExplodingInEvaluation(gym.Wrapper):
         return self.env.reset(seed=seed, options=options)
 
 
+@pytest.mark.slow
 def test_an_env_failure_in_a_checkpoint_evaluation_names_the_evaluation_not_a_training_step():
     initial = sg.InitialEnv(lambda: ExplodingInEvaluation(ReplayEnv([[0.0], [1.0]])), features=("x",))
     budget = sg.Budget(timesteps=256, eval_episodes=2, checkpoints=4)
@@ -139,12 +146,14 @@ def test_an_env_failure_in_a_checkpoint_evaluation_names_the_evaluation_not_a_tr
     assert "training step" not in message
 
 
+@pytest.mark.slow
 def test_baseline_trains_on_the_initial_env_and_reports_goals():
     result, model = train_run(tiny_spec(baseline=True), seed=0)
     assert model.observation_space.shape == (3,)
     assert set(result.successes) == {"pendulum", "pendulum/position", "pendulum/stabilization"}
 
 
+@pytest.mark.slow
 def test_wall_clock_cap_stops_training():
     spec = tiny_spec(budget=sg.Budget(timesteps=100_000, eval_episodes=1, wall_clock_s=0.5))
     result, _ = train_run(spec, seed=0)
@@ -192,6 +201,7 @@ def test_evaluate_counts_an_episode_ended_by_its_constraint_as_unsafe():
     assert counts == {"far": 0, "far:two": 2, "far:hot": 0}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("baseline", [False, True])
 def test_runs_measure_the_safety_rate_of_every_constraint(baseline):
     fast = sg.Constraint(lambda s, a: abs(s.omega) > 7.5, budget=2, name="fast")
@@ -213,6 +223,7 @@ def reached_initial():
     return sg.InitialEnv(lambda: ReplayEnv([[0.0], [1.0], [1.0]]), features=("x",))
 
 
+@pytest.mark.slow
 def test_a_run_whose_thresholds_are_met_stops_at_the_first_checkpoint():
     budget = sg.Budget(timesteps=4096, eval_episodes=30, checkpoints=4)
     spec = sg.Spec(reached_initial(), sg.Goal("up", x=(0.5, None)), budget=budget, hyperparameters=TINY, expect=0.8)
@@ -223,6 +234,7 @@ def test_a_run_whose_thresholds_are_met_stops_at_the_first_checkpoint():
     assert model.num_timesteps == 1024  # the model kept is the one judged: training stopped at the checkpoint
 
 
+@pytest.mark.slow
 def test_a_run_stopped_by_a_met_checkpoint_did_not_hit_the_wall_clock(monkeypatch):
     import time
 
@@ -242,6 +254,7 @@ def test_a_run_stopped_by_a_met_checkpoint_did_not_hit_the_wall_clock(monkeypatc
     assert result.met_early and result.timesteps == 1024 and not result.hit_wall_clock
 
 
+@pytest.mark.slow
 def test_the_cached_model_of_a_run_stopped_at_a_checkpoint_is_the_one_judged(tmp_path):
     budget = sg.Budget(timesteps=4096, eval_episodes=30, checkpoints=4)
     spec = sg.Spec(reached_initial(), sg.Goal("up", x=(0.5, None)), budget=budget, hyperparameters=TINY, expect=0.8)
@@ -250,6 +263,7 @@ def test_the_cached_model_of_a_run_stopped_at_a_checkpoint_is_the_one_judged(tmp
     assert sg.load_model(result, 0).num_timesteps == result.runs[0].timesteps == 1024
 
 
+@pytest.mark.slow
 def test_a_run_whose_thresholds_are_not_met_trains_its_whole_budget():
     budget = sg.Budget(timesteps=4096, eval_episodes=30, checkpoints=4)
     spec = sg.Spec(reached_initial(), sg.Goal("far", x=(5.0, None)), budget=budget, hyperparameters=TINY, expect=0.5)
@@ -263,6 +277,7 @@ def test_a_run_whose_thresholds_are_not_met_trains_its_whole_budget():
     assert result.episodes == 30
 
 
+@pytest.mark.slow
 def test_one_checkpoint_trains_the_whole_budget_even_when_met():
     budget = sg.Budget(timesteps=4096, eval_episodes=30, checkpoints=1)
     spec = sg.Spec(reached_initial(), sg.Goal("up", x=(0.5, None)), budget=budget, hyperparameters=TINY, expect=0.8)
@@ -270,6 +285,7 @@ def test_one_checkpoint_trains_the_whole_budget_even_when_met():
     assert not result.met_early and result.timesteps == 4096
 
 
+@pytest.mark.slow
 def test_auto_weights_adapt_during_training_and_are_recorded():
     initial = sg.InitialEnv(lambda: ReplayEnv([[0.0], [1.0], [0.0], [1.0]]), features=("x",))
     tree = sg.All(sg.Goal("up", x=(0.5, None)), sg.Goal("low", x=(None, 0.7)), name="p", weights="auto")
@@ -284,6 +300,7 @@ def test_auto_weights_adapt_during_training_and_are_recorded():
     assert baseline.weights == {} and "weights" not in baseline.curve[0]
 
 
+@pytest.mark.slow
 def test_auto_weights_see_the_safety_of_the_nodes_own_constraints():
     initial = sg.InitialEnv(lambda: ReplayEnv([[0.0], [1.0], [0.0], [1.0]]), features=("x",))
     never = sg.Constraint(lambda s, a: False, name="never")
@@ -309,6 +326,7 @@ def digested(tmp_path_factory):
     return spec, sg.run_spec(spec, workers=1, cache_dir=tmp_path_factory.mktemp("digests"), progress=None)
 
 
+@pytest.mark.slow
 def test_a_runs_weights_digest_is_the_digest_of_its_model_loaded_back_from_the_cache(digested):
     from specguard.cache.weights import weights_digest
 
@@ -326,6 +344,7 @@ def test_a_runs_weights_digest_is_the_digest_of_its_model_loaded_back_from_the_c
     assert [run.weights_digest for run in again.runs] == digests  # the same seed, the same weights
 
 
+@pytest.mark.slow
 def test_a_runs_weights_digest_is_in_its_json_the_table_and_the_junit_properties(digested):
     from specguard.pytest_plugin.judge import judge_goal
 
@@ -341,6 +360,7 @@ def test_a_runs_weights_digest_is_in_its_json_the_table_and_the_junit_properties
     assert [s["weights_digest"] for s in check.to_row()["per_seed"]] == [r.weights_digest for r in result.runs]
 
 
+@pytest.mark.slow
 def test_an_agent_checked_against_a_spec_carries_its_identity_as_its_weights_digest(digested):
     spec, result = digested
     run = result.runs[0]

@@ -54,6 +54,7 @@ def spec(trainer=improving, **kwargs):
     return sg.Spec(SHORT, BALANCE, trainer=trainer, **kwargs)
 
 
+@pytest.mark.slow
 def test_checkpoints_are_judged_at_the_planned_looks_and_the_generator_closed_once_met():
     log: list = []
     result, agent = train_run(spec(functools.partial(improving, log=log)), seed=0)
@@ -67,6 +68,7 @@ def test_checkpoints_are_judged_at_the_planned_looks_and_the_generator_closed_on
     assert log[-2:] == [met_at, "closed"]  # closed: asked for nothing past the met checkpoint, its finally ran
 
 
+@pytest.mark.slow
 def test_a_trainer_never_met_runs_to_its_budget_and_its_last_agent_gets_the_final_evaluation():
     log: list = []
     result, agent = train_run(spec(functools.partial(improving, good_from=10**9, log=log)), seed=0)
@@ -76,6 +78,7 @@ def test_a_trainer_never_met_runs_to_its_budget_and_its_last_agent_gets_the_fina
     assert log[-2:] == [1000, "closed"]
 
 
+@pytest.mark.slow
 def test_a_trainer_that_ends_early_is_judged_at_its_last_checkpoint():
     def short(make_env, timesteps, seed):
         yield 7, lean
@@ -84,6 +87,7 @@ def test_a_trainer_that_ends_early_is_judged_at_its_last_checkpoint():
     assert result.timesteps == 7 and agent is lean and result.successes["balance"] == result.episodes
 
 
+@pytest.mark.slow
 def test_a_trainer_is_stopped_at_its_first_checkpoint_past_the_budget():
     log: list = []
 
@@ -119,12 +123,14 @@ class Checkpoints:
         self.asked.append("closed")
 
 
+@pytest.mark.slow
 def test_a_met_look_closes_the_trainers_iterator_at_once():
     trainer = Checkpoints()
     result, _ = train_run(spec(trainer), seed=0)
     assert result.met_early and trainer.asked[-1] == "closed" and trainer.asked[-2] == result.timesteps
 
 
+@pytest.mark.slow
 def test_the_wall_clock_cap_stops_a_trainer():
     def slow(make_env, timesteps, seed):
         for steps in range(1, timesteps + 1):
@@ -161,11 +167,13 @@ def test_a_trainer_that_is_no_generator_function_is_refused_when_the_spec_is_mad
         spec(trainer)
 
 
+@pytest.mark.slow
 def test_a_callable_returning_no_iterator_is_refused_when_it_runs():
     with pytest.raises(InvalidSpec, match=r"expected trainer .*ReturnsAList.* to return a generator"):
         train_run(spec(ReturnsAList()), seed=0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("items", "match"),
     [
@@ -187,6 +195,7 @@ def test_a_bad_checkpoint_fails_the_run_in_one_line_naming_the_trainer(items, ma
     assert "Spec 'balance', seed 0, trainer" in str(e.value) and "\n" not in e.value.message
 
 
+@pytest.mark.slow
 def test_a_trainer_that_raises_fails_its_seed_naming_the_trainer_the_seed_and_its_last_steps():
     def breaks(make_env, timesteps, seed):
         yield 100, push_left
@@ -238,6 +247,7 @@ def test_the_trainer_is_part_of_the_key_and_a_spec_without_one_keeps_its_key():
     assert fingerprint_spec(plain).run_key(0) not in keys
 
 
+@pytest.mark.slow
 def test_a_trainer_run_is_cached_and_its_agent_loaded_back(tmp_path):
     first = sg.run_spec(spec(), workers=1, cache_dir=tmp_path, progress=None)
     again = sg.run_spec(spec(), workers=1, cache_dir=tmp_path, progress=None)
@@ -263,6 +273,7 @@ def unpicklable(make_env, timesteps, seed):
     yield 100, Locked()
 
 
+@pytest.mark.slow
 def test_an_agent_that_cannot_be_pickled_is_warned_about_and_its_run_kept(tmp_path):
     with pytest.warns(CacheWarning, match=r"seed 0: its agent Locked cannot be pickled .*kept and judged, not cached"):
         result = sg.run_spec(spec(unpicklable), workers=1, cache_dir=tmp_path, progress=None)
@@ -270,6 +281,7 @@ def test_an_agent_that_cannot_be_pickled_is_warned_about_and_its_run_kept(tmp_pa
     assert Cache(tmp_path).load(spec(unpicklable), 0) is None
 
 
+@pytest.mark.slow
 def test_a_trainer_spec_trains_its_seeds_in_two_worker_processes(tmp_path):
     two = spec(budget=dataclasses.replace(BUDGET, min_seeds=2, max_seeds=2))
     result = sg.run_spec(two, workers=2, cache_dir=tmp_path, progress=None)
@@ -280,6 +292,7 @@ def test_a_trainer_spec_trains_its_seeds_in_two_worker_processes(tmp_path):
 # -- the example -----------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_the_reinforce_example_trains_cartpole_through_the_protocol_and_is_cached(tmp_path):
     example = import_file(REINFORCE)
     one = example.balance.scaled(1.0)
@@ -294,6 +307,7 @@ def test_the_reinforce_example_trains_cartpole_through_the_protocol_and_is_cache
     assert agent(obs) in (0, 1)
 
 
+@pytest.mark.slow
 def test_an_agent_that_raises_in_evaluation_is_named_as_the_agent_not_the_environment():
     def fails_to_act(obs):
         raise ValueError("logits are NaN")
@@ -308,6 +322,7 @@ def test_an_agent_that_raises_in_evaluation_is_named_as_the_agent_not_the_enviro
     assert "weights went NaN" in str(e.value)
 
 
+@pytest.mark.slow
 def test_a_trainer_run_reports_its_progress_at_each_tenth_of_its_budget():
     events: list = []
     train_run(spec(functools.partial(improving, good_from=10**9)), seed=0, progress=events.append)
@@ -323,18 +338,21 @@ def raising_after_one(make_env, timesteps, seed, *, error):
     raise error
 
 
+@pytest.mark.slow
 def test_a_partial_trainer_is_named_by_the_function_it_wraps():
     trainer = functools.partial(raising_after_one, error=ValueError("boom"))
     with pytest.raises(TrainingError, match=r"trainer raising_after_one, after step 100: it raised ValueError: boom"):
         train_run(spec(trainer), seed=0)
 
 
+@pytest.mark.slow
 def test_a_warning_of_run_spec_points_at_the_users_line(tmp_path):
     with pytest.warns(sg.SpecWarning, match="gets nothing from it") as caught:
         sg.run_spec(spec(), workers=1, cache_dir=None, progress=None, tensorboard_log=tmp_path / "runs")
     assert [w.filename for w in caught if issubclass(w.category, sg.SpecWarning)] == [__file__]
 
 
+@pytest.mark.slow
 def test_a_trainers_agent_has_its_weights_digest_or_none_where_it_cannot_be_digested():
     from specguard.engine.train_task import judged_digest
 

@@ -179,6 +179,7 @@ def _failure(outcome: TaskOutcome) -> Failure:
 # Tests
 
 
+@pytest.mark.slow
 def test_results_of_all_tasks_by_key_in_task_order_at_most_max_workers_at_once() -> None:
     tasks = [
         Task(10, sleep_then_return, (100, 0.3)),
@@ -199,6 +200,7 @@ def test_results_of_all_tasks_by_key_in_task_order_at_most_max_workers_at_once()
     assert multiprocessing.active_children() == []
 
 
+@pytest.mark.slow
 def test_progress_lines_reach_on_line_in_order_per_key() -> None:
     lines: list[tuple[int, str]] = []
     outcomes = run_tasks(
@@ -212,6 +214,7 @@ def test_progress_lines_reach_on_line_in_order_per_key() -> None:
     assert len(lines) == 60  # the report without a line was not passed on
 
 
+@pytest.mark.slow
 def test_exception_is_a_one_line_failure_and_the_other_result_is_kept() -> None:
     seen: list[Failure] = []
 
@@ -233,6 +236,7 @@ def test_exception_is_a_one_line_failure_and_the_other_result_is_kept() -> None:
     assert isinstance(done, Done) and done.value[0] == 5
 
 
+@pytest.mark.slow
 def test_exception_class_shipped_by_value_comes_back_as_that_class() -> None:
     failure = _failure(run_tasks([Task(0, raise_shipped)], max_workers=1)[0])
     assert failure.cause == "ShippedError: custom"
@@ -240,6 +244,7 @@ def test_exception_class_shipped_by_value_comes_back_as_that_class() -> None:
     assert type(failure.exception) is ShippedError
 
 
+@pytest.mark.slow
 def test_exception_that_cannot_be_unpickled_still_gives_cause_and_traceback() -> None:
     failure = _failure(run_tasks([Task(0, raise_unpicklable)], max_workers=1)[0])
     assert failure.cause == "UnpicklableError: a=1 b=2"
@@ -247,6 +252,7 @@ def test_exception_that_cannot_be_unpickled_still_gives_cause_and_traceback() ->
     assert failure.exception is None
 
 
+@pytest.mark.slow
 def test_a_task_reads_the_environment_the_parent_has_when_it_starts(monkeypatch: pytest.MonkeyPatch) -> None:
     run_tasks([Task(0, touch, (os.devnull,))], max_workers=1)  # the fork server, if any, started before the change
     monkeypatch.setenv("SPECGUARD_TEST_VALUE", "set after the first task")
@@ -257,6 +263,7 @@ def test_a_task_reads_the_environment_the_parent_has_when_it_starts(monkeypatch:
     assert run_tasks([Task(2, read_environment, ("SPECGUARD_TEST_VALUE",))], max_workers=1) == {2: Done(2, None)}
 
 
+@pytest.mark.slow
 def test_a_task_writes_to_the_parents_stderr_of_when_it_starts(tmp_path: Path) -> None:
     run_tasks([Task(0, touch, (os.devnull,))], max_workers=1)  # the fork server, if any, holds other descriptors
     saved = os.dup(2)
@@ -271,12 +278,14 @@ def test_a_task_writes_to_the_parents_stderr_of_when_it_starts(tmp_path: Path) -
     assert "a line from the task" in (tmp_path / "stderr.txt").read_text()
 
 
+@pytest.mark.slow
 @pytest.mark.skipif("forkserver" not in multiprocessing.get_all_start_methods(), reason="spawned: no fork server")
 def test_tasks_start_with_the_heavy_libraries_already_imported() -> None:
     loaded = run_tasks([Task(0, libraries_loaded)], max_workers=1)[0]
     assert loaded == Done(0, {"torch": True, "stable_baselines3": True, "gymnasium": True})
 
 
+@pytest.mark.slow
 def test_killed_worker_fails_alone_with_its_last_phase_and_step() -> None:
     outcomes = run_tasks([Task(0, kill_self), Task(1, sleep_then_return, (1, 1.0))], max_workers=2)
     failure = _failure(outcomes[0])
@@ -286,6 +295,7 @@ def test_killed_worker_fails_alone_with_its_last_phase_and_step() -> None:
     assert isinstance(outcomes[1], Done)
 
 
+@pytest.mark.slow
 def test_exit_code_of_a_worker_that_exits_without_result() -> None:
     outcomes = run_tasks([Task(0, exit_3), Task(1, sleep_then_return, (1, 0.0))], max_workers=1)
     failure = _failure(outcomes[0])
@@ -294,12 +304,14 @@ def test_exit_code_of_a_worker_that_exits_without_result() -> None:
     assert isinstance(outcomes[1], Done)  # started after the death, with max_workers=1
 
 
+@pytest.mark.slow
 def test_unpicklable_result_is_a_failure_of_that_task() -> None:
     failure = _failure(run_tasks([Task(0, return_a_lambda)], max_workers=1)[0])
     assert "\n" not in failure.cause and "lambda" in failure.cause
     assert (failure.phase, failure.step) == ("done-ish", 1)
 
 
+@pytest.mark.slow
 def test_lambdas_travel_and_module_functions_ship_by_value() -> None:
     outcomes = run_tasks(
         [
@@ -312,6 +324,7 @@ def test_lambdas_travel_and_module_functions_ship_by_value() -> None:
     assert outcomes == {0: Done(0, 42), 1: Done(1, 42), 2: Done(2, False)}
 
 
+@pytest.mark.slow
 def test_stop_on_returns_at_once_and_terminates_the_others(tmp_path: Path) -> None:
     pid_file, done_file, never = tmp_path / "pid", tmp_path / "done", tmp_path / "never"
     start = time.monotonic()
@@ -333,6 +346,7 @@ def test_stop_on_returns_at_once_and_terminates_the_others(tmp_path: Path) -> No
     assert multiprocessing.active_children() == []
 
 
+@pytest.mark.slow
 def test_sigterm_handler_is_restored_and_non_main_threads_leave_signals_alone() -> None:
     before = signal.getsignal(signal.SIGTERM)
     assert run_tasks([Task(0, sleep_then_return, (1, 0.0))], max_workers=1)[0].key == 0
@@ -353,6 +367,7 @@ def test_sigterm_handler_is_restored_and_non_main_threads_leave_signals_alone() 
     assert errors == [] and result == [{0: Done(0, 2)}]
 
 
+@pytest.mark.slow
 def test_stopping_all_tasks_stops_run_tasks_on_another_thread_and_then_lets_calls_run(tmp_path: Path) -> None:
     pid_file, done_file = tmp_path / "pid", tmp_path / "done"
     errors: list[BaseException] = []
@@ -434,6 +449,7 @@ def _start_parent(tmp_path: Path) -> tuple[subprocess.Popen[str], int]:
     return parent, int(pid_file.read_text())
 
 
+@pytest.mark.slow
 def test_sigterm_to_the_parent_stops_its_child_and_the_parent_exits(tmp_path: Path) -> None:
     parent, child_pid = _start_parent(tmp_path)
     start = time.monotonic()
@@ -450,6 +466,7 @@ def test_sigterm_to_the_parent_stops_its_child_and_the_parent_exits(tmp_path: Pa
     assert _wait_for(lambda: _pid_gone(child_pid), 2), "the child outlived its parent"
 
 
+@pytest.mark.slow
 def test_child_exits_by_itself_when_its_parent_is_killed(tmp_path: Path) -> None:
     parent, child_pid = _start_parent(tmp_path)
     parent.kill()  # SIGKILL: no cleanup runs in the parent
@@ -503,6 +520,7 @@ def test_auto_shares_the_cores():
     assert resolve_workers(5, share=8) == 5  # an explicit count is taken as given
 
 
+@pytest.mark.slow
 def test_each_outcome_reaches_the_caller_as_its_task_ends(tmp_path):
     # Task 1 ends only once the parent has been told of task 0: an outcome held back to the batch's end fails it.
     marker = tmp_path / "task 0 ended"
@@ -530,6 +548,7 @@ print(run_tasks([Task(0, double, (1,))], max_workers=1)[0].cause, flush=True)
 """
 
 
+@pytest.mark.slow
 def test_a_worker_dead_at_the_import_of_an_unguarded_script_names_the_script(tmp_path: Path) -> None:
     script = tmp_path / "unguarded.py"
     script.write_text(textwrap.dedent(UNGUARDED))

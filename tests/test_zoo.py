@@ -246,6 +246,7 @@ def test_a_file_of_ones_own_with_every_kind_of_key(tmp_path):
     assert settings.source == str(path) and str(path) in message
 
 
+@pytest.mark.slow
 def test_the_zoos_callbacks_run_in_the_spec_they_are_unpacked_into(tmp_path):
     path = write(
         tmp_path,
@@ -393,6 +394,7 @@ def test_a_linear_schedule_is_rl_zoos_and_keys_by_its_value():
     assert digest(LinearSchedule(0.2)) == digest(schedule) != digest(LinearSchedule(0.3))
 
 
+@pytest.mark.slow
 def test_a_zoo_entry_trains_with_its_schedules_and_is_cached(tmp_path):
     """CartPole-v1's PPO entry end to end: two seeds in worker processes, the schedules in the model, then the cache."""
     settings, _ = zoo("PPO", "CartPole-v1")

@@ -229,6 +229,7 @@ def test_specguard_exposes_them_as_top_level_names():
     assert (sg.AnyOf, sg.Sequence, sg.Avoid) == (AnyOf, Sequence, Avoid)
 
 
+@pytest.mark.slow
 def test_loading_the_plugins_in_a_fresh_process_warns_nothing():
     code = (
         "import warnings\n"

@@ -537,6 +537,10 @@ CHECKS: tuple[Check, ...] = (
 )
 """Every check, in the order :func:`checks_for` runs them."""
 
+FRESH_INTERPRETER: frozenset[Check] = frozenset({check_description_is_exact})
+"""The checks that start a fresh interpreter: :func:`specguard.testing.parametrize_with_checks` marks their items
+``slow`` (deselected by ``pytest -m "not slow"``)."""
+
 
 def _refines(cls: type) -> bool:
     if not issubclass(cls, Node):

@@ -4,7 +4,13 @@ A session that knows its specs before it runs them (``pytest --goal-specs`` over
 ``specguard run`` over a file's specs) plans them here, in the order it will ask for them: each spec's first
 ``budget.min_seeds`` seeds that are neither in the run cache nor locked by another process are locked and queued
 on the session's :class:`~specguard.parallel.slots.SlotPool`, behind whatever the foreground trains. While a
-spec's slower seed trains, the core its faster seed freed trains the next spec's.
+spec's slower seed trains, the core its faster seed freed trains another spec's.
+
+Planned runs start longest first: ranked by their budget's ceiling in timesteps, the largest first (ties in the
+session's order). The one cost known before training is that ceiling (an anytime run may stop earlier); starting
+the longest runs first and packing the shorter ones around them (the longest-processing-time rule) keeps one long
+seed from starting late and leaving the other cores idle at the session's end. A foreground item that asks for
+a run still queued moves it to the front, so the order changes when a run starts, never what it trains.
 
 The foreground asks for a run by its cache key (:meth:`TrainAhead.take`, from
 :class:`~specguard.engine.runs.Runs`): a planned run still queued moves to the front, one training is waited for,
@@ -115,7 +121,8 @@ class TrainAhead:
         return [key for key, run in self._planned.items() if not run.taken]
 
     def plan(self, specs: Iterable[Spec]) -> None:
-        """Queue the first ``min_seeds`` seeds of each spec, in order, that no cache entry or other process holds."""
+        """Queue the first ``min_seeds`` seeds of each spec that no cache entry or other process holds, to start
+        longest ceiling first (the module docstring)."""
         for index, spec in enumerate(specs):
             if not self._planning:
                 return
@@ -132,7 +139,8 @@ class TrainAhead:
                     continue
                 output = self._outputs / f"{key}.out"
                 task = seed_task(trained, seed, keyed, output=str(output))
-                ticket = self.pool.submit(task, rank=(AHEAD, index, seed), inbox=self._inbox)
+                rank = (AHEAD, -trained.budget.timesteps, index, seed)  # longest ceiling first (module docstring)
+                ticket = self.pool.submit(task, rank=rank, inbox=self._inbox)
                 run = _Planned(trained.label, fingerprint.spec_key, key, seed, paths, lock, output, ticket)
                 self._planned[key] = run
                 self._by_ticket[ticket] = run

@@ -62,6 +62,11 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line(
         "markers",
+        "slow: an expensive test (training, a fresh interpreter); specguard.testing.parametrize_with_checks marks "
+        'the checks that start one; `pytest -m "not slow"` leaves them out',
+    )
+    config.addinivalue_line(
+        "markers",
         f"{MARKER}(expect=None, xfail=None): a test returning a specguard.Spec, trained and checked by "
         "`pytest --goal-specs`, or a specguard.AgentCheck, its agent judged (declare it with @specguard.goal_spec)",
     )
