@@ -1,14 +1,14 @@
 """The suite's two tiers, in one rule (for ``tests/``, ``plugins/tests/`` and the docstring examples alike).
 
 ``pytest -m "not slow"`` is the fast tier: unit and property tests that train nothing and start no process.
-An item is ``slow`` when it says so (``@pytest.mark.slow``; the contract kit's ``parametrize_with_checks``
-marks the checks that start a fresh interpreter), when it requests a fixture of :data:`SLOW_FIXTURES` (a pytest
-run inside the test), or when it is a docstring example (they show whole uses, some of which train or start
-processes; all 136 took 4 s). Every other item runs under a tripwire: should it train (stable-baselines3's
-``learn``, specguard's ``train_run``) or start a process (``subprocess``, ``multiprocessing``, ``os.fork``), it
-fails, naming what it did and the mark it needs. So the fast tier cannot grow slow in silence, and no test can
-leave the slow tier by forgetting its mark: the whole suite (``pytest -n 2``, as CI runs it) trips on the same
-rule.
+An item of the suite (under ``testpaths``; the main job's ``example_specs/`` is left alone) is ``slow`` when it
+says so (``@pytest.mark.slow``; the contract kit's ``parametrize_with_checks`` marks the checks that start a
+fresh interpreter), when it requests a fixture of :data:`SLOW_FIXTURES` (a pytest run inside the test), or when
+it is a docstring example (they show whole uses, some of which train or start processes; all 136 took 4 s).
+Every other item runs under a tripwire: should it train (stable-baselines3's ``learn``, specguard's
+``train_run``) or start a process (``subprocess``, ``multiprocessing``, ``os.fork``), it fails, naming what it
+did and the mark it needs. So the fast tier cannot grow slow in silence, and no test can leave the slow tier by
+forgetting its mark: the whole suite (``pytest -n 2``, as CI runs it) trips on the same rule.
 """
 
 from __future__ import annotations
@@ -35,10 +35,16 @@ def pytest_configure(config: pytest.Config) -> None:
     _arm_once()  # the ``slow`` marker itself is registered by specguard's pytest plugin
 
 
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    # The suite is what README's test command collects (testpaths); the rule leaves any other item alone: the main
+    # job's goal specs (example_specs/) train, and are no test of specguard's own.
+    suite = [config.rootpath / path for path in config.getini("testpaths")]
     for item in items:
+        if not any(item.path.is_relative_to(folder) for folder in suite):
+            continue
         if isinstance(item, DoctestItem) or SLOW_FIXTURES.intersection(getattr(item, "fixturenames", ())):
             item.add_marker(pytest.mark.slow)
+        item.stash[_FAST] = item.get_closest_marker("slow") is None
 
 
 @pytest.hookimpl(wrapper=True)
@@ -61,7 +67,7 @@ def pytest_runtest_teardown(item: pytest.Item) -> Iterator[None]:
 
 @contextmanager
 def _armed(item: pytest.Item) -> Iterator[None]:
-    fast = item.get_closest_marker("slow") is None
+    fast = item.stash.get(_FAST, False)
     item.stash[_TRIPPED] = None
     if fast:
         _current.append(item)
@@ -76,6 +82,7 @@ def _armed(item: pytest.Item) -> Iterator[None]:
 
 
 _TRIPPED = pytest.StashKey[str | None]()
+_FAST = pytest.StashKey[bool]()  # an item of the suite's fast tier: the tripwire is armed while it runs
 
 
 def _trip(what: str) -> None:

@@ -105,6 +105,7 @@ def test_a_run_another_process_holds_or_the_cache_has_is_not_planned(tmp_path, s
     ahead.close()
 
 
+@pytest.mark.slow  # a slot may start the planned runs' processes before the pool closes
 def test_planning_checks_a_copy_so_the_spec_warns_in_its_own_item(tmp_path, slots):
     s = spec()
     ahead = TrainAhead(slots, Cache(tmp_path))

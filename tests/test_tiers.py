@@ -1,5 +1,6 @@
 """The suite's tiers (the repository's conftest.py): an unmarked test that trains or starts a process fails, naming
-what it did; a marked one runs; ``-m "not slow"`` leaves the marked, the pytester and the docstring items out."""
+what it did; a marked one runs; ``-m "not slow"`` leaves the marked, the pytester and the docstring items out; an
+item outside the suite's testpaths (the main job's) is left alone."""
 
 from __future__ import annotations
 
@@ -61,15 +62,32 @@ def double(x):
 '''
 
 
+OUTSIDE = """
+import subprocess
+import sys
+
+
+def test_outside_the_suite():
+    subprocess.run([sys.executable, "-c", "pass"], check=True)
+"""
+
+
 def _project(pytester):
+    """The repository's conftest.py over a suite (testpaths: ``tests``) and a folder outside it."""
     shutil.copy(ROOT / "conftest.py", pytester.path / "conftest.py")
-    pytester.makepyfile(test_tiers_example=TESTS)
+    pytester.makeini("[pytest]\ntestpaths = tests\n")
+    (pytester.path / "tests").mkdir()
+    (pytester.path / "tests" / "test_tiers_example.py").write_text(TESTS)
+    (pytester.path / "outside").mkdir()
+    (pytester.path / "outside" / "test_outside.py").write_text(OUTSIDE)
 
 
 def test_an_unmarked_test_that_trains_or_starts_a_process_fails_naming_what_it_did(pytester):
     _project(pytester)
     result = pytester.runpytest_subprocess("-p", "pytester", "--doctest-modules", "-p", "no:cacheprovider")
     result.assert_outcomes(passed=4, failed=4)
+    outside = pytester.runpytest_subprocess("-p", "no:cacheprovider", "outside")
+    outside.assert_outcomes(passed=1)  # the rule is the suite's: a user's or the main job's items are left alone
     out = result.stdout.str()
     for name, what in [
         ("test_starts_a_process", "starts a process ("),
@@ -77,7 +95,7 @@ def test_an_unmarked_test_that_trains_or_starts_a_process_fails_naming_what_it_d
         ("test_swallows_the_trip", "starts a process ("),
         ("test_starts_a_process_from_a_thread", "starts a process ("),
     ]:
-        assert f"test_tiers_example.py::{name} {what}" in out, name
+        assert f"tests/test_tiers_example.py::{name} {what}" in out, name
     assert "but is not marked slow" in out
 
 

@@ -82,6 +82,7 @@ class Handed:
 @dataclass(eq=False)
 class _Planned:
     label: str
+    index: int  # the spec's place in the session
     spec_key: str
     key: str
     seed: int
@@ -117,13 +118,15 @@ class TrainAhead:
 
     @property
     def planned(self) -> list[str]:
-        """The run keys planned and not yet taken, in the order they were planned."""
-        return [key for key, run in self._planned.items() if not run.taken]
+        """The run keys planned and not yet taken, in the session's order (spec, then seed)."""
+        runs = sorted((run.index, run.seed, key) for key, run in self._planned.items() if not run.taken)
+        return [key for _, _, key in runs]
 
     def plan(self, specs: Iterable[Spec]) -> None:
         """Queue the first ``min_seeds`` seeds of each spec that no cache entry or other process holds, to start
-        longest ceiling first (the module docstring)."""
-        for index, spec in enumerate(specs):
+        longest ceiling first (the module docstring): planned in that order too, so that a slot idle while the
+        rest are planned starts the longest."""
+        for index, spec in sorted(enumerate(specs), key=lambda pair: -pair[1].budget.timesteps):
             if not self._planning:
                 return
             planned = self._copy_and_fingerprint(spec)
@@ -141,7 +144,7 @@ class TrainAhead:
                 task = seed_task(trained, seed, keyed, output=str(output))
                 rank = (AHEAD, -trained.budget.timesteps, index, seed)  # longest ceiling first (module docstring)
                 ticket = self.pool.submit(task, rank=rank, inbox=self._inbox)
-                run = _Planned(trained.label, fingerprint.spec_key, key, seed, paths, lock, output, ticket)
+                run = _Planned(trained.label, index, fingerprint.spec_key, key, seed, paths, lock, output, ticket)
                 self._planned[key] = run
                 self._by_ticket[ticket] = run
 
