@@ -140,3 +140,43 @@ def test_a_masked_model_not_told_its_envs_says_so():
     model = MaskablePPO("MlpPolicy", cartpole_spec(algorithm="MaskablePPO").make_env(), seed=0, device="cpu")
     with pytest.raises(sg.SpecError, match=r"MaskablePPO acts on action masks, and the policy was not told its envs"):
         policy(model)(CART_OBS[0, 0])
+
+
+@pytest.mark.parametrize("deterministic", [True, False], ids=["deterministic", "sampled"])
+@pytest.mark.parametrize("algorithm", ["PPO", "SAC", "RecurrentPPO"])
+def test_a_policys_actions_are_predicts_own_to_the_bit_and_the_model_and_torch_are_restored(algorithm, deterministic):
+    import torch
+    from stable_baselines3 import PPO, SAC
+    from torch.distributions import Distribution
+
+    spec = pendulum_spec(algorithm=algorithm)
+    model = {"PPO": PPO, "SAC": SAC, "RecurrentPPO": RecurrentPPO}[algorithm](
+        "MlpLstmPolicy" if algorithm == "RecurrentPPO" else "MlpPolicy", spec.make_env(), seed=0, device="cpu"
+    )
+    model.policy.set_training_mode(True)  # as SB3 leaves it after an update
+    observations = OBS[0]
+    torch.manual_seed(7)
+    expected = by_hand(model, observations) if deterministic else None
+    if not deterministic:
+        state, start, expected = None, np.ones(1, dtype=bool), []
+        for obs in observations:
+            action, state = model.predict(obs, state=state, episode_start=start, deterministic=False)
+            start = np.zeros(1, dtype=bool)
+            expected.append(action.reshape(-1))
+        expected = np.array(expected)
+
+    model.policy.set_training_mode(True)
+    calls = []
+    original = type(model.policy).set_training_mode
+    act = Policy(model, deterministic=deterministic)
+    act.start([None])
+    torch.manual_seed(7)
+    try:
+        type(model.policy).set_training_mode = lambda self, mode: (calls.append(mode), original(self, mode))[1]
+        got = np.array([np.reshape(act(obs), -1) for obs in observations])
+    finally:
+        type(model.policy).set_training_mode = original
+    assert got.tobytes() == expected.tobytes()
+    assert calls == [False], "eval mode is set once, not at every step"
+    assert not model.policy.training
+    assert "set_training_mode" not in vars(model.policy) and Distribution._validate_args is True
