@@ -65,6 +65,55 @@ def test_run_passes_and_fails_with_exit_status(spec_file, tmp_path, capsys):
     assert "== hard: FAILED" in capsys.readouterr().out
 
 
+TWO_SPECS = textwrap.dedent(
+    """
+    import specguard as sg
+
+    pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
+    calm = sg.Always(sg.Goal("calm", omega=(-8, 8)), name="calm")
+    tiny = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
+
+
+    def spec(steps):
+        budget = sg.Budget(timesteps=steps, min_seeds=2, eval_episodes=2, checkpoints=1)
+        return sg.Spec(pendulum, calm, budget=budget, expect=0.5, hyperparameters=tiny)
+
+
+    short, long = spec(128), spec(192)
+    """
+)
+
+
+@pytest.mark.slow
+def test_run_over_several_specs_trains_them_ahead_on_shared_slots(tmp_path, capsys, monkeypatch):
+    """Several specs on the local executor with the cache: one pool of slots, every spec planned ahead (the longest
+    first), each run handed to its own spec and reported trained; the weights those of a run without the cache."""
+    from specguard.engine.ahead import TrainAhead
+
+    path = tmp_path / "two.py"
+    path.write_text(TWO_SPECS)
+    planned, taken = [], []
+    plan, take = TrainAhead.plan, TrainAhead.take
+    monkeypatch.setattr(TrainAhead, "plan", lambda self, specs: (planned.extend(specs), plan(self, specs))[1])
+    monkeypatch.setattr(TrainAhead, "take", lambda self, key: (taken.append(key), take(self, key))[1])
+    report = tmp_path / "ahead.json"
+    args = ["--workers", "2", "--quiet", "--json"]
+    assert main(["run", str(path), "--cache-dir", str(tmp_path / "cache"), *args, str(report)]) == 0
+    assert [s.budget.timesteps for s in planned] == [128, 192] and len(taken) == 4
+    ahead = json.loads(report.read_text())
+    assert all(not any(r["cached"].values()) for r in ahead.values()), "a run trained ahead is reported as cached"
+
+    planned.clear()
+    alone = tmp_path / "alone.json"
+    assert main(["run", str(path), "--no-cache", *args, str(alone)]) == 0
+    assert planned == [], "no cache: nothing is planned ahead"
+    capsys.readouterr()
+    digests = {name: [run["weights_digest"] for run in r["runs"]] for name, r in ahead.items()}
+    assert digests == {
+        name: [run["weights_digest"] for run in r["runs"]] for name, r in json.loads(alone.read_text()).items()
+    }
+
+
 @pytest.mark.slow
 def test_run_reports_safety_rates_in_the_table_and_the_json(tmp_path, capsys):
     path = tmp_path / "safe_specs.py"

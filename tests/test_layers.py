@@ -605,6 +605,7 @@ TOPICS: Mapping[str, str] = {
     "packaging": "the two distributions as an index shows them",
     "readme": "README, the front page",
     "semantics": "the rules of docs/semantics.md, across both evaluators",
+    "tiers": "the suite's fast and slow tiers (the repository's conftest.py)",
 }
 """The test files that test no one module or part: each its own topic, kept short."""
 

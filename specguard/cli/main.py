@@ -45,7 +45,8 @@ import json
 import os
 import sys
 import tempfile
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -174,34 +175,65 @@ def _write_results(path: Path, text: str) -> None:
 
 
 def _run_all(args: argparse.Namespace, specs: dict[str, Any], executor: Any) -> tuple[dict[str, Any], bool]:
-    """Train and print every spec; returns the results as JSON data and whether one failed."""
-    from specguard.engine.run_spec import run_spec
+    """Train and print every spec; returns the results as JSON data and whether one failed.
+
+    Several specs on the local executor with the cache share one pool of training slots, and a slot one spec
+    leaves idle trains the others' seeds ahead (:mod:`specguard.engine.ahead`), as ``pytest --goal-specs`` does.
+    """
+    from specguard.engine.run_spec import RunOptions, run_with
     from specguard.report.table import table
     from specguard.training.progress import print_event
 
-    results = {}
-    failed = False
-    for name, spec in specs.items():
-        spec = spec.as_run(
+    cache_dir = None if args.no_cache else args.cache_dir
+    progress = None if args.quiet else print_event
+    runs = {
+        name: spec.as_run(
             args.budget_scale,
             checkpoints=args.checkpoints,
             undecided=args.undecided,
             tensorboard_log=args.tensorboard_log,
             numerics=args.numerics,
         )
-        result = run_spec(
-            spec,
-            executor=executor,
-            workers=args.workers,
-            cache_dir=None if args.no_cache else args.cache_dir,
-            progress=None if args.quiet else print_event,
-        )
-        results[name] = result.to_dict()
-        print(f"== {name}: {result.status()} ({result.seconds:.1f}s)")
-        print(table(result))
-        print()
-        failed = failed or not result.as_expected
+        for name, spec in specs.items()
+    }
+    results = {}
+    failed = False
+    with _ahead(runs, executor, cache_dir, progress) as (executor, ahead):
+        for name, spec in runs.items():
+            options = RunOptions(args.workers, cache_dir, progress, executor=executor, ahead=ahead)
+            result = run_with(spec, options)
+            results[name] = result.to_dict()
+            print(f"== {name}: {result.status()} ({result.seconds:.1f}s)")
+            print(table(result))
+            print()
+            failed = failed or not result.as_expected
     return results, failed
+
+
+@contextmanager
+def _ahead(runs: dict[str, Any], executor: Any, cache_dir: Any, progress: Any) -> Iterator[tuple[Any, Any]]:
+    """The executor and the runs trained ahead for ``runs``: slots of the local executor's size, every spec planned
+    on them (the foreground takes its own as it comes to it); ``executor`` alone with one spec, no cache or a
+    cluster."""
+    from specguard.parallel.executors import LocalExecutor
+
+    if len(runs) < 2 or cache_dir is None or not isinstance(executor, LocalExecutor):
+        yield executor, None
+        return
+    from specguard.cache.store import Cache
+    from specguard.engine.ahead import TrainAhead
+    from specguard.parallel.slots import PooledExecutor, SlotPool
+
+    pool = SlotPool(executor.workers)
+    ahead = TrainAhead(pool, Cache(Path(cache_dir)), say=progress)
+    try:
+        ahead.plan(list(runs.values()))
+        yield PooledExecutor(pool), ahead
+    finally:
+        try:
+            ahead.close()
+        finally:
+            pool.close()
 
 
 _T = TypeVar("_T")
