@@ -213,11 +213,11 @@ def no_training(monkeypatch):
 
     calls = []
 
-    def run_spec(spec, **kwargs):
+    def run_with(spec, options):
         calls.append(spec)
         raise SpecError("stub: no training in this test")
 
-    monkeypatch.setattr(specguard.engine.run_spec, "run_spec", run_spec)
+    monkeypatch.setattr(specguard.engine.run_spec, "run_with", run_with)
     return calls
 
 
