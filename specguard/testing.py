@@ -115,12 +115,6 @@ def parametrize_with_checks(classes: Iterable[type]) -> pytest.MarkDecorator:
     return pytest.mark.parametrize("operator, check", params)
 
 
-def _marks(slow: bool) -> list[pytest.MarkDecorator]:
-    import pytest
-
-    return [pytest.mark.slow] if slow else []
-
-
 def check_operator(cls: type, max_examples: int | None = None) -> None:
     """Run every check that applies to ``cls``.
 

@@ -35,11 +35,11 @@ def lstm():
     return spec, RecurrentPPO("MlpLstmPolicy", spec.make_env(), seed=0, device="cpu")
 
 
-def by_hand(model, observations):
+def by_hand(model, observations, *, deterministic=True):
     """The actions SB3's own loop gives for one env's observations, from an episode start."""
     state, start, actions = None, np.ones(1, dtype=bool), []
     for obs in observations:
-        action, state = model.predict(obs, state=state, episode_start=start, deterministic=True)
+        action, state = model.predict(obs, state=state, episode_start=start, deterministic=deterministic)
         start = np.zeros(1, dtype=bool)
         actions.append(action.reshape(-1))
     return np.array(actions)
@@ -156,14 +156,7 @@ def test_a_policys_actions_are_predicts_own_to_the_bit_and_the_model_and_torch_a
     model.policy.set_training_mode(True)  # as SB3 leaves it after an update
     observations = OBS[0]
     torch.manual_seed(7)
-    expected = by_hand(model, observations) if deterministic else None
-    if not deterministic:
-        state, start, expected = None, np.ones(1, dtype=bool), []
-        for obs in observations:
-            action, state = model.predict(obs, state=state, episode_start=start, deterministic=False)
-            start = np.zeros(1, dtype=bool)
-            expected.append(action.reshape(-1))
-        expected = np.array(expected)
+    expected = by_hand(model, observations, deterministic=deterministic)
 
     model.policy.set_training_mode(True)
     calls = []
