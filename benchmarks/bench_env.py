@@ -4,7 +4,9 @@ Steps the raw ``gym.make(env_id)`` env and the env constructed from a goal tree
 in lockstep, with the same pre-sampled actions and the same reset seeds, so both
 see the same states (when the constructed env ends an episode earlier, both are
 reset). Then trains PPO with the same hyperparameters and seed on each and
-compares throughput. Prints per-step times and ratios; exits 0 whatever the
+compares throughput. Then steps ``--n-envs`` of each as training steps them (``make_vec_env`` of the raw env
+against :func:`~specguard.training.vec_env.spec_vec_env`, the constructed envs stepped together), against the
+same targets. Prints per-step times and ratios; exits 0 whatever the
 figures (targets are reported, not asserted: machines are shared and noisy).
 
 Targets (issue "the falsifier ahead of random on every agent, and the step cost"): LunarLander (c), with its
@@ -16,7 +18,8 @@ env's. The verdict is on the median ratio of the rounds; the best round's ratio 
 shared machine, the round least disturbed by other work).
 
 Usage:
-    python benchmarks/bench_env.py [--steps 20000] [--rounds 5] [--ppo-steps 8192] [--skip-ppo] [--case Lunar]
+    python benchmarks/bench_env.py [--steps 20000] [--rounds 5] [--ppo-steps 8192] [--skip-ppo] [--n-envs 16]
+        [--case Lunar]
 """
 
 from __future__ import annotations
@@ -135,6 +138,56 @@ def bench_steps(n_steps: int, rounds: int, only: list[str] | None = None) -> Non
         built.close()
 
 
+def vec_steps(venv: Any, actions: list[np.ndarray]) -> float:
+    """Seconds ``venv`` spends stepping through ``actions`` (one batch of actions per step), from a seeded reset."""
+    venv.reset()
+    clock = time.perf_counter
+    start = clock()
+    for a in actions:
+        venv.step(a)
+    return clock() - start
+
+
+def bench_batched(n_envs: int, n_steps: int, rounds: int, only: list[str] | None = None) -> None:
+    """Training's envs: ``n_envs`` raw envs in ``make_vec_env`` against the constructed ones in training's
+    ``spec_vec_env`` (and, for the record, in ``make_vec_env``, as training stepped them before), same actions."""
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from specguard.training.vec_env import spec_vec_env
+
+    print(
+        f"\nTraining's envs, {n_envs} envs x {n_steps // n_envs} steps x {rounds} rounds, per env step "
+        "(median of rounds; raw: make_vec_env of gym.make)"
+    )
+    print(f"{'case':28s} {'raw us':>8s} {'each us':>8s} {'ratio':>7s} {'together':>9s} {'ratio':>7s} {'target':>7s}")
+    for label, case, target in CASES:
+        if only and not any(part.lower() in label.lower() for part in only):
+            continue
+        initial_env, tree = case()
+        env_id = initial_env.env
+        assert isinstance(env_id, str)
+        build = partial(sg.make_env, initial_env, tree, check=False)
+        venvs = {
+            "raw": make_vec_env(partial(gym.make, env_id), n_envs=n_envs, seed=0),
+            "each": make_vec_env(build, n_envs=n_envs, seed=0),
+            "together": spec_vec_env(build, n_envs=n_envs, seed=0),
+        }
+        space = venvs["raw"].action_space
+        space.seed(0)
+        actions = [np.stack([space.sample() for _ in range(n_envs)]) for _ in range(n_steps // n_envs)]
+        vec_steps(venvs["together"], actions[: len(actions) // 10])  # warm-up
+        times: dict[str, list[float]] = {name: [] for name in venvs}
+        for _ in range(rounds):
+            for name, venv in venvs.items():
+                times[name].append(vec_steps(venv, actions) / (len(actions) * n_envs) * 1e6)
+        raw, each, together = (statistics.median(times[name]) for name in ("raw", "each", "together"))
+        ratio = together / raw
+        verdict = "" if target is None else f"<= {target}" + (" ok" if ratio <= target else " MISSED")
+        print(f"{label:28s} {raw:8.2f} {each:8.2f} {each / raw:7.3f} {together:9.2f} {ratio:7.3f} {verdict}")
+        for venv in venvs.values():
+            venv.close()
+
+
 def ppo_throughput(make: Callable[[], gym.Env], steps: int, kwargs: dict[str, Any]) -> float:
     from stable_baselines3 import PPO
 
@@ -173,10 +226,13 @@ def main() -> None:
     parser.add_argument("--ppo-steps", type=int, default=8192)
     parser.add_argument("--ppo-rounds", type=int, default=3)
     parser.add_argument("--skip-ppo", action="store_true")
+    parser.add_argument("--n-envs", type=int, default=16, help="training's envs stepped together (0: skip)")
     parser.add_argument("--case", action="append", help="only the step cases whose label contains this (repeatable)")
     args = parser.parse_args()
     np.random.seed(0)
     bench_steps(args.steps, args.rounds, args.case)
+    if args.n_envs:
+        bench_batched(args.n_envs, args.steps, args.rounds, args.case)
     if not args.skip_ppo:
         bench_ppo(args.ppo_steps, args.ppo_rounds)
 

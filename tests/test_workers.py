@@ -286,6 +286,30 @@ def test_tasks_start_with_the_heavy_libraries_already_imported() -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.skipif("forkserver" not in multiprocessing.get_all_start_methods(), reason="spawned: no fork server")
+def test_a_fork_server_someone_else_started_first_is_not_used_for_portable_tasks() -> None:
+    # SB3's SubprocVecEnv starts the process's fork server without libm's portable variants; a task it forked
+    # would keep that environment (and a portable run refuse to train). specguard spawns its tasks instead.
+    script = textwrap.dedent(
+        """
+        import os
+        from multiprocessing import forkserver
+        os.environ.pop("GLIBC_TUNABLES", None)
+        forkserver.ensure_running()
+        from specguard.parallel.protocol import Task
+        from specguard.parallel.workers import _context, run_tasks
+        from specguard.utils.numerics import hold_numerics, numerics_environ
+        print(_context().get_start_method())
+        portable = numerics_environ("portable")
+        task = Task(0, lambda report: hold_numerics("portable", "task", lambda: "DEFAULT"), (), portable)
+        print(run_tasks([task], max_workers=1)[0].value)
+        """
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert done.stdout.split() == ["spawn", "portable"], done.stderr
+
+
+@pytest.mark.slow
 def test_killed_worker_fails_alone_with_its_last_phase_and_step() -> None:
     outcomes = run_tasks([Task(0, kill_self), Task(1, sleep_then_return, (1, 1.0))], max_workers=2)
     failure = _failure(outcomes[0])

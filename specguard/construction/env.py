@@ -374,6 +374,8 @@ class SpecEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         # The base observation can be handed on untouched when nothing is added or converted.
         self._passthrough = self._identity and not slots and base_space.dtype == np.float32 and not self._with_env
         self._pending: Any = None  # (weights, CompiledTree) adapted, in force from the next reset
+        self.info_shares = False
+        """The last step's ``info`` holds entries of the initial env's own info (which the env may still hold)."""
         self.adapted_weights: dict[str, tuple[float, ...]] = {}
         """The adapted weights in force this episode (:meth:`set_weights`); empty while the tree's own."""
 
@@ -446,6 +448,30 @@ class SpecEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         return {SPEC_KEY: observation, ENV_KEY: obs} if self._whole else {SPEC_KEY: observation, **obs}
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info, row = self.advance(action)
+        # A new array each step (a consumer may keep it, e.g. SB3's terminal_observation); or, when
+        # nothing is added or converted, the base env's own observation untouched.
+        observation: Any = obs if row is obs else np.array(row, _FLOAT32)
+        if self._with_env:
+            observation = self._beside(obs, observation)
+        return observation, reward, terminated, truncated, info
+
+    @property
+    def flat(self) -> bool:
+        """The observation is the features and own state, a flat ``Box`` (``observation="features"``): a vectorised
+        env may write the ``row`` of :meth:`advance` into its buffer rather than ask for the observation."""
+        return not self._with_env
+
+    def advance(self, action: Any) -> tuple[Any, float, bool, bool, StepInfo, list[float]]:
+        """:meth:`step`, with the observation's values in place of the observation: ``(obs, reward, terminated,
+        truncated, info, row)``, ``obs`` the initial env's own.
+
+        ``row`` is the new features, then the own state (a list); or ``obs`` itself where nothing is added or
+        converted (``row is obs``). :meth:`step` makes its observation of it (float32, or the features under
+        :data:`SPEC_KEY`); a vectorised env (:class:`~specguard.training.vec_env.SpecVecEnv`) writes it into its
+        own buffer instead. ``info`` holds new dicts of the spec's, and the initial env's own entries as they
+        came (:attr:`info_shares`).
+        """
         # The hot path: every call of a user's training runs it, so it is written out in one function.
         base_action = action
         if self._execute is not None:
@@ -464,6 +490,7 @@ class SpecEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
                 _features(obs, None, self.features, self.tree.name)  # raises, naming the observation
         else:
             f = self._read(obs, info, self.env, self._t)
+        self.info_shares = bool(info)
         ev = self.evaluator
         # The last state is judged too; a termination by the initial env is one before the horizon.
         result = ev.step(action, f, terminated or truncated, terminated)
@@ -475,12 +502,8 @@ class SpecEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
             reward_terms=ScalarDict(result.terms),
             base_reward=float(base_reward),
         )
-        # A new array each step (a consumer may keep it, e.g. SB3's terminal_observation); or, when
-        # nothing is added or converted, the base env's own observation untouched.
-        observation: Any = obs if self._passthrough else np.array(f + ev.own_state, _FLOAT32)
-        if self._with_env:
-            observation = self._beside(obs, observation)
-        return observation, result.reward, bool(terminated or result.terminated), bool(truncated), info
+        row = obs if self._passthrough else f + ev.own_state
+        return obs, result.reward, bool(terminated or result.terminated), bool(truncated), info, row
 
 
 class BaselineEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):

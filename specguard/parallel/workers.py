@@ -321,22 +321,37 @@ def _release(children: Sequence[_Child]) -> None:
 
 
 def _context() -> BaseContext:
-    """The fork server where the platform has one, with :data:`PRELOAD` (module docstring); else spawn."""
+    """The fork server where the platform has one, with :data:`PRELOAD` (module docstring); else spawn.
+
+    Spawn too where this process's fork server was already running, started by someone else (SB3's
+    ``SubprocVecEnv`` starts it): its tasks would keep its environment, without libm's portable variants.
+    """
     if "forkserver" not in multiprocessing.get_all_start_methods():
         return multiprocessing.get_context("spawn")
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload(list(PRELOAD))  # read when this process's server starts, at its first task
-    _start_fork_server()
-    return context
+    return context if _start_fork_server() else multiprocessing.get_context("spawn")
 
 
-def _start_fork_server() -> None:
+_OWN_SERVER: list[int] = []  # the fork server's pid, where specguard started it (with libm's portable variants)
+
+
+def _start_fork_server() -> bool:
     """Start this process's fork server, if it is not running, with libm's portable variants (glibc reads
-    ``GLIBC_TUNABLES`` as a process starts; a forked task keeps its server's): :mod:`specguard.utils.numerics`."""
+    ``GLIBC_TUNABLES`` as a process starts; a forked task keeps its server's): :mod:`specguard.utils.numerics`.
+    Whether the server running is specguard's own: ``False`` where another started it first."""
     from multiprocessing import forkserver
 
+    server: Any = forkserver._forkserver  # the process's one server (multiprocessing keeps no public handle)
+    running = getattr(server, "_forkserver_pid", None)
+    if running is not None and running not in _OWN_SERVER:
+        return False
     with _environ(with_libm(os.environ)):
         forkserver.ensure_running()
+    pid = getattr(server, "_forkserver_pid", None)
+    if pid is not None and pid not in _OWN_SERVER:
+        _OWN_SERVER.append(pid)
+    return True
 
 
 @contextlib.contextmanager

@@ -204,10 +204,15 @@ def _build(spec: Spec, seed: int) -> _Run:
     from stable_baselines3.common.logger import Logger
     from stable_baselines3.common.vec_env import VecNormalize
 
+    from specguard.training.vec_env import spec_vec_env
+
     label = f"Spec {spec.label!r}"
     build = spec.env_factory()  # the training envs and the evaluation env share one compiled tree
     try:
-        venv = make_vec_env(build, n_envs=spec.n_envs, seed=seed)
+        # The constructed envs stepped together (the same steps, without a Monitor and an info copy per env); a
+        # baseline's envs are the initial env's own, in make_vec_env's.
+        vectorise = make_vec_env if spec.baseline else spec_vec_env
+        venv = vectorise(build, n_envs=spec.n_envs, seed=seed)
     except SpecError:
         raise
     except Exception as e:
