@@ -192,6 +192,50 @@ def test_the_doors_options_override_the_specs_undecided_the_same_way(tmp_path: P
     run.assert_outcomes(xfailed=1)
 
 
+SPARSE_FILE = """
+import specguard as sg
+
+pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
+# Upright and still within a hair: no episode of a policy trained 128 steps ends there, and nothing shapes it.
+tree = sg.Goal("balanced", x=(0.9999, 1.0), y=(-0.01, 0.01), omega=(-0.01, 0.01))
+spec = sg.Spec(
+    pendulum,
+    tree,
+    budget=sg.Budget(timesteps=128, min_seeds=1, eval_episodes=4),
+    hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1},
+    expect=0.9,
+)
+"""
+
+
+def test_every_door_prints_the_same_hint_under_a_failed_goal(
+    tmp_path: Path, pytester: pytest.Pytester, capsys: pytest.CaptureFixture[str]
+):
+    spec_file = tmp_path / "sparse_spec.py"
+    spec_file.write_text(textwrap.dedent(SPARSE_FILE))
+    spec = load_objects(f"{spec_file}::spec")["spec"]
+
+    result = sg.run_spec(spec, workers=1, cache_dir=tmp_path / "api", progress=None)
+    hint = result.hints["balanced"]
+    assert hint.startswith("sparse goal never reached in 1/1 seeds"), hint
+
+    out = tmp_path / "cli.json"
+    argv = ["run", f"{spec_file}::spec", "--workers", "1", "--cache-dir", str(tmp_path / "cli"), "--quiet"]
+    assert main([*argv, "--json", str(out)]) == 1
+    assert f"hint for 'balanced': {hint}" in capsys.readouterr().out.splitlines()
+    assert json.loads(out.read_text())["spec"]["hints"] == {"balanced": hint}
+
+    pytester.makepyfile(sparse_spec=spec_file.read_text())
+    pytester.makepyfile(
+        test_sparse="import specguard as sg\nfrom sparse_spec import spec\n\ntest_sparse = sg.goal_specs({'s': spec})\n"
+    )
+    run = pytester.runpytest_subprocess(
+        "-p", "no:cacheprovider", "--goal-specs", "--goal-specs-workers=1", f"--goal-specs-cache-dir={tmp_path / 'p'}"
+    )
+    run.assert_outcomes(failed=1)
+    assert f"  hint: {hint}" in run.outlines
+
+
 def test_a_spec_with_nothing_to_assert_is_refused_at_every_door_before_training(
     tmp_path: Path, pytester: pytest.Pytester, capsys: pytest.CaptureFixture[str]
 ):

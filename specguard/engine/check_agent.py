@@ -166,7 +166,8 @@ def check_agent(
     n = run.episodes
     base = EVAL_SEED_BASE + seed * EVAL_SEED_STRIDE
     counts = run.successes
-    result = judged(one, [run], ends_at_goal=observation == "spec")  # the baseline env's episodes are the env's own
+    # The baseline env's episodes are the env's own.
+    result = judged(one, [run], ends_at_goal=observation == "spec", agent=agent.name)
     seen = "the constructed env's" if observation == "spec" else "the initial env's own"
     wrapped = f", through {function_text(seen_wrap)}" if seen_wrap is not None else ""
     result.notes[:0] = [
@@ -176,7 +177,6 @@ def check_agent(
         f"observation{wrapped}",
         *_never_failed(counts, n, spec.confidence),
     ]
-    result.agent = agent.name
     result.trained = None  # no model behind it
     result.cached = {seed: hit}
     result.spec_key = key

@@ -1,5 +1,21 @@
-"""Judging a spec's runs: each thresholded goal's quorum verdict, the notes on their evaluation episodes, and how
-many more seeds could change a verdict."""
+"""Judging a spec's runs: each thresholded goal's quorum verdict, the notes on their evaluation episodes, what to
+try where a goal did not pass, and how many more seeds could change a verdict.
+
+The hints are one function, :func:`goal_hint`, for every door: the pytest item's failure (``pytest
+--goal-specs``), the table of ``specguard run``, ``specguard check`` and ``specguard reproduce``, and a result's
+JSON (:attr:`SpecResult.hints <specguard.engine.spec_result.SpecResult.hints>`). A sparse goal never reached asks
+for a ``Distance``, subgoals that compete name the weaker one, runs left undecided say by how much, a safety rate
+names its violations, and an agent trained elsewhere is told what its episodes show, not how to train it.
+
+Example:
+    >>> import specguard as sg
+    >>> from specguard.training.result import RunResult
+    >>> spec = sg.Spec(sg.InitialEnv("Pendulum-v1", features=("x",)), sg.Goal("up", x=(0.9, 1.0)),
+    ...                budget=sg.Budget(timesteps=64, min_seeds=1), expect=0.5)
+    >>> run = RunResult(spec="up", seed=0, timesteps=64, episodes=30, successes={"up": 0}, train_seconds=1.0)
+    >>> judged(spec, [run]).hints
+    {'up': "sparse goal never reached in 1/1 seeds: consider a Distance annotation on 'up'"}
+"""
 
 from __future__ import annotations
 
@@ -7,14 +23,17 @@ from collections.abc import Mapping, Sequence
 
 from specguard.construction import cap
 from specguard.engine.spec_result import GoalVerdict, SpecResult
-from specguard.extend import Node, until_end
+from specguard.extend import SHAPING, Node, until_end
 from specguard.spec.spec import Spec
 from specguard.stats.intervals import quorum_verdict, run_verdict, success_interval
-from specguard.stats.verdicts import QuorumVerdict, RunVerdict
+from specguard.stats.verdicts import GoalOutcome, QuorumVerdict, RunVerdict
 from specguard.training.result import RunResult
+from specguard.tree.keys import SAFETY, kind
 from specguard.tree.nodes import keeps_to_horizon
+from specguard.utils.node_paths import child_path
+from specguard.utils.text import interval_text
 
-__all__ = ["episode_notes", "judge", "judged", "seeds_still_needed"]
+__all__ = ["episode_notes", "goal_hint", "hints", "judge", "judged", "seeds_still_needed"]
 
 
 def judge(spec: Spec, runs: Sequence[RunResult], failed_seeds: int) -> dict[str, GoalVerdict]:
@@ -53,9 +72,16 @@ def seeds_still_needed(spec: Spec, goals: dict[str, GoalVerdict], done: int) -> 
 
 
 def judged(
-    spec: Spec, runs: Sequence[RunResult], *, errors: Mapping[int, str] | None = None, ends_at_goal: bool | None = None
+    spec: Spec,
+    runs: Sequence[RunResult],
+    *,
+    errors: Mapping[int, str] | None = None,
+    ends_at_goal: bool | None = None,
+    agent: str | None = None,
 ) -> SpecResult:
-    """The result of ``spec`` over ``runs`` (and the seeds that crashed, ``errors``): verdicts, notes, words.
+    """The result of ``spec`` over ``runs`` (and the seeds that crashed, ``errors``): verdicts, notes, words, hints.
+
+    ``agent``: the name of the agent judged, for an agent trained elsewhere (its hints speak of its episodes).
 
     What ``run_spec`` returns for the same runs, less what only a call knows (cache hits, time, the cache).
 
@@ -71,7 +97,7 @@ def judged(
     """
     errors = dict(errors or {})
     runs = sorted(runs, key=lambda r: r.seed)
-    return SpecResult(
+    result = SpecResult(
         spec=spec.label,
         runs=runs,
         goals=judge(spec, runs, len(errors)),
@@ -80,8 +106,11 @@ def judged(
         undecided=spec.undecided,
         xfail=dict(spec.xfail),
         notes=episode_notes(spec.tree, runs, ends_at_goal=not spec.baseline if ends_at_goal is None else ends_at_goal),
+        agent=agent,
         trained=spec,
     )
+    result.hints = hints(spec, result)
+    return result
 
 
 def episode_notes(tree: Node | None, runs: Sequence[RunResult], *, ends_at_goal: bool = True) -> list[str]:
@@ -138,3 +167,143 @@ def episode_notes(tree: Node | None, runs: Sequence[RunResult], *, ends_at_goal:
             f"(the env's: a fall, a crash): the root goal {root!r} holds until the end, and {why}"
         )
     return lines
+
+
+def hints(spec: Spec, result: SpecResult) -> dict[str, str]:
+    """:func:`goal_hint` of every thresholded goal and safety rate of ``result`` that did not pass, in its order."""
+    out = {}
+    for path in result.goals:
+        if result.outcome(path) is not GoalOutcome.PASSED:
+            hint = goal_hint(spec, path, result)
+            if hint is not None:
+                out[path] = hint
+    return out
+
+
+def _node(tree: Node, path: str) -> Node:
+    return dict(tree.walk())[path]
+
+
+def _undecided_hint(spec: Spec, path: str, result: SpecResult) -> str:
+    """Why runs stayed undecided: each is judged alone, at the corrected confidence, by its own interval."""
+    confidence, threshold = spec.verdict_confidence, spec.thresholds[path]
+    undecided = [
+        f"seed {r.seed} {interval_text(success_interval(r.successes[path], r.episodes, confidence))}"
+        for r in result.runs
+        if run_verdict(r.successes[path], r.episodes, threshold, confidence) is RunVerdict.UNDECIDED
+    ]
+    return (
+        f"runs stayed undecided after {spec.budget.max_eval_episodes} evaluation episodes: each run is judged on "
+        f"its own episodes at {confidence:.2%} confidence (the table's {spec.confidence:.0%}, corrected for "
+        f"{spec.budget.looks} looks), and these intervals contain the threshold {threshold:g}: "
+        f"{', '.join(undecided) or 'none'}; raise budget.max_eval_episodes, or ask for a threshold further from "
+        "the measured rate"
+    )
+
+
+def _safety_hint(spec: Spec, key: str, result: SpecResult, verdicts: list[RunVerdict]) -> str | None:
+    """What to try when a safety rate (``path:name``) missed its threshold."""
+    runs = result.runs
+    episodes = sum(r.episodes for r in runs)
+    if not episodes:
+        return None
+    if RunVerdict.UNDECIDED in verdicts and RunVerdict.MISSED not in verdicts:
+        return _undecided_hint(spec, key, result)
+    unsafe = episodes - sum(r.successes[key] for r in runs)
+    always = [r.seed for r in runs if r.successes[key] == 0]
+    where = f"; in every episode of {len(always)}/{len(runs)} seeds" if always else ""
+    return (
+        f"{key!r} was violated in {unsafe / episodes:.0%} of evaluation episodes{where} "
+        "(an episode with any violation counts as unsafe, whatever the annotation's budget): "
+        "consider a larger weight for its penalty, or a larger training budget"
+    )
+
+
+def _agent_hint(spec: Spec, path: str, result: SpecResult, verdicts: list[RunVerdict]) -> str | None:
+    """What an agent's (trained elsewhere) failing goal or safety rate shows of its behaviour: nothing of training."""
+    episodes = sum(r.episodes for r in result.runs)
+    if not episodes:
+        return None
+    who = f"agent {result.agent!r}"
+    if RunVerdict.UNDECIDED in verdicts and RunVerdict.MISSED not in verdicts:
+        return (
+            f"{who}'s {episodes} evaluation episodes leave it undecided: their interval contains the threshold "
+            f"{spec.thresholds[path]:g}; give it more episodes (max_episodes, --max-episodes), or ask for a "
+            "threshold further from the measured rate"
+        )
+    met = sum(r.successes[path] for r in result.runs)
+    if kind(path) == SAFETY:
+        return f"{who} violated {path!r} in {episodes - met} of its {episodes} evaluation episodes"
+    fell = sum(r.terminated for r in result.runs)
+    if fell and keeps_to_horizon(spec.tree) and until_end(spec.tree):
+        return (
+            f"the env ended {fell} of {who}'s {episodes} evaluation episodes before the horizon (a fall, a crash), "
+            "which a goal held until the end does not keep; where the env's termination is a good end, say so "
+            "with sg.Always(..., until='termination')"
+        )
+    if not met:
+        return f"{who} never ended an evaluation episode in {path!r} ({episodes} episodes)"
+    node = _node(spec.tree, path)
+    if node.children:
+        kids = [child_path(path, c.name) for c in node.children]
+        rates = {kid: sum(r.successes[kid] for r in result.runs) / episodes for kid in kids}
+        worst = min(rates, key=rates.__getitem__)
+        return f"{who} fell short on {worst!r}, met in {rates[worst]:.0%} of its episodes"
+    return None
+
+
+def goal_hint(spec: Spec, path: str, result: SpecResult) -> str | None:
+    """What to try where goal (or safety key) ``path`` of ``result`` did not pass, or ``None`` where nothing is known
+    to help; for an agent trained elsewhere (:attr:`SpecResult.agent`), what its episodes show of it.
+
+    ``spec`` is the spec the result judged (its thresholds, tree and budget).
+    """
+    verdicts = result.goals[path].runs
+    if result.agent is not None:  # trained elsewhere: its behaviour, not advice on training
+        return _agent_hint(spec, path, result, verdicts)
+    if kind(path) == SAFETY:
+        return _safety_hint(spec, path, result, verdicts)
+    runs = result.runs
+    fell = sum(r.terminated for r in runs)
+    horizon = keeps_to_horizon(spec.tree)
+    if fell and horizon and until_end(spec.tree):
+        episodes = sum(r.episodes for r in runs)
+        share = "every" if fell == episodes else f"{fell} of {episodes}"
+        return (
+            f"the env ended {share} evaluation episode{'s' if 1 < fell < episodes else ''} before the "
+            "horizon (a fall, a crash), which a goal held until the end does not keep: state the env's failure "
+            "condition in the spec (a Constraint, a goal) so the agent learns to avoid it, or, where the env's "
+            "termination is a good end, say so with sg.Always(..., until='termination')"
+        )
+    never = [r.seed for r in runs if r.successes[path] == 0]
+    shaped = any(a.role == SHAPING for _, n in _node(spec.tree, path).walk() for a in n.annotations)
+    if never:
+        from specguard.construction.preflight import unreachable_reason
+
+        # "Impossible" is refused before training; should a result from elsewhere (an old cache) get here,
+        # no Distance can help: say why, instead of "never reached".
+        impossible = unreachable_reason(spec.initial_env, spec.tree, path)
+        if impossible is not None:
+            return f"goal impossible, not just never reached: {impossible}"
+    if never and not shaped:
+        return (
+            f"sparse goal never reached in {len(never)}/{len(runs)} seeds: consider a Distance annotation on {path!r}"
+        )
+    if never:
+        return f"goal never reached in {len(never)}/{len(runs)} seeds: consider a larger budget or other weights"
+    node = _node(spec.tree, path)
+    episodes = sum(r.episodes for r in runs)
+    if node.children and episodes:
+        kids = [child_path(path, c.name) for c in node.children]
+        rates = {kid: sum(r.successes[kid] for r in runs) / episodes for kid in kids}
+        best, worst = max(rates, key=rates.__getitem__), min(rates, key=rates.__getitem__)
+        if rates[best] - rates[worst] >= 0.3:
+            return (
+                f"subgoals compete: {best!r} is reached in {rates[best]:.0%} of episodes, {worst!r} in "
+                f"{rates[worst]:.0%}; consider a Distance on {worst!r} or a larger weight for it"
+            )
+    if RunVerdict.UNDECIDED in verdicts:
+        return _undecided_hint(spec, path, result)
+    if any(r.hit_wall_clock for r in runs):
+        return "training stopped at the budget's wall-clock cap in some seeds"
+    return None

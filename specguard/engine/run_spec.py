@@ -27,7 +27,7 @@ from pathlib import Path
 
 from specguard.cache.store import Cache
 from specguard.engine.ahead import TrainAhead
-from specguard.engine.judging import episode_notes, judge, seeds_still_needed
+from specguard.engine.judging import episode_notes, hints, judge, seeds_still_needed
 from specguard.engine.runs import Runs
 from specguard.engine.spec_result import SpecResult
 from specguard.error import SpecError
@@ -194,6 +194,7 @@ def _seeds_of(spec: Spec, options: RunOptions) -> Iterator[tuple[Runs, SpecResul
         result.cache_dir = None if runs.cache is None else runs.cache.root
         yield runs, result
         result.notes = episode_notes(spec.tree, result.runs, ends_at_goal=not spec.baseline)
+        result.hints = hints(spec, result)
     finally:
         if owned:
             runner.close()

@@ -161,6 +161,8 @@ class SpecResult:
             verdicts, one line each (:func:`specguard.engine.judging.episode_notes`).
         agent: the name of the agent judged, for a result of :func:`~specguard.engine.check_agent.check_agent` (one
             run that trained nothing); ``None`` for a trained spec.
+        hints: per goal (or safety rate) that did not pass, what to try (:func:`specguard.engine.judging.goal_hint`),
+            the hint every door prints under its verdict; a result stored before hints were kept has none.
         trained: the spec as run, which with ``cache_dir`` reaches the runs' models
             (:func:`specguard.engine.trained.load_model`); neither is reported nor serialised.
     """
@@ -178,6 +180,7 @@ class SpecResult:
     xfail: dict[str, str] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     agent: str | None = None
+    hints: dict[str, str] = field(default_factory=dict)
     trained: Spec | None = field(default=None, repr=False, compare=False)
     cache_dir: Path | None = field(default=None, repr=False, compare=False)
 
@@ -253,6 +256,7 @@ class SpecResult:
             "xfail": dict(self.xfail),
             "notes": list(self.notes),
             "agent": self.agent,
+            "hints": dict(self.hints),
         }
 
     @classmethod
@@ -305,6 +309,7 @@ class SpecResult:
             xfail=dict(fields["xfail"]),
             notes=list(fields["notes"]),
             agent=fields["agent"],
+            hints=dict(fields["hints"]),
             trained=trained,
             cache_dir=None if cache_dir is None else Path(cache_dir),
         )
@@ -346,6 +351,12 @@ _FIELDS: tuple[tuple[str, Any, Callable[[Any], bool], str], ...] = (
     ),
     ("notes", [], lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v), "a list of texts"),
     ("agent", None, lambda v: v is None or isinstance(v, str), "a string or null"),
+    (
+        "hints",
+        {},
+        lambda v: isinstance(v, dict) and all(isinstance(k, str) and isinstance(x, str) for k, x in v.items()),
+        "an object of hints (texts) by goal path",
+    ),
 )
 """Each field of a stored result but its label: its default where it may be absent, its rule and the words for
 what it should be."""

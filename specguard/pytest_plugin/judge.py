@@ -11,15 +11,12 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from specguard.engine.judging import goal_hint
 from specguard.engine.spec_result import SpecResult
-from specguard.extend import SHAPING, Node, until_end
 from specguard.spec.spec import Spec
-from specguard.stats.intervals import run_verdict, success_interval
 from specguard.stats.sequential import GateState
 from specguard.stats.verdicts import OUTCOME_VERBS, GoalOutcome, RunVerdict
 from specguard.tree.keys import GOAL, SAFETY, kind, require_thresholds, resolve_goal
-from specguard.tree.nodes import keeps_to_horizon
-from specguard.utils.node_paths import child_path
 from specguard.utils.text import digests_text, interval_text, numerics_text
 
 if TYPE_CHECKING:
@@ -139,129 +136,6 @@ class GoalCheck:
         return row
 
 
-def _node(tree: Node, path: str) -> Node:
-    return dict(tree.walk())[path]
-
-
-def _undecided_hint(spec: Spec, path: str, result: SpecResult) -> str:
-    """Why runs stayed undecided: each is judged alone, at the corrected confidence, by its own interval."""
-    confidence, threshold = spec.verdict_confidence, spec.thresholds[path]
-    undecided = [
-        f"seed {r.seed} {interval_text(success_interval(r.successes[path], r.episodes, confidence))}"
-        for r in result.runs
-        if run_verdict(r.successes[path], r.episodes, threshold, confidence) is RunVerdict.UNDECIDED
-    ]
-    return (
-        f"runs stayed undecided after {spec.budget.max_eval_episodes} evaluation episodes: each run is judged on "
-        f"its own episodes at {confidence:.2%} confidence (the table's {spec.confidence:.0%}, corrected for "
-        f"{spec.budget.looks} looks), and these intervals contain the threshold {threshold:g}: "
-        f"{', '.join(undecided) or 'none'}; raise budget.max_eval_episodes, or ask for a threshold further from "
-        "the measured rate"
-    )
-
-
-def _safety_hint(spec: Spec, key: str, result: SpecResult, verdicts: list[RunVerdict]) -> str | None:
-    """What to try when a safety rate (``path:name``) missed its threshold."""
-    runs = result.runs
-    episodes = sum(r.episodes for r in runs)
-    if not episodes:
-        return None
-    if RunVerdict.UNDECIDED in verdicts and RunVerdict.MISSED not in verdicts:
-        return _undecided_hint(spec, key, result)
-    unsafe = episodes - sum(r.successes[key] for r in runs)
-    always = [r.seed for r in runs if r.successes[key] == 0]
-    where = f"; in every episode of {len(always)}/{len(runs)} seeds" if always else ""
-    return (
-        f"{key!r} was violated in {unsafe / episodes:.0%} of evaluation episodes{where} "
-        "(an episode with any violation counts as unsafe, whatever the annotation's budget): "
-        "consider a larger weight for its penalty, or a larger training budget"
-    )
-
-
-def _agent_hint(spec: Spec, path: str, result: SpecResult, verdicts: list[RunVerdict]) -> str | None:
-    """What an agent's (trained elsewhere) failing goal or safety rate shows of its behaviour: nothing of training."""
-    episodes = sum(r.episodes for r in result.runs)
-    if not episodes:
-        return None
-    who = f"agent {result.agent!r}"
-    if RunVerdict.UNDECIDED in verdicts and RunVerdict.MISSED not in verdicts:
-        return (
-            f"{who}'s {episodes} evaluation episodes leave it undecided: their interval contains the threshold "
-            f"{spec.thresholds[path]:g}; give it more episodes (max_episodes, --max-episodes), or ask for a "
-            "threshold further from the measured rate"
-        )
-    met = sum(r.successes[path] for r in result.runs)
-    if kind(path) == SAFETY:
-        return f"{who} violated {path!r} in {episodes - met} of its {episodes} evaluation episodes"
-    fell = sum(r.terminated for r in result.runs)
-    if fell and keeps_to_horizon(spec.tree) and until_end(spec.tree):
-        return (
-            f"the env ended {fell} of {who}'s {episodes} evaluation episodes before the horizon (a fall, a crash), "
-            "which a goal held until the end does not keep; where the env's termination is a good end, say so "
-            "with sg.Always(..., until='termination')"
-        )
-    if not met:
-        return f"{who} never ended an evaluation episode in {path!r} ({episodes} episodes)"
-    node = _node(spec.tree, path)
-    if node.children:
-        kids = [child_path(path, c.name) for c in node.children]
-        rates = {kid: sum(r.successes[kid] for r in result.runs) / episodes for kid in kids}
-        worst = min(rates, key=rates.__getitem__)
-        return f"{who} fell short on {worst!r}, met in {rates[worst]:.0%} of its episodes"
-    return None
-
-
-def _hint(spec: Spec, path: str, result: SpecResult, verdicts: list[RunVerdict]) -> str | None:
-    if result.agent is not None:  # trained elsewhere: its behaviour, not advice on training
-        return _agent_hint(spec, path, result, verdicts)
-    if kind(path) == SAFETY:
-        return _safety_hint(spec, path, result, verdicts)
-    runs = result.runs
-    fell = sum(r.terminated for r in runs)
-    horizon = keeps_to_horizon(spec.tree)
-    if fell and horizon and until_end(spec.tree):
-        episodes = sum(r.episodes for r in runs)
-        share = "every" if fell == episodes else f"{fell} of {episodes}"
-        return (
-            f"the env ended {share} evaluation episode{'s' if 1 < fell < episodes else ''} before the "
-            "horizon (a fall, a crash), which a goal held until the end does not keep: state the env's failure "
-            "condition in the spec (a Constraint, a goal) so the agent learns to avoid it, or, where the env's "
-            "termination is a good end, say so with sg.Always(..., until='termination')"
-        )
-    never = [r.seed for r in runs if r.successes[path] == 0]
-    shaped = any(a.role == SHAPING for _, n in _node(spec.tree, path).walk() for a in n.annotations)
-    if never:
-        from specguard.construction.preflight import unreachable_reason
-
-        # "Impossible" is refused before training; should a result from elsewhere (an old cache) get here,
-        # no Distance can help: say why, instead of "never reached".
-        impossible = unreachable_reason(spec.initial_env, spec.tree, path)
-        if impossible is not None:
-            return f"goal impossible, not just never reached: {impossible}"
-    if never and not shaped:
-        return (
-            f"sparse goal never reached in {len(never)}/{len(runs)} seeds: consider a Distance annotation on {path!r}"
-        )
-    if never:
-        return f"goal never reached in {len(never)}/{len(runs)} seeds: consider a larger budget or other weights"
-    node = _node(spec.tree, path)
-    episodes = sum(r.episodes for r in runs)
-    if node.children and episodes:
-        kids = [child_path(path, c.name) for c in node.children]
-        rates = {kid: sum(r.successes[kid] for r in runs) / episodes for kid in kids}
-        best, worst = max(rates, key=rates.__getitem__), min(rates, key=rates.__getitem__)
-        if rates[best] - rates[worst] >= 0.3:
-            return (
-                f"subgoals compete: {best!r} is reached in {rates[best]:.0%} of episodes, {worst!r} in "
-                f"{rates[worst]:.0%}; consider a Distance on {worst!r} or a larger weight for it"
-            )
-    if RunVerdict.UNDECIDED in verdicts:
-        return _undecided_hint(spec, path, result)
-    if any(r.hit_wall_clock for r in runs):
-        return "training stopped at the budget's wall-clock cap in some seeds"
-    return None
-
-
 def judge_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalCheck:
     """The figures and outcome of goal (or safety key) ``path``, which must have a threshold in ``spec``."""
     verdict = result.goals[path]
@@ -301,7 +175,7 @@ def judge_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalChe
         cached=bool(result.cached) and all(result.cached.values()),
         errors=dict(result.errors),
         spec_key=result.spec_key,
-        hint=None if outcome is GoalOutcome.PASSED else _hint(spec, path, result, verdict.runs),
+        hint=None if outcome is GoalOutcome.PASSED else goal_hint(spec, path, result),
         kind=kind(path),
         notes=list(result.notes),
         agent=result.agent,

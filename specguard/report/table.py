@@ -36,7 +36,8 @@ def table(result: SpecResult) -> str:
     threshold shows ``-`` for what it lacks. Under the table: the result's notes (the episodes that
     started inside the root goal, or ended before their horizon, how many), the weights each run
     adapted, each run's weights digest (its first 12 hex digits: ``weights seed 0: 3c61144ad8e8; seed 1: ...``,
-    :attr:`RunResult.weights_digest <specguard.training.result.RunResult>`), and the seeds that failed.
+    :attr:`RunResult.weights_digest <specguard.training.result.RunResult>`), the seeds that failed, and last what
+    to try for each goal that did not pass (:attr:`SpecResult.hints`, the hint of the pytest item's failure).
     """
     paths = [p for r in result.runs[:1] for p in r.successes] or list(result.goals)
     paths.sort(key=lambda p: kind(p) != GOAL)  # stable: each kind keeps its order
@@ -71,4 +72,5 @@ def table(result: SpecResult) -> str:
         lines.append(f"weights {digests}" + (f" ({computed})" if computed else ""))
     for seed, message in result.errors.items():
         lines.append(f"seed {seed} failed: {message}")
+    lines += [f"hint for {p!r}: {hint}" for p, hint in result.hints.items()]
     return "\n".join(lines)
