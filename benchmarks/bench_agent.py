@@ -29,7 +29,7 @@ import gymnasium as gym
 import numpy as np
 
 import specguard as sg
-from specguard.training.train import EVAL_SEED_BASE
+from specguard.evaluation.episodes import EVAL_SEED_BASE
 
 CARTPOLE = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
 BALANCE = sg.Always(sg.Goal("upright", theta=(-0.2, 0.2)), name="balance")

@@ -66,12 +66,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the case stud
 import specguard as sg
 from specguard.engine.falsify_run import batch_policy, property_keys
 from specguard.engine.run_spec import RunOptions, train_seeds
+from specguard.evaluation.policy import one_torch_thread, policy
+from specguard.evaluation.rollout import episode
 from specguard.falsify.robustness import SCORES
 from specguard.falsify.search import EpisodeRunner, falsify
 from specguard.starts.space import StartSpace
 from specguard.stats.intervals import failure_upper_bound
-from specguard.training.policy import one_torch_thread, policy
-from specguard.training.rollout import episode
 
 PENDULUM_WIDE = StartSpace({"hinge": (-0.2, 0.2), "hinge_vel": (-1.0, 1.0)})
 RARE = 0.05

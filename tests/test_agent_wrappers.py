@@ -18,7 +18,7 @@ from specguard.agents.wrappers import FrameStack
 from specguard.cli.main import main
 from specguard.engine.check_agent import agent_envs, agent_wrap, check_agent, seed_base
 from specguard.error import AgentError, AgentMismatch
-from specguard.training.rollout import episode
+from specguard.evaluation.rollout import episode
 
 SPEC_FILE = """
 import specguard as sg

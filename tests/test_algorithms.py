@@ -19,6 +19,7 @@ import specguard as sg
 from example_specs import pendulum
 from specguard.cache.canonical import canonical
 from specguard.cache.fingerprint import fingerprint_spec
+from specguard.evaluation.rollout import rollout
 from specguard.spec.algorithms import (
     ALGORITHMS,
     CONTRIB,
@@ -30,7 +31,6 @@ from specguard.spec.algorithms import (
     hyperparameter_names,
     resolve_algorithm,
 )
-from specguard.training.rollout import rollout
 from specguard.training.train import train_run
 
 TINY = {"n_steps": 32, "batch_size": 32, "n_epochs": 1}

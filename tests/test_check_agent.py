@@ -14,9 +14,9 @@ import specguard as sg
 from specguard.engine import check_agent as check_agent_module
 from specguard.engine.check_agent import check_agent
 from specguard.error import AgentError, AgentMismatch
+from specguard.evaluation.episodes import EVAL_SEED_BASE, EVAL_SEED_STRIDE
 from specguard.stats.intervals import success_interval
 from specguard.stats.verdicts import Word
-from specguard.training.train import EVAL_SEED_BASE, EVAL_SEED_STRIDE
 
 sb3 = pytest.importorskip("stable_baselines3")
 

@@ -15,9 +15,11 @@ design dependency). Parts, lowest first:
   below the engine imports it: the spec and training need only what ``starts/`` and ``construction/`` hold;
 - ``parallel/`` (tasks in processes or on a cluster: generic, it knows nothing of specs);
 - the public tools over the core: ``strategies``, ``registry``, ``contract/``, ``testing``;
-- ``spec/`` (the spec, its budget, the algorithms, spec files), then ``training/`` (one seed), then ``cache/``
+- ``spec/`` (the spec, its budget, the algorithms, spec files), then ``evaluation/`` (a policy's evaluation
+  episodes and their seeds, a model as a policy, rollouts), then ``training/`` (one seed), then ``cache/``
   (run identity and the store), then ``agents/`` (an agent trained elsewhere, loaded as one policy: it acts as a
-  trained model does, and is fingerprinted as a spec's functions are), then ``engine/`` (``run_spec``, its runs and
+  trained model does, and is fingerprinted as a spec's functions are; evaluated, never trained, it imports
+  ``evaluation/`` and not ``training/``), then ``engine/`` (``run_spec``, its runs and
   verdicts), then ``gate/`` (the baseline gate);
 - ``report/`` (session reports, figures, GIFs, spec rendering);
 - the doors: ``pytest_plugin/`` and ``cli/``; and the facade ``specguard`` (``__init__``) and ``__main__``.
@@ -51,7 +53,7 @@ PACKAGE = Path(specguard.__file__).parent
 BASE = frozenset({"error", "validation", "version", "utils"})
 CORE = BASE | {"extend", "tree", "starts", "construction"}
 TOOLS = CORE | {"strategies", "registry", "contract", "testing"}
-RUNNING = TOOLS | {"stats", "parallel", "falsify", "spec", "training", "cache", "agents"}
+RUNNING = TOOLS | {"stats", "parallel", "falsify", "spec", "evaluation", "training", "cache", "agents"}
 # Per part, the parts its modules may import (its own included).
 ALLOWED: Mapping[str, frozenset[str]] = {
     "error": frozenset({"error"}),
@@ -70,9 +72,11 @@ ALLOWED: Mapping[str, frozenset[str]] = {
     "falsify": CORE | {"stats", "falsify"},
     "parallel": BASE | {"parallel"},
     "spec": CORE | {"stats", "spec"},
-    "training": CORE | {"stats", "parallel", "spec", "training"},
-    "cache": CORE | {"stats", "parallel", "spec", "training", "cache"},
-    "agents": CORE | {"stats", "spec", "training", "cache", "agents"},
+    "evaluation": CORE | {"spec", "evaluation"},
+    "training": CORE | {"stats", "parallel", "spec", "evaluation", "training"},
+    "cache": CORE | {"stats", "parallel", "spec", "evaluation", "training", "cache"},
+    # An agent trained elsewhere is evaluated, never trained: agents/ reaches evaluation/, not training/.
+    "agents": CORE | {"stats", "spec", "evaluation", "cache", "agents"},
     "engine": RUNNING | {"engine"},
     "gate": RUNNING | {"engine", "gate"},
     "report": RUNNING | {"engine", "gate", "report"},

@@ -10,9 +10,9 @@ from sb3_contrib import MaskablePPO, RecurrentPPO
 import specguard as sg
 from specguard.construction.episode_policy import EpisodePolicy
 from specguard.engine.falsify_run import batch_policy, property_keys
+from specguard.evaluation.policy import Policy, policy
+from specguard.evaluation.rollout import rollout
 from specguard.falsify.search import EpisodeRunner
-from specguard.training.policy import Policy, policy
-from specguard.training.rollout import rollout
 
 CARTPOLE = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
 TREE = sg.All(sg.Goal("centre", x=(-0.5, 0.5)), sg.Goal("fast", v=(2.0, 100.0)), name="cartpole")

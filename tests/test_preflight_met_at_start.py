@@ -139,7 +139,7 @@ def test_specguard_run_refuses_in_one_line_with_status_2(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_the_verdict_counts_evaluation_episodes_that_started_in_the_root_goal():
-    from specguard.training.train import EVAL_SEED_BASE, EVAL_SEED_STRIDE
+    from specguard.evaluation.episodes import EVAL_SEED_BASE, EVAL_SEED_STRIDE
 
     initial = sg.InitialEnv(sometimes_inside, features=("x",))
     budget = sg.Budget(timesteps=64, min_seeds=1, max_seeds=1, eval_episodes=6, checkpoints=1)

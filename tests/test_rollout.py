@@ -10,8 +10,8 @@ from PIL import Image
 import specguard as sg
 from specguard.cache.models import load_model
 from specguard.cache.store import Cache
+from specguard.evaluation.rollout import rollout
 from specguard.report.gifs import Gif, report_gifs, write_gif
-from specguard.training.rollout import rollout
 from specguard.training.train import train_run
 
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}

@@ -15,7 +15,7 @@ from specguard_plugins import Avoid
 
 import specguard as sg
 from specguard.contract.replay import ReplayEnv
-from specguard.training.train import evaluate
+from specguard.evaluation.episodes import evaluate
 
 EVALUATORS = ("flat", "reference")
 

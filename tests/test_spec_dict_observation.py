@@ -18,9 +18,9 @@ import specguard as sg
 from specguard.cache.fingerprint import _algorithm_fields, _fields, fingerprint_spec
 from specguard.construction.env import ENV_KEY, SPEC_KEY, stack_observations
 from specguard.engine.falsify_run import batch_policy, property_keys
+from specguard.evaluation.policy import policy
 from specguard.falsify.search import EpisodeRunner
 from specguard.report.show import render_spec
-from specguard.training.policy import policy
 from specguard.training.train import train_run
 
 LENGTH = 5  # cells 0 .. 4; the agent starts at 0

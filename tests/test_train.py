@@ -13,9 +13,10 @@ import pytest
 import specguard as sg
 from example_specs import pendulum
 from specguard.error import TrainingError
+from specguard.evaluation.episodes import EVAL_SEED_BASE, evaluate
 from specguard.stats.anytime import min_successes_to_meet
 from specguard.testing import ReplayEnv
-from specguard.training.train import EVAL_SEED_BASE, evaluate, train_run
+from specguard.training.train import train_run
 
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 

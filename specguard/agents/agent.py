@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from specguard.error import AgentError, AgentMismatch, SpecError, SpecWarning
-from specguard.training.policy import observation_rows
+from specguard.evaluation.policy import observation_rows
 from specguard.utils.text import MAX_SHOWN, elide, shown
 
 __all__ = ["Agent", "action_problem", "check_fits", "observation_kind", "observation_rows", "space_text"]
@@ -40,7 +40,7 @@ class Agent:
     their episodes start, then the agent once per step. Made by :func:`~specguard.agents.sources.load_agent`.
 
     Args:
-        act: the action for ``(observations, rows)``: a :class:`specguard.training.policy.Policy` (a model's, which
+        act: the action for ``(observations, rows)``: a :class:`specguard.evaluation.policy.Policy` (a model's, which
             keeps a recurrent state and reads action masks), or a callable ``obs -> action`` for one observation
             (``per_observation=True``, the default for a callable).
         name: a short name for reports.
@@ -88,7 +88,7 @@ class Agent:
         normalizer_source: str | None = None,
         env_id: str | None = None,
     ) -> None:
-        from specguard.training.policy import Policy
+        from specguard.evaluation.policy import Policy
 
         self.name = name
         self.observation_space = observation_space
@@ -130,7 +130,7 @@ class Agent:
     def batched(self, batch: bool = True) -> Agent:
         """The same agent taking a batch of observations (``batch=True``) or one: it shares the model, with its own
         per-env state."""
-        from specguard.training.policy import Policy
+        from specguard.evaluation.policy import Policy
 
         act = self._source
         if self._policy is not None:
@@ -196,7 +196,7 @@ class Agent:
     def _callable_act(self, fn: Callable[[Any], Any]) -> Callable[[Any, Sequence[int] | None], Any]:
         """``fn`` (one observation to one action) as the agent's step, decided once: normalized or not, batched or
         not (its actions stacked)."""
-        from specguard.training.policy import callable_policy
+        from specguard.evaluation.policy import callable_policy
 
         norm = self.normalizer
         one = fn if norm is None else (lambda obs: fn(norm.normalize_obs(obs)))

@@ -13,7 +13,7 @@ Four sources, told apart once, when the agent is loaded:
    ``<env_id>.zip``, where there are others, as ``rl_zoo3.enjoy`` loads by default), and what its files say the
    env was made with (:attr:`Agent.env_kwargs`) and the agent trained with (:attr:`Agent.config`);
 3. an object with SB3's ``predict(obs, state=None, episode_start=None, deterministic=True)``: a model in memory,
-   whose recurrent state is carried from step to step (:class:`specguard.training.policy.Policy`);
+   whose recurrent state is carried from step to step (:class:`specguard.evaluation.policy.Policy`);
 4. a callable ``obs -> action`` for one observation (CleanRL's, TorchRL's, a hand-written rule).
 
 A text ``FILE.py::NAME`` names the object ``NAME`` of a Python file, loaded as the object itself is (a callable, a
@@ -43,11 +43,11 @@ from specguard.agents.wrappers import zoo_wrappers
 from specguard.cache.store import file_sha256
 from specguard.cache.weights import normalizer_digest, parts_digest, weights_digest
 from specguard.error import AgentError, InvalidSpec, SpecError
+from specguard.evaluation.policy import Policy, normalizer_of
 from specguard.spec.algorithms import ALGORITHMS, CONTRIB, SB3, algorithm_class, hyperparameter_names
 from specguard.spec.algorithms import resolve_algorithm as _resolve
 from specguard.spec.loading import import_file
 from specguard.spec.zoo import read_zoo_file
-from specguard.training.policy import Policy, normalizer_of
 from specguard.utils.text import MAX_SHOWN, elide, function_text, shown
 
 __all__ = ["STATISTICS", "load_agent", "named_object"]
@@ -86,7 +86,7 @@ def load_agent(
             observation; default: the ``vecnormalize.pkl`` beside a zip, a model's own training env's.
         deterministic: a model's deterministic action, or a sampled one.
         batch: the agent takes a batch of observations (one row per env), as
-            :class:`~specguard.training.policy.Policy` does; :meth:`Agent.batched` turns it.
+            :class:`~specguard.evaluation.policy.Policy` does; :meth:`Agent.batched` turns it.
         trust: run the code an agent's files may hold. By default a zip's ``data`` and a ``vecnormalize.pkl`` are
             decoded without running any (:mod:`specguard.agents.decode`: arrays, spaces, SB3's and sb3-contrib's own
             classes), and a file that needs more is refused naming the field; ``trust=True`` unpickles them as SB3's

@@ -4,10 +4,10 @@ A policy is any callable from observations to actions. One that carries
 something per env from step to step (a recurrent policy's state, the env's
 action masks) is an :class:`EpisodePolicy`: told as episodes start, then
 asked once per step. Training's evaluation and rollouts
-(:mod:`specguard.training.train`, :mod:`specguard.training.rollout`) and the
+(:mod:`specguard.training.train`, :mod:`specguard.evaluation.rollout`) and the
 falsifier's runner (:class:`specguard.falsify.search.EpisodeRunner`, several
 envs in lockstep) all tell it, and
-:class:`specguard.training.policy.Policy` is one.
+:class:`specguard.evaluation.policy.Policy` is one.
 
 Example:
     >>> import numpy as np
@@ -34,7 +34,7 @@ class EpisodePolicy(Protocol):
 
     :meth:`start` is called as the episodes of ``envs`` start (after their ``reset``; one env per row), then the
     policy once per step, with the rows still running (``None``: every env started).
-    :class:`specguard.training.policy.Policy` is one.
+    :class:`specguard.evaluation.policy.Policy` is one.
     """
 
     def start(self, envs: Sequence[Any]) -> None: ...

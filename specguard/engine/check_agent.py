@@ -55,13 +55,13 @@ from specguard.error import (
     SpecWarning,
     user_stacklevel,
 )
+from specguard.evaluation.episodes import EVAL_SEED_BASE, EVAL_SEED_STRIDE, evaluate
+from specguard.evaluation.policy import one_torch_thread
 from specguard.spec.budget import AGENT_TIMESTEPS, Budget
 from specguard.spec.spec import Spec
 from specguard.stats.anytime import evaluation_stages, final_evaluation
 from specguard.stats.intervals import failure_upper_bound
-from specguard.training.policy import one_torch_thread
 from specguard.training.result import RunResult
-from specguard.training.train import EVAL_SEED_BASE, EVAL_SEED_STRIDE, evaluate
 from specguard.tree.keys import label, result_keys
 from specguard.utils.atomic import DEFAULT_CACHE_DIR
 from specguard.utils.text import MAX_SHOWN, elide, function_text, shown

@@ -28,11 +28,11 @@ import numpy as np
 
 from specguard.engine.spec_result import SpecResult
 from specguard.engine.trained import load_run
+from specguard.evaluation.policy import one_torch_thread
 from specguard.falsify.robustness import SCORES
 from specguard.falsify.search import EpisodeRunner, Falsification, falsify
 from specguard.spec.spec import Spec
 from specguard.starts.space import StartSpace
-from specguard.training.policy import one_torch_thread
 from specguard.validation import check_choice
 
 __all__ = [
@@ -81,7 +81,7 @@ def database_key(spec_key: str, seed: int | None, space: StartSpace, *, agent: s
 
 def batch_policy(model: Any, normalizer: Any, deterministic: bool) -> Callable[[np.ndarray], Any]:
     """``model``'s actions for a batch of observations (rows), its ``VecNormalize`` statistics applied if any."""
-    from specguard.training.policy import policy
+    from specguard.evaluation.policy import policy
 
     return policy(model, normalizer, deterministic=deterministic, batch=True)
 

@@ -45,7 +45,7 @@ def judged_digest(spec: Spec, model: Any) -> str | None:
     if any, or a callable); ``None`` when it cannot be digested (a trainer's agent, or a custom algorithm class,
     holding what has no canonical form): it is judged all the same."""
     from specguard.cache.weights import weights_digest
-    from specguard.training.policy import normalizer_of
+    from specguard.evaluation.policy import normalizer_of
 
     name = type(model).__name__
     try:

@@ -20,8 +20,8 @@ from typing import Any
 from specguard.cache.models import load_model as load_cached
 from specguard.engine.spec_result import SpecResult
 from specguard.error import SpecError
+from specguard.evaluation.rollout import rollout as roll_out
 from specguard.spec.spec import Spec
-from specguard.training.rollout import rollout as roll_out
 
 __all__ = ["load_model", "load_normalizer", "load_run", "rollout"]
 

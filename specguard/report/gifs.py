@@ -25,12 +25,12 @@ from typing import Any
 
 from specguard.cache.models import load_model
 from specguard.error import InitialEnvError, SpecError
+from specguard.evaluation.episodes import EVAL_SEED_BASE
+from specguard.evaluation.policy import policy
+from specguard.evaluation.rollout import episode
 from specguard.report.offscreen import HOW, NoOffscreen, is_mujoco, offscreen
 from specguard.spec.spec import Spec
 from specguard.starts.space import START_OPTION, StartSpace
-from specguard.training.policy import policy
-from specguard.training.rollout import episode
-from specguard.training.train import EVAL_SEED_BASE
 
 __all__ = ["MAX_FRAMES", "Gif", "NoFrames", "agent_gif", "counterexample_gifs", "gif_stem", "report_gifs", "write_gif"]
 

@@ -4,7 +4,7 @@ Every function takes *rows*: the plain dicts of :meth:`specguard.pytest_plugin.j
 plus ``"verdict"`` (what pytest reported: passed, failed, xfailed, xpassed,
 undecided) and optionally ``"comparison"`` and ``"curves"`` (one curve per run,
 in the order of ``"per_seed"``). The Markdown links the PNG and the rollout
-GIFs of :mod:`specguard.training.rollout` written beside it.
+GIFs of :mod:`specguard.evaluation.rollout` written beside it.
 
 A row whose goal is a safety key ``path:name`` (its ``"kind"`` is
 ``"safety"``) is a safety rate: tables label it ``path:name (safe)`` and list
@@ -267,7 +267,7 @@ def write_reports(
 
     Args:
         gifs: per spec, its rollout GIF (already written into ``directory``) or a
-            note (:func:`specguard.training.rollout.report_gifs`); the Markdown links them.
+            note (:func:`specguard.evaluation.rollout.report_gifs`); the Markdown links them.
         counterexamples: the falsify items' runs; the JSON lists them and the Markdown shows them with their GIFs.
         interrupted: why the session stopped before its last item (both files say it; the JSON's ``"interrupted"``
             is ``null`` for a session that ran every item).

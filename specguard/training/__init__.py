@@ -1,1 +1,2 @@
-"""Training one seed of a spec: the learning loop, auto weights, progress events, its result, and rollouts."""
+"""Training one seed of a spec: the learning loop, its envs stepped together, auto weights, progress events and
+its result."""

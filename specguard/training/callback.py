@@ -36,7 +36,8 @@ from typing import TYPE_CHECKING, Any
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 from specguard.error import SpecError, SpecWarning, TrainingError
-from specguard.training.curve import count_episode, root_success
+from specguard.evaluation.episodes import count_episode
+from specguard.training.curve import root_success
 from specguard.training.progress import encode_update
 from specguard.utils.text import MAX_SHOWN, elide, function_text
 

@@ -21,18 +21,12 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
+from specguard.evaluation.episodes import count_episode
+
 if TYPE_CHECKING:
     from specguard.training.auto_weights import WeightAdapter
 
-__all__ = ["GoalCurve", "count_episode", "root_success"]
-
-
-def count_episode(counts: dict[str, int], info: Mapping[str, Any]) -> None:
-    """Add one finished episode's last ``info``: its goals (by path), then its safety (by ``path:name``)."""
-    for key, ok in info["goals"].items():
-        counts[key] = counts.get(key, 0) + int(ok)
-    for key, ok in info.get("safe", {}).items():
-        counts[key] = counts.get(key, 0) + int(ok)
+__all__ = ["GoalCurve", "root_success"]
 
 
 def root_success(success: Mapping[str, float]) -> float | None:

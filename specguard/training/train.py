@@ -26,17 +26,16 @@ from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 
-from specguard.construction.cap import CAPPED
 from specguard.construction.env import SPEC_KEY, action_masks_problem
-from specguard.construction.episode_policy import EpisodePolicy
 from specguard.error import InvalidSpec, SpecError, TrainingError
+from specguard.evaluation.episodes import EVAL_SEED_BASE, EVAL_SEED_STRIDE, evaluate
+from specguard.evaluation.policy import policy as policy_of
 from specguard.parallel.protocol import Report
 from specguard.spec.algorithms import ALGORITHMS, algorithm_class, algorithm_name, takes_action_masks
 from specguard.spec.spec import Spec
 from specguard.stats.anytime import checkpoint_steps, final_evaluation, interim_look
 from specguard.training.auto_weights import WeightAdapter
-from specguard.training.curve import GoalCurve, count_episode, root_success
-from specguard.training.policy import policy as policy_of
+from specguard.training.curve import GoalCurve, root_success
 from specguard.training.progress import ProgressEvent, decode_update, encode_update
 from specguard.training.result import RunResult
 from specguard.utils.text import MAX_SHOWN, elide, function_text, shown
@@ -44,79 +43,9 @@ from specguard.utils.text import MAX_SHOWN, elide, function_text, shown
 if TYPE_CHECKING:
     from specguard.training.callback import UserCallback
 
-__all__ = ["EVAL_SEED_BASE", "EVAL_SEED_STRIDE", "evaluate", "train_run"]
+__all__ = ["train_run"]
 
-EVAL_SEED_BASE = 1_000_000
-EVAL_SEED_STRIDE = 100_000
 CURVE_POINTS = 10
-AGENT_FAILED = (
-    "the agent failed to act on an observation of the env: a trained model whose weights went NaN (a learning "
-    "rate or clip range too large), or a trainer's agent that raised; call it on env.reset(seed=...)[0] to see"
-)
-
-
-def _policy_action(space: gym.Space[Any], action: Any) -> Any:
-    return int(action) if isinstance(space, gym.spaces.Discrete) else action
-
-
-def evaluate(
-    policy: Callable[[Any], Any],
-    env: gym.Env,
-    episodes: int,
-    seeds: list[int] | range,
-    started: list[bool] | None = None,
-    terminated: list[bool] | None = None,
-    capped: list[bool] | None = None,
-    outcomes: list[dict[str, int]] | None = None,
-) -> dict[str, int]:
-    """Run ``episodes`` episodes of ``policy`` on ``env`` (which reports ``info["goals"]`` and ``info["safe"]``).
-
-    An :class:`~specguard.construction.episode_policy.EpisodePolicy` (a trained model's
-    :class:`~specguard.training.policy.Policy`) is told as each episode starts.
-
-    ``started``, if given, receives per episode whether its first state (at reset) was in the root goal
-    (the first of ``info["goals"]``); ``terminated``, whether it ended by termination rather than
-    truncation (a fall or a crash of the initial env, before its horizon); ``capped``, whether specguard's
-    step cap cut it (``info[CAPPED]``: the env declares no episode limit, :mod:`specguard.construction.cap`);
-    ``outcomes``, the episode's own counts (1 or 0 per key, as returned), for paired comparisons.
-
-    Returns:
-        Per node path, the number of episodes whose last state lies in the
-        goal; then per safety key (``path:name``), the number of episodes
-        without a violation (the last step's ``info["safe"]``).
-
-    Raises:
-        TrainingError: ``policy`` raised (specguard's own errors pass as they are); the env's errors propagate
-            unchanged, for the caller to name.
-    """
-    counts: dict[str, int] = {}
-    for i in range(episodes):
-        obs, info = env.reset(seed=seeds[i])
-        if isinstance(policy, EpisodePolicy):
-            policy.start([env])
-        if started is not None:
-            started.append(bool(next(iter(info["goals"].values()))))
-        ended = cut = False
-        while not (ended or cut):
-            try:
-                action = policy(obs)
-            except SpecError:
-                raise
-            except Exception as e:  # the policy's failure, not the env's (a NaN network, a trainer's agent)
-                raise TrainingError(
-                    f"the agent raised {type(e).__name__}: {elide(str(e), MAX_SHOWN)}", hint=AGENT_FAILED
-                ) from e
-            obs, _, ended, cut, info = env.step(_policy_action(env.action_space, action))
-        if terminated is not None:
-            terminated.append(bool(ended))
-        if capped is not None:
-            capped.append(CAPPED in info)
-        count_episode(counts, info)
-        if outcomes is not None:
-            episode: dict[str, int] = {}
-            count_episode(episode, info)
-            outcomes.append(episode)
-    return counts
 
 
 Emit = Callable[[str, int | None, str | None], None]

@@ -1,6 +1,6 @@
 """Watching a trained policy: trajectories of evaluation episodes on the env its run trained on.
 
-:func:`rollout` runs the policy (:func:`specguard.training.policy.policy`) on the env a
+:func:`rollout` runs the policy (:func:`specguard.evaluation.policy.policy`) on the env a
 run trained on (:meth:`Spec.make_env <specguard.spec.spec.Spec.make_env>`: the constructed
 env, or the initial env for a baseline spec) and returns every step. GIFs of
 an episode are :mod:`specguard.report.gifs`; loading a cached model is
@@ -13,9 +13,9 @@ from collections.abc import Callable
 from typing import Any
 
 from specguard.construction.episode_policy import EpisodePolicy
+from specguard.evaluation.episodes import EVAL_SEED_BASE
+from specguard.evaluation.policy import one_torch_thread, policy
 from specguard.spec.spec import Spec
-from specguard.training.policy import one_torch_thread, policy
-from specguard.training.train import EVAL_SEED_BASE
 
 __all__ = ["episode", "rollout"]
 

@@ -2,7 +2,7 @@
 
 The one assembly of a policy from an SB3 model, used wherever a model acts: a
 run's evaluation and anytime checkpoints (:mod:`specguard.training.train`),
-rollouts and GIFs (:mod:`specguard.training.rollout`) and the falsifier
+rollouts and GIFs (:mod:`specguard.evaluation.rollout`) and the falsifier
 (:mod:`specguard.engine.falsify_run`). Per env it keeps
 
 * the model's ``VecNormalize`` statistics, applied to every observation;
