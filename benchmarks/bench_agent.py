@@ -100,7 +100,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--train-steps", type=int, default=4096)
     args = parser.parse_args()
-    warnings.simplefilter("ignore", sg.SpecWarning)
+    warnings.simplefilter("ignore", sg.error.SpecWarning)
     with tempfile.TemporaryDirectory(prefix="bench-agent-") as tmp:
         cases: list[tuple[str, str, sg.Spec, Any, Callable[[Any], Any]]] = [
             ("CartPole, push toward the lean", "CartPole-v1", _spec(CARTPOLE, BALANCE), _lean, _lean)

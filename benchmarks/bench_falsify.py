@@ -66,6 +66,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the case stud
 import specguard as sg
 from specguard.engine.falsify_run import batch_policy, property_keys
 from specguard.engine.run_spec import RunOptions, train_seeds
+from specguard.engine.trained import load_normalizer
 from specguard.evaluation.policy import one_torch_thread, policy
 from specguard.evaluation.rollout import episode
 from specguard.falsify.robustness import SCORES
@@ -220,7 +221,7 @@ def run_suite(args: argparse.Namespace) -> None:
         result = train_seeds(spec, args.seeds, options)
         for seed in args.seeds:
             began = time.perf_counter()
-            model, normalizer = sg.load_model(result, seed), sg.load_normalizer(result, seed)
+            model, normalizer = sg.load_model(result, seed), load_normalizer(result, seed)
             act = batch_policy(model, normalizer, spec.deterministic)
             runner = EpisodeRunner(spec.make_env, act, space, property_keys(spec), score=args.score)
             found: list[int | None] = []

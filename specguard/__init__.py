@@ -27,63 +27,83 @@ Example:
 from __future__ import annotations
 
 import importlib
+import warnings
 from typing import TYPE_CHECKING, Any
 
 from specguard.version import __version__
 
 _EXPORTS = {
+    # the language
+    "InitialEnv": "specguard.construction.initial_env",
+    "Goal": "specguard.tree.nodes",
     "All": "specguard.tree.nodes",
     "Always": "specguard.tree.nodes",
-    "Annotation": "specguard.extend",
-    "AgentCheck": "specguard.engine.check_agent",
-    "AgentError": "specguard.error",
-    "AgentMismatch": "specguard.error",
-    "Budget": "specguard.spec.budget",
-    "Cache": "specguard.cache.store",
-    "CacheWarning": "specguard.error",
-    "CompiledTree": "specguard.construction.compiled",
-    "Constraint": "specguard.tree.builtin_annotations",
     "Distance": "specguard.tree.builtin_annotations",
-    "EvaluationError": "specguard.error",
-    "Falsify": "specguard.falsify.assertion",
-    "FingerprintError": "specguard.error",
-    "Goal": "specguard.tree.nodes",
-    "GoalMetAtStart": "specguard.error",
-    "SpecEnv": "specguard.construction.env",
-    "BaselineEnv": "specguard.construction.env",
-    "GoalVerdict": "specguard.engine.spec_result",
-    "InitialEnv": "specguard.construction.initial_env",
-    "InitialEnvError": "specguard.error",
-    "InvalidSpec": "specguard.error",
+    "Constraint": "specguard.tree.builtin_annotations",
     "Node": "specguard.extend",
-    "Spec": "specguard.spec.spec",
-    "SpecError": "specguard.error",
-    "SpecResult": "specguard.engine.spec_result",
-    "SpecWarning": "specguard.error",
     "StartSpace": "specguard.starts.space",
-    "StateMappingError": "specguard.error",
-    "UnknownFeature": "specguard.error",
-    "UnreachableGoal": "specguard.error",
-    "VersionMismatch": "specguard.error",
+    "formula": "specguard.tree.formula",
+    # the spec, its budget, its trainer's settings
+    "Spec": "specguard.spec.spec",
+    "Budget": "specguard.spec.budget",
+    "zoo_settings": "specguard.spec.zoo",
+    # the constructed env
+    "make_env": "specguard.construction.env",
+    "make_baseline_env": "specguard.construction.env",
+    "SpecEnv": "specguard.construction.env",
+    "compile_tree": "specguard.construction.compiled",
+    # training and judging a spec
+    "run_spec": "specguard.engine.run_spec",
+    "SpecResult": "specguard.engine.spec_result",
+    "table": "specguard.report.table",
+    "load_model": "specguard.engine.trained",
+    "rollout": "specguard.engine.trained",
+    "falsify_runs": "specguard.engine.falsify_run",
+    # agents trained elsewhere
+    "load_agent": "specguard.agents.sources",
     "check_agent": "specguard.engine.check_agent",
-    "check_spec": "specguard.spec.spec",
+    "AgentCheck": "specguard.engine.check_agent",
     "compare_agents": "specguard.gate.agent_gate",
     "falsify_agent": "specguard.engine.falsify_run",
-    "falsify_runs": "specguard.engine.falsify_run",
-    "load_model": "specguard.engine.trained",
-    "load_normalizer": "specguard.engine.trained",
-    "rollout": "specguard.engine.trained",
-    "table": "specguard.report.table",
-    "compile_tree": "specguard.construction.compiled",
-    "formula": "specguard.tree.formula",
+    "Falsify": "specguard.falsify.assertion",
+    # the pytest door
     "goal_spec": "specguard.pytest_plugin.declare",
     "goal_specs": "specguard.pytest_plugin.declare",
-    "load_agent": "specguard.agents.sources",
-    "make_baseline_env": "specguard.construction.env",
-    "make_env": "specguard.construction.env",
-    "run_spec": "specguard.engine.run_spec",
-    "zoo_settings": "specguard.spec.zoo",
+    # every error a user may catch derives from it; each one is in specguard.error
+    "SpecError": "specguard.error",
 }
+
+_SUBMODULES = ("error", "extend", "strategies", "testing")
+"""The public submodules, reached as attributes (``sg.error.InvalidSpec``) as Gymnasium's ``gym.spaces`` is."""
+
+_MOVED = {
+    **dict.fromkeys(
+        (
+            "AgentError",
+            "AgentMismatch",
+            "CacheWarning",
+            "EvaluationError",
+            "FingerprintError",
+            "GoalMetAtStart",
+            "InitialEnvError",
+            "InvalidSpec",
+            "SpecWarning",
+            "StateMappingError",
+            "UnknownFeature",
+            "UnreachableGoal",
+            "VersionMismatch",
+        ),
+        "specguard.error",
+    ),
+    "BaselineEnv": "specguard.construction.env",
+    "CompiledTree": "specguard.construction.compiled",
+    "Annotation": "specguard.extend",
+    "Cache": "specguard.cache.store",
+    "GoalVerdict": "specguard.engine.spec_result",
+    "check_spec": "specguard.spec.spec",
+    "load_normalizer": "specguard.engine.trained",
+}
+"""The names the face gave up (0.x, CHANGELOG): each still resolves, with a ``DeprecationWarning`` naming its home."""
 
 # The one list of public names: __all__ is derived from it, and the TYPE_CHECKING imports
 # below (for type checkers, which cannot follow __getattr__) are checked against it by tests/test_init.py.
@@ -93,6 +113,16 @@ __all__ = [*sorted(_EXPORTS), "__version__"]
 def __getattr__(name: str) -> Any:
     module = _EXPORTS.get(name)
     if module is None:
+        if name in _SUBMODULES:
+            return importlib.import_module(f"specguard.{name}")
+        if name in _MOVED:
+            warnings.warn(
+                f"specguard.{name} moved to {_MOVED[name]}.{name}; the top level keeps only the names of "
+                "specguard.__all__ (this alias goes in a later 0.x release)",
+                DeprecationWarning,
+                stacklevel=2,
+            )
+            return getattr(importlib.import_module(_MOVED[name]), name)
         if name[:1].isupper():  # an operator from an installed plugin, e.g. sg.AnyOf
             from specguard.registry import registered
 
@@ -111,10 +141,7 @@ def __dir__() -> list[str]:
 
 if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.agents.sources import load_agent as load_agent
-    from specguard.cache.store import Cache as Cache
-    from specguard.construction.compiled import CompiledTree as CompiledTree
     from specguard.construction.compiled import compile_tree as compile_tree
-    from specguard.construction.env import BaselineEnv as BaselineEnv
     from specguard.construction.env import SpecEnv as SpecEnv
     from specguard.construction.env import make_baseline_env as make_baseline_env
     from specguard.construction.env import make_env as make_env
@@ -124,26 +151,10 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.engine.falsify_run import falsify_agent as falsify_agent
     from specguard.engine.falsify_run import falsify_runs as falsify_runs
     from specguard.engine.run_spec import run_spec as run_spec
-    from specguard.engine.spec_result import GoalVerdict as GoalVerdict
     from specguard.engine.spec_result import SpecResult as SpecResult
     from specguard.engine.trained import load_model as load_model
-    from specguard.engine.trained import load_normalizer as load_normalizer
     from specguard.engine.trained import rollout as rollout
-    from specguard.error import AgentError as AgentError
-    from specguard.error import AgentMismatch as AgentMismatch
-    from specguard.error import CacheWarning as CacheWarning
-    from specguard.error import EvaluationError as EvaluationError
-    from specguard.error import FingerprintError as FingerprintError
-    from specguard.error import GoalMetAtStart as GoalMetAtStart
-    from specguard.error import InitialEnvError as InitialEnvError
-    from specguard.error import InvalidSpec as InvalidSpec
     from specguard.error import SpecError as SpecError
-    from specguard.error import SpecWarning as SpecWarning
-    from specguard.error import StateMappingError as StateMappingError
-    from specguard.error import UnknownFeature as UnknownFeature
-    from specguard.error import UnreachableGoal as UnreachableGoal
-    from specguard.error import VersionMismatch as VersionMismatch
-    from specguard.extend import Annotation as Annotation
     from specguard.extend import Node as Node
     from specguard.falsify.assertion import Falsify as Falsify
     from specguard.gate.agent_gate import compare_agents as compare_agents
@@ -152,7 +163,6 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.report.table import table as table
     from specguard.spec.budget import Budget as Budget
     from specguard.spec.spec import Spec as Spec
-    from specguard.spec.spec import check_spec as check_spec
     from specguard.spec.zoo import zoo_settings as zoo_settings
     from specguard.starts.space import StartSpace as StartSpace
     from specguard.tree.builtin_annotations import Constraint as Constraint

@@ -2,7 +2,7 @@
 
 Built-in and third-party operators use the same checks, so every message has
 the same shape: *where* (the node or annotation at fault), *what was expected*,
-*what was given*, and a hint where one helps (see :class:`specguard.InvalidSpec`).
+*what was given*, and a hint where one helps (see :class:`specguard.error.InvalidSpec`).
 Each rule is one ``is_*`` predicate; its ``check_*`` raises that message, and
 the doors read an option's text by the same predicate
 (:mod:`specguard.utils.parsing`).

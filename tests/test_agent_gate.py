@@ -172,7 +172,7 @@ def test_only_asserted_goals_are_compared_as_against_a_saved_baseline():
     ],
 )
 def test_bad_arguments_of_compare_agents_are_one_line_naming_them(options, culprit):
-    with pytest.raises(sg.InvalidSpec) as info:
+    with pytest.raises(sg.error.InvalidSpec) as info:
         compare_agents(KEEP, lean, lean, **options)
     first = str(info.value).splitlines()[0]
     assert first.startswith("compare_agents('keep'): ") and culprit in first

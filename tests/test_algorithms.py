@@ -106,7 +106,7 @@ def test_an_algorithm_by_module_and_class(tmp_path, monkeypatch):
     ],
 )
 def test_an_unknown_algorithm_is_one_line_listing_what_is_accepted(given, message):
-    with pytest.raises(sg.InvalidSpec, match=rf"^Spec 'pendulum'.algorithm: {message}") as e:
+    with pytest.raises(sg.error.InvalidSpec, match=rf"^Spec 'pendulum'.algorithm: {message}") as e:
         spec(algorithm=given)
     assert "\n" not in e.value.message
 
@@ -116,7 +116,7 @@ def test_a_module_that_cannot_be_imported_is_one_error_naming_the_string(module,
     write_bad_modules(tmp_path)
     monkeypatch.syspath_prepend(str(tmp_path))
     text = f"{module}:PPO"
-    with pytest.raises(sg.InvalidSpec) as e:  # not the module's own error, nor its SystemExit
+    with pytest.raises(sg.error.InvalidSpec) as e:  # not the module's own error, nor its SystemExit
         spec(algorithm=text)
     assert e.value.where == "Spec 'pendulum'.algorithm"
     assert e.value.message.startswith(f"cannot import algorithm {text!r}: {says}")
@@ -127,7 +127,9 @@ def test_without_sb3_contrib_its_names_say_what_to_install(monkeypatch):
     import sys
 
     monkeypatch.setitem(sys.modules, "sb3_contrib", None)  # import sb3_contrib raises ImportError
-    with pytest.raises(sg.InvalidSpec, match=r"TQC is an sb3-contrib algorithm, and sb3-contrib is not installed"):
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"TQC is an sb3-contrib algorithm, and sb3-contrib is not installed"
+    ):
         spec(algorithm="TQC")
 
 
@@ -152,7 +154,7 @@ def test_a_policy_by_name_or_class():
 
 @pytest.mark.parametrize(("algorithm", "policy"), [("PPO", "CnnPolicy"), ("RecurrentPPO", "CnnLstmPolicy")])
 def test_an_image_policy_on_the_flat_features_is_refused_naming_the_policy_that_fits(algorithm, policy):
-    with pytest.raises(sg.InvalidSpec) as e:
+    with pytest.raises(sg.error.InvalidSpec) as e:
         spec(algorithm=algorithm, policy=policy, hyperparameters=TINY)
     assert e.value.where == "Spec 'pendulum'.policy"
     fits = default_policy(algorithm)
@@ -166,7 +168,7 @@ def test_an_image_policy_on_the_flat_features_is_refused_naming_the_policy_that_
 def test_a_policy_class_of_another_algorithm_is_refused_naming_the_policy():
     from stable_baselines3.dqn.policies import DQNPolicy
 
-    with pytest.raises(sg.InvalidSpec) as e:
+    with pytest.raises(sg.error.InvalidSpec) as e:
         spec(policy=DQNPolicy)
     assert e.value.where == "Spec 'pendulum'.policy"
     assert e.value.message == (
@@ -184,12 +186,12 @@ def test_a_policy_class_of_another_algorithm_is_refused_naming_the_policy():
     ],
 )
 def test_a_policy_the_algorithm_cannot_take_is_refused(kwargs, message):
-    with pytest.raises(sg.InvalidSpec, match=rf"^Spec 'pendulum'.policy: expected policy to be {message}"):
+    with pytest.raises(sg.error.InvalidSpec, match=rf"^Spec 'pendulum'.policy: expected policy to be {message}"):
         spec(**kwargs)
 
 
 def test_a_policy_among_the_hyperparameters_is_refused_with_a_hint_to_the_field():
-    with pytest.raises(sg.InvalidSpec, match=r"'policy' is not a hyperparameter here") as e:
+    with pytest.raises(sg.error.InvalidSpec, match=r"'policy' is not a hyperparameter here") as e:
         spec(hyperparameters={"policy": "CnnPolicy"})
     assert "\n" not in e.value.message
     assert e.value.hint == "use Spec(..., policy=...)"
@@ -210,7 +212,7 @@ def test_the_policy_trains():
 
 
 def test_an_unknown_hyperparameter_is_refused_at_construction_naming_it_the_algorithm_and_close_matches():
-    with pytest.raises(sg.InvalidSpec) as e:
+    with pytest.raises(sg.error.InvalidSpec) as e:
         spec(hyperparameters={"bogus": 1, "n_stepz": 64, "gamma": 0.9})
     assert e.value.where == "Spec 'pendulum'.hyperparameters"
     assert e.value.message.splitlines() == [
@@ -222,7 +224,7 @@ def test_an_unknown_hyperparameter_is_refused_at_construction_naming_it_the_algo
 
 @pytest.mark.parametrize("key", ["seed", "env", "device", "verbose"])
 def test_what_specguard_passes_itself_is_no_hyperparameter(key):
-    with pytest.raises(sg.InvalidSpec, match=rf"'{key}' is not a hyperparameter here: "):
+    with pytest.raises(sg.error.InvalidSpec, match=rf"'{key}' is not a hyperparameter here: "):
         spec(hyperparameters={key: 0})
 
 
@@ -231,13 +233,13 @@ def test_hyperparameter_names_follow_kwargs_to_the_base_class():
     assert names[0] == "extra" and "n_steps" in names and "gae_lambda" in names
     assert "_init_setup_model" not in names and "policy" not in names
     spec(algorithm=ExtraPPO, hyperparameters={"extra": 2, **TINY})
-    with pytest.raises(sg.InvalidSpec, match=r"test_algorithms:ExtraPPO takes no hyperparameter 'extr'; did you"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"test_algorithms:ExtraPPO takes no hyperparameter 'extr'; did you"):
         spec(algorithm=ExtraPPO, hyperparameters={"extr": 2})
 
 
 def test_each_algorithm_checks_its_own_names():
     spec(algorithm="TQC", hyperparameters={"top_quantiles_to_drop_per_net": 2})
-    with pytest.raises(sg.InvalidSpec, match=r"SAC takes no hyperparameter 'top_quantiles_to_drop_per_net'"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"SAC takes no hyperparameter 'top_quantiles_to_drop_per_net'"):
         spec(algorithm="SAC", hyperparameters={"top_quantiles_to_drop_per_net": 2})
 
 
@@ -379,11 +381,15 @@ def test_maskable_ppo_acts_on_the_initial_envs_masks_in_training_and_evaluation(
 
 @pytest.mark.slow
 def test_maskable_ppo_without_masks_is_refused_before_training():
-    with pytest.raises(sg.InvalidSpec, match=r"MaskablePPO acts on action masks, and the initial env \(Unmasked\) "):
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"MaskablePPO acts on action masks, and the initial env \(Unmasked\) "
+    ):
         train_run(masked_spec(Unmasked, expect=0.5), seed=0)
 
 
 @pytest.mark.slow
 def test_maskable_ppo_refuses_masks_of_actions_execute_changes():
-    with pytest.raises(sg.InvalidSpec, match=r"acts on action masks, and the agent's actions go through execute\(\)"):
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"acts on action masks, and the agent's actions go through execute\(\)"
+    ):
         train_run(masked_spec(env_kwargs={"execute": lambda a: (a + 1) % 3}, expect=0.5), seed=0)

@@ -52,7 +52,7 @@ def test_all_auto_starts_at_one_over_n_and_says_so():
 
 @pytest.mark.parametrize("weights", ["Auto", "uniform", b"auto"])
 def test_all_rejects_other_words_for_weights(weights):
-    with pytest.raises(sg.InvalidSpec, match=r"All 'p'.*None or 'auto'"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"All 'p'.*None or 'auto'"):
         sg.All(up, still, name="p", weights=weights)
 
 

@@ -35,21 +35,23 @@ def test_scaled_keeps_everything_but_timesteps():
     ],
 )
 def test_bad_budgets(kwargs, message):
-    with pytest.raises(sg.InvalidSpec, match=message):
+    with pytest.raises(sg.error.InvalidSpec, match=message):
         sg.Budget(**kwargs)
 
 
 def test_bad_scale():
-    with pytest.raises(sg.InvalidSpec, match=r"Budget.scaled: expected factor to be a finite number > 0 \(the budget"):
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"Budget.scaled: expected factor to be a finite number > 0 \(the budget"
+    ):
         sg.Budget(timesteps=10).scaled(0)
 
 
 def test_budgets_reach_the_shared_rules():
     # counts are validation.check_count, seconds and scales validation.check_positive
     assert sg.Budget(timesteps=np.int64(10), min_seeds=np.int32(3)) == sg.Budget(timesteps=10, min_seeds=3)
-    with pytest.raises(sg.InvalidSpec, match=r"expected checkpoints to be an integer >= 1, got True"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"expected checkpoints to be an integer >= 1, got True"):
         sg.Budget(timesteps=10, checkpoints=True)
-    with pytest.raises(sg.InvalidSpec, match=r"expected wall_clock_s to be a finite number > 0 .*got inf"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"expected wall_clock_s to be a finite number > 0 .*got inf"):
         sg.Budget(timesteps=10, wall_clock_s=math.inf)
-    with pytest.raises(sg.InvalidSpec, match=r"expected factor to be a finite number > 0 .*got inf"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"expected factor to be a finite number > 0 .*got inf"):
         sg.Budget(timesteps=10).scaled(math.inf)

@@ -356,9 +356,11 @@ def test_callbacks_are_part_of_the_spec_identity_and_the_log_folder_is_not(tmp_p
 
 
 def test_a_callback_that_is_no_factory_is_refused_where_the_spec_is_made():
-    with pytest.raises(sg.InvalidSpec, match=r"callbacks\[0\].*expected a callable returning an SB3 BaseCallback"):
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"callbacks\[0\].*expected a callable returning an SB3 BaseCallback"
+    ):
         quick_spec(callbacks=[3])
-    with pytest.raises(sg.InvalidSpec, match="expected a list of callback factories"):
+    with pytest.raises(sg.error.InvalidSpec, match="expected a list of callback factories"):
         quick_spec(callbacks=MarkTraining)
 
 
@@ -367,7 +369,7 @@ def test_tensorboard_needs_its_package_in_one_line(tmp_path, monkeypatch):
 
     real = importlib.util.find_spec
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "tensorboard" else real(name, *a))
-    with pytest.raises(sg.InvalidSpec, match="needs the tensorboard package, which is not installed"):
+    with pytest.raises(sg.error.InvalidSpec, match="needs the tensorboard package, which is not installed"):
         quick_spec().as_run(tensorboard_log=tmp_path)
 
 
@@ -414,9 +416,9 @@ def test_a_tensorboard_folder_that_cannot_be_made_is_refused_in_one_line_naming_
         42: "expected tensorboard_log to be a folder, got 42",
     }
     for folder, message in refused.items():
-        with pytest.raises(sg.InvalidSpec) as spec_error:
+        with pytest.raises(sg.error.InvalidSpec) as spec_error:
             quick_spec(tensorboard_log=folder)
-        with pytest.raises(sg.InvalidSpec) as door_error:
+        with pytest.raises(sg.error.InvalidSpec) as door_error:
             quick_spec().as_run(tensorboard_log=folder)
         for error in (spec_error, door_error):
             assert message in str(error.value).splitlines()[0], str(error.value)
@@ -521,7 +523,7 @@ def test_a_users_callback_that_stops_training_is_recorded_and_one_that_returns_n
     forgetful = UserCallback(Forgetful(), "Spec 'x', seed 0")
     step = stepped(forgetful)
     with pytest.warns(
-        sg.SpecWarning,
+        sg.error.SpecWarning,
         match=r"^Spec 'x', seed 0, callback Forgetful: its _on_step returned None at step 1, which SB3 takes as "
         r"False: training stopped there",
     ):

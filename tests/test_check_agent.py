@@ -194,9 +194,9 @@ def test_a_wrap_that_returns_no_env_is_refused(no_episode):
 
 
 def test_arguments_out_of_range_are_refused(no_episode):
-    with pytest.raises(sg.InvalidSpec, match="expected max_episodes >= episodes, got 10 < 20"):
+    with pytest.raises(sg.error.InvalidSpec, match="expected max_episodes >= episodes, got 10 < 20"):
         check_agent(KEEP, lean, episodes=20, max_episodes=10)
-    with pytest.raises(sg.InvalidSpec, match="observation"):
+    with pytest.raises(sg.error.InvalidSpec, match="observation"):
         check_agent(KEEP, lean, observation="pixels")
 
 
@@ -280,14 +280,16 @@ def test_an_agent_check_runs_check_agent_with_its_settings_and_refuses_bad_ones_
     check = sg.AgentCheck(KEEP, lean, episodes=10, max_episodes=10, seed=3)
     assert_replayed(check.run(), replay(lean, 10, seed=3))
     with pytest.raises(
-        sg.InvalidSpec, match=r"^AgentCheck\('balance'\): expected max_episodes >= episodes, got 5 < 10"
+        sg.error.InvalidSpec, match=r"^AgentCheck\('balance'\): expected max_episodes >= episodes, got 5 < 10"
     ):
         sg.AgentCheck(KEEP, lean, episodes=10, max_episodes=5)
-    with pytest.raises(sg.InvalidSpec, match=r"^AgentCheck\('balance'\): expected wrap to be a function env -> env"):
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"^AgentCheck\('balance'\): expected wrap to be a function env -> env"
+    ):
         sg.AgentCheck(KEEP, lean, wrap=3)
-    with pytest.raises(sg.InvalidSpec, match=r"^AgentCheck\('balance'\): expected algorithm to be a name"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"^AgentCheck\('balance'\): expected algorithm to be a name"):
         sg.AgentCheck(KEEP, lean, algorithm=3)
-    with pytest.raises(sg.InvalidSpec, match=r"^AgentCheck: expected a Spec, got 'keep'"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"^AgentCheck: expected a Spec, got 'keep'"):
         sg.AgentCheck("keep", lean)
 
 
@@ -338,7 +340,7 @@ def test_an_agent_trained_on_an_env_made_otherwise_is_judged_with_a_loud_note():
     from specguard.agents.agent import Agent
 
     agent = Agent(lean, name="zoo lean", env_kwargs={"sutton_barto_reward": True, "render_mode": None})
-    with pytest.warns(sg.SpecWarning, match=r"made with \{'sutton_barto_reward': True\}"):
+    with pytest.warns(sg.error.SpecWarning, match=r"made with \{'sutton_barto_reward': True\}"):
         result = check_agent(KEEP, agent, episodes=10, max_episodes=10, cache_dir=None)
     assert "sutton_barto_reward" in result.notes[0] and "sutton_barto_reward" in sg.table(result)
     same = sg.Spec(
@@ -348,7 +350,7 @@ def test_an_agent_trained_on_an_env_made_otherwise_is_judged_with_a_loud_note():
         expect=0.5,
     )
     with warnings.catch_warnings():
-        warnings.simplefilter("error", sg.SpecWarning)
+        warnings.simplefilter("error", sg.error.SpecWarning)
         result = check_agent(same, agent, episodes=10, max_episodes=10, cache_dir=None)
     assert not any("made with" in note for note in result.notes)
 
@@ -376,11 +378,11 @@ def test_an_agent_trained_on_another_env_id_is_judged_with_a_loud_note():
     from specguard.agents.agent import Agent
 
     agent = Agent(lean, name="zoo lean", env_id="CartPole-v0")
-    with pytest.warns(sg.SpecWarning, match=r"trained on env 'CartPole-v0'.*\('CartPole-v1'\)"):
+    with pytest.warns(sg.error.SpecWarning, match=r"trained on env 'CartPole-v0'.*\('CartPole-v1'\)"):
         result = check_agent(KEEP, agent, episodes=10, max_episodes=10, cache_dir=None)
     assert "'CartPole-v0'" in result.notes[0] and "'CartPole-v0'" in sg.table(result)
     with warnings.catch_warnings():
-        warnings.simplefilter("error", sg.SpecWarning)
+        warnings.simplefilter("error", sg.error.SpecWarning)
         agent = Agent(lean, name="zoo lean", env_id="CartPole-v1")
         same = check_agent(KEEP, agent, episodes=10, max_episodes=10, cache_dir=None)
     assert not any("trained on env" in note for note in same.notes)
@@ -397,7 +399,7 @@ def test_an_agents_result_asked_for_its_model_points_to_the_agent():
 def test_episodes_that_start_inside_a_reach_goal_are_met_at_the_start_only_where_the_goal_ends_them():
     tilted = sg.Spec(CARTPOLE, sg.Goal("tilted", theta=(0.02, None)), budget=sg.Budget(timesteps=1), expect=0.3)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", sg.SpecWarning)  # some starts are inside the root goal: that is the point
+        warnings.simplefilter("ignore", sg.error.SpecWarning)  # some starts are inside the root goal: that is the point
         own = check_agent(tilted, lean, episodes=20, max_episodes=20, cache_dir=None)
         constructed = check_agent(tilted, lean, episodes=20, max_episodes=20, observation="spec", cache_dir=None)
     started = own.runs[0].started_in_goal

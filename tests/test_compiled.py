@@ -111,14 +111,14 @@ def test_generated_source_is_readable():
 
 def test_unknown_feature_names_the_path_and_lists_known_features():
     tree = sg.All(sg.Goal("p", z=(0, 1)), name="r")
-    with pytest.raises(sg.UnknownFeature, match=r"r/p: goal names unknown feature 'z'; known features: a, b, c"):
+    with pytest.raises(sg.error.UnknownFeature, match=r"r/p: goal names unknown feature 'z'; known features: a, b, c"):
         compile_tree(tree, FEATURES)
 
 
 def test_user_function_errors_name_the_annotation():
     tree = sg.Goal("g", a=(0, 1)).annotate(sg.Distance(lambda s: s.zz, scale=1.0))
     ev = compile_tree(tree, FEATURES).evaluator()
-    with pytest.raises(sg.EvaluationError, match=r"g:distance: the distance function raised AttributeError"):
+    with pytest.raises(sg.error.EvaluationError, match=r"g:distance: the distance function raised AttributeError"):
         ev.reset([0.0, 0.0, 0.0])
 
 
@@ -126,7 +126,7 @@ def test_negative_distance_is_rejected_mid_episode():
     tree = sg.Goal("g", a=(0, 1)).annotate(sg.Distance(lambda s: s.b, scale=1.0))
     ev = compile_tree(tree, FEATURES).evaluator()
     ev.reset([5.0, 1.0, 0.0])
-    with pytest.raises(sg.EvaluationError, match=r"g:distance: expected a finite distance >= 0, got -1.0"):
+    with pytest.raises(sg.error.EvaluationError, match=r"g:distance: expected a finite distance >= 0, got -1.0"):
         ev.step(0, [5.0, -1.0, 0.0])
 
 
@@ -137,7 +137,7 @@ def test_failing_constraint_is_named():
     tree = sg.Goal("g", a=(0, 1)).annotate(sg.Constraint(boom, name="crash"))
     ev = compile_tree(tree, FEATURES).evaluator()
     ev.reset([5.0, 1.0, 0.0])
-    with pytest.raises(sg.EvaluationError, match=r"g:crash: the constraint function raised RuntimeError: no"):
+    with pytest.raises(sg.error.EvaluationError, match=r"g:crash: the constraint function raised RuntimeError: no"):
         ev.step(0, [5.0, -1.0, 0.0])
 
 
@@ -153,7 +153,7 @@ def test_non_finite_distance_is_rejected_at_reset(bad):
     tree = sg.Goal("g", a=(0, 1)).annotate(sg.Distance(_distance_of_b, scale=1.0))
     ev = compile_tree(tree, FEATURES).evaluator()
     with pytest.raises(
-        sg.EvaluationError,
+        sg.error.EvaluationError,
         match=rf"g:distance: expected a finite distance >= 0, got {bad!r} \(state State\(a=5.0, b={bad!r}, c=0.0\)\)",
     ):
         ev.reset([5.0, bad, 0.0])
@@ -165,7 +165,7 @@ def test_non_finite_distance_is_rejected_mid_episode_by_both_evaluators(bad):
     message = rf"g:distance: expected a finite distance >= 0, got {bad!r} \(state State\(a=5.0, b={bad!r}, c=0.0\)\)"
     for ev in (compile_tree(tree, FEATURES).evaluator(), ReferenceEvaluator(tree, FEATURES)):
         ev.reset([5.0, 1.0, 0.0])
-        with pytest.raises(sg.EvaluationError, match=message):
+        with pytest.raises(sg.error.EvaluationError, match=message):
             ev.step(0, [5.0, bad, 0.0])
 
 
@@ -174,7 +174,9 @@ def test_batch_rewards_reject_bad_distances(bad):
     tree = sg.Goal("g", a=(0, 1)).annotate(sg.Distance(_distance_of_b, scale=1.0))
     s = np.array([[0.0, 1.0, 0.0], [0.0, 2.0, 0.0]])
     s2 = np.array([[0.0, 1.0, 0.0], [0.0, bad, 0.0]])
-    with pytest.raises(sg.EvaluationError, match=rf"g:distance: expected a finite distance >= 0, got {bad!r} \(state"):
+    with pytest.raises(
+        sg.error.EvaluationError, match=rf"g:distance: expected a finite distance >= 0, got {bad!r} \(state"
+    ):
         compile_tree(tree, FEATURES).reward_terms(s, np.zeros(2), s2)
 
 
@@ -183,7 +185,7 @@ def test_batch_rewards_reject_bad_distances(bad):
 
 def test_an_overflowing_coefficient_is_rejected_when_compiling():
     tree = sg.Goal("g", a=(0, 1)).annotate(sg.Distance(_distance_of_b, scale=1e-320))
-    with pytest.raises(sg.InvalidSpec, match=r"g:distance: the component's coefficient .* is inf"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"g:distance: the component's coefficient .* is inf"):
         compile_tree(tree, FEATURES)
 
 
@@ -260,11 +262,11 @@ def test_adapted_weights_replace_an_auto_nodes_weights_only():
     adapted = compile_tree(tree, ("x", "v"), weights={"p": (0.9, 0.1)})
     assert [t.coef for t in plain.terms] == [0.5, 0.5]
     assert [t.coef for t in adapted.terms] == [0.9, 0.1]
-    with pytest.raises(sg.InvalidSpec, match=r"weights\['p/up'\].*weights='auto'.*such nodes: 'p'"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"weights\['p/up'\].*weights='auto'.*such nodes: 'p'"):
         compile_tree(tree, ("x", "v"), weights={"p/up": (1.0,)})
-    with pytest.raises(sg.InvalidSpec, match=r"expected 2 finite weights >= 0 \(one per child\), got \(1.0,\)"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"expected 2 finite weights >= 0 \(one per child\), got \(1.0,\)"):
         compile_tree(tree, ("x", "v"), weights={"p": (1.0,)})
-    with pytest.raises(sg.InvalidSpec, match=r"such nodes: none"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"such nodes: none"):
         compile_tree(sg.All(up, still, name="p"), ("x", "v"), weights={"p": (0.9, 0.1)})
 
 
@@ -287,7 +289,7 @@ def test_adapted_weights_of_an_auto_node_include_its_default_weight_constraints(
         ("p:constraint", 2.0),  # a weight its author set is kept
     ]
     with pytest.raises(
-        sg.InvalidSpec, match=r"expected 3 finite weights >= 0 \(one per child, then one per constraint"
+        sg.error.InvalidSpec, match=r"expected 3 finite weights >= 0 \(one per child, then one per constraint"
     ):
         compile_tree(tree, ("x", "v"), weights={"p": (0.9, 0.1)})
 
@@ -327,7 +329,7 @@ def test_a_constraint_result_is_checked_on_every_step_in_both_evaluators_with_on
         ev.step(0, [1.0, 0.0, 0.0])
         ev.step(0, [2.0, 0.0, 0.0])
         own = list(ev.own_state)
-        with pytest.raises(sg.EvaluationError) as caught:
+        with pytest.raises(sg.error.EvaluationError) as caught:
             ev.step(0, [3.0, 0.0, 0.0])
         assert ev.own_state == own  # the failed step changed no episode state
         return caught.value

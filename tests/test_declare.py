@@ -95,7 +95,7 @@ def test_goal_specs_has_one_case_per_spec_and_goal_with_the_specs_xfail_and_mark
     ],
 )
 def test_goal_specs_rejects_what_it_cannot_gate(specs, marks, message):
-    with pytest.raises(sg.InvalidSpec, match=message):
+    with pytest.raises(sg.error.InvalidSpec, match=message):
         sg.goal_specs(specs, marks=marks)
 
 
@@ -103,5 +103,5 @@ def test_goal_specs_needs_thresholds():
     from example_specs import pendulum
 
     spec = sg.Spec(pendulum.initial_env, pendulum.trees["w"], budget=sg.Budget(timesteps=10))
-    with pytest.raises(sg.InvalidSpec, match=r"goal_specs\['w'\]: expected at least one threshold, got \{\}"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"goal_specs\['w'\]: expected at least one threshold, got \{\}"):
         sg.goal_specs({"w": spec})

@@ -17,6 +17,7 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 import specguard as sg
 from example_specs import acrobot, lunar_lander, mountain_car, pendulum
 from specguard import strategies as sgst
+from specguard.construction.env import BaselineEnv
 from specguard.error import GoalMetAtStart, UnreachableGoal
 from specguard.starts.space import START_OPTION, starts_of
 from specguard.testing import ReplayEnv
@@ -208,25 +209,29 @@ def test_execute_maps_actions_and_action_space_is_declared():
 
 def test_state_of_wrong_length_is_reported():
     initial = sg.InitialEnv("Pendulum-v1", features=("x", "y"), state=lambda o: o[:3])
-    with pytest.raises(sg.StateMappingError, match=r"state\(\) must return 2 finite numbers for features \('x', 'y'\)"):
+    with pytest.raises(
+        sg.error.StateMappingError, match=r"state\(\) must return 2 finite numbers for features \('x', 'y'\)"
+    ):
         sg.make_env(initial, sg.Goal("g", x=(0, 1)))  # the start check reads the starts' features
 
 
 def test_state_with_non_finite_values_is_reported():
     initial = sg.InitialEnv("Pendulum-v1", features=("x",), state=lambda o: [float("nan")])
-    with pytest.raises(sg.StateMappingError, match=r"must return 1 finite numbers .* got \[nan\]"):
+    with pytest.raises(sg.error.StateMappingError, match=r"must return 1 finite numbers .* got \[nan\]"):
         sg.make_env(initial, sg.Goal("g", x=(0, 1)))  # the start check reads the starts' features
 
 
 def test_state_that_raises_is_reported():
     initial = sg.InitialEnv("Pendulum-v1", features=("x",), state=lambda o: o["x"])
-    with pytest.raises(sg.StateMappingError, match=r"g: state\(\) raised IndexError"):
+    with pytest.raises(sg.error.StateMappingError, match=r"g: state\(\) raised IndexError"):
         sg.make_env(initial, sg.Goal("g", x=(0, 1)))  # the start check reads the starts' features
 
 
 def test_identity_state_needs_one_feature_per_observation():
     initial = sg.InitialEnv("Pendulum-v1", features=("x", "y"))
-    with pytest.raises(sg.StateMappingError, match=r"identity state\(\) needs a flat Box observation of 2 features"):
+    with pytest.raises(
+        sg.error.StateMappingError, match=r"identity state\(\) needs a flat Box observation of 2 features"
+    ):
         sg.make_env(initial, sg.Goal("g", x=(0, 1)))
 
 
@@ -240,7 +245,7 @@ def test_identity_state_needs_one_feature_per_observation():
 )
 def test_identity_state_features_must_label_the_observation_one_to_one(make, features, given):
     initial = sg.InitialEnv("CartPole-v1", features=features)
-    with pytest.raises(sg.StateMappingError) as info:
+    with pytest.raises(sg.error.StateMappingError) as info:
         make(initial, sg.Goal("g", a=(0, 1)))
     message = str(info.value)
     assert message.startswith(f"InitialEnv 'CartPole-v1': the identity state() needs a flat Box observation of {given}")
@@ -251,24 +256,24 @@ def test_identity_state_features_must_label_the_observation_one_to_one(make, fea
 def test_identity_state_rejects_a_non_box_observation_early():
     initial = sg.InitialEnv("FrozenLake-v1", features=("cell",))
     with pytest.raises(
-        sg.StateMappingError, match=r"InitialEnv 'FrozenLake-v1': .* the observation space is Discrete\(16\)"
+        sg.error.StateMappingError, match=r"InitialEnv 'FrozenLake-v1': .* the observation space is Discrete\(16\)"
     ):
         sg.make_baseline_env(initial, sg.Goal("g", cell=(0, 1)))
 
 
 def test_unknown_feature_fails_before_the_env_is_built():
     with pytest.raises(
-        sg.UnknownFeature, match=r"pendulum/speed: goal names unknown feature 'v'; known features: x, y, omega"
+        sg.error.UnknownFeature, match=r"pendulum/speed: goal names unknown feature 'v'; known features: x, y, omega"
     ):
         sg.make_env(pendulum.initial_env, sg.All(sg.Goal("speed", v=(0, 1)), name="pendulum"))
 
 
 def test_make_env_rejects_wrong_argument_types():
-    with pytest.raises(sg.InitialEnvError, match="expected an InitialEnv"):
+    with pytest.raises(sg.error.InitialEnvError, match="expected an InitialEnv"):
         sg.make_env("Pendulum-v1", pendulum.trees["a"])
-    with pytest.raises(sg.InvalidSpec, match=r"expected a goal-tree node \(Goal, All, ...\) as tree"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"expected a goal-tree node \(Goal, All, ...\) as tree"):
         sg.make_env(pendulum.initial_env, {"x": (0, 1)})
-    with pytest.raises(sg.InvalidSpec, match="expected 'flat' or 'reference'"):
+    with pytest.raises(sg.error.InvalidSpec, match="expected 'flat' or 'reference'"):
         sg.make_env(pendulum.initial_env, pendulum.trees["a"], evaluator="fast")
 
 
@@ -276,9 +281,14 @@ def test_make_env_rejects_wrong_argument_types():
 @pytest.mark.parametrize(
     ("initial", "tree", "error", "message"),
     [
-        ("Pendulum-v1", pendulum.trees["a"], sg.InitialEnvError, "expected an InitialEnv as first argument"),
-        (pendulum.initial_env, {"x": (0, 1)}, sg.InvalidSpec, r"expected a goal-tree node \(Goal, All, ...\) as tree"),
-        (pendulum.initial_env, sg.Goal("g", v=(0, 1)), sg.UnknownFeature, "goal names unknown feature 'v'"),
+        ("Pendulum-v1", pendulum.trees["a"], sg.error.InitialEnvError, "expected an InitialEnv as first argument"),
+        (
+            pendulum.initial_env,
+            {"x": (0, 1)},
+            sg.error.InvalidSpec,
+            r"expected a goal-tree node \(Goal, All, ...\) as tree",
+        ),
+        (pendulum.initial_env, sg.Goal("g", v=(0, 1)), sg.error.UnknownFeature, "goal names unknown feature 'v'"),
     ],
     ids=["not-an-initial-env", "not-a-node", "unknown-feature"],
 )
@@ -286,7 +296,7 @@ def test_the_baseline_env_refuses_what_make_env_refuses(make, initial, tree, err
     # One preflight for both (issue 19): the baseline used to skip the node check.
     with pytest.raises(error, match=message) as info:
         make(initial, tree)
-    if error is not sg.UnknownFeature:  # the argument checks name the function called
+    if error is not sg.error.UnknownFeature:  # the argument checks name the function called
         assert str(info.value).startswith(make.__name__)
 
 
@@ -396,7 +406,7 @@ def test_a_factory_refuses_again_what_its_preflight_refused():
 
     build = EnvFactory(pendulum.initial_env, sg.Goal("g", v=(0, 1)), baseline=True)
     for _ in range(2):
-        with pytest.raises(sg.UnknownFeature, match="g: goal names unknown feature 'v'"):
+        with pytest.raises(sg.error.UnknownFeature, match="g: goal names unknown feature 'v'"):
             build()
 
 
@@ -405,13 +415,13 @@ def test_an_env_refuses_the_compiled_tree_of_another_tree():
 
     base = gym.make("Pendulum-v1")
     other = compile_tree(pendulum.trees["b"], pendulum.initial_env.features)
-    with pytest.raises(sg.InvalidSpec, match="compiled: expected compile_tree"):
+    with pytest.raises(sg.error.InvalidSpec, match="compiled: expected compile_tree"):
         sg.SpecEnv(base, pendulum.trees["w"], pendulum.initial_env.features, compiled=other)
-    with pytest.raises(sg.InvalidSpec, match="compiled: expected compile_tree"):
-        sg.BaselineEnv(base, pendulum.trees["w"], pendulum.initial_env.features, compiled=other)
+    with pytest.raises(sg.error.InvalidSpec, match="compiled: expected compile_tree"):
+        BaselineEnv(base, pendulum.trees["w"], pendulum.initial_env.features, compiled=other)
     tree = sg.All(sg.Goal("a", x=(0.9, 1.0)), sg.Goal("b", omega=(-1, 1)), name="auto", weights="auto")
     adapted = compile_tree(tree, pendulum.initial_env.features, weights={"auto": (0.7, 0.3)})
-    with pytest.raises(sg.InvalidSpec, match="compiled: expected the tree compiled with its own weights"):
+    with pytest.raises(sg.error.InvalidSpec, match="compiled: expected the tree compiled with its own weights"):
         sg.SpecEnv(base, tree, pendulum.initial_env.features, compiled=adapted)
 
 
@@ -445,7 +455,7 @@ def test_baseline_env_rejects_non_finite_rewards():
     initial = sg.InitialEnv(lambda: NanReward(gym.make("Pendulum-v1")), features=("x", "y", "omega"))
     env = sg.make_baseline_env(initial, pendulum.trees["b"])
     env.reset(seed=0)
-    with pytest.raises(sg.EvaluationError, match=r"pendulum: the initial env returned a non-finite reward nan"):
+    with pytest.raises(sg.error.EvaluationError, match=r"pendulum: the initial env returned a non-finite reward nan"):
         env.step(np.zeros(1, dtype=np.float32))
 
 
@@ -465,12 +475,12 @@ def test_adapted_weights_apply_from_the_next_episode_on():
     env.reset(seed=0)
     assert env.adapted_weights == {"p": (0.9, 0.1)}
     assert env.step(0)[1] == pytest.approx(0.9 - 0.1)
-    with pytest.raises(sg.InvalidSpec, match=r"weights\['p/up'\]"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"weights\['p/up'\]"):
         env.set_weights({"p/up": (1.0,)})
 
 
 def test_the_reference_evaluator_keeps_the_trees_weights():
-    with pytest.raises(sg.InvalidSpec, match=r"evaluator: adapted weights need the 'flat' evaluator"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"evaluator: adapted weights need the 'flat' evaluator"):
         _replay_auto_env(evaluator="reference").set_weights({"p": (0.9, 0.1)})
 
 
@@ -488,7 +498,7 @@ def test_a_constraint_that_returns_no_truth_value_is_an_error_naming_it(returns,
     tree = sg.Goal("up", x=(0.9, 1.0)).annotate(sg.Constraint(returns, name="fast"))
     env = sg.make_env(pendulum.initial_env, tree, evaluator=evaluator)
     env.reset(seed=0)
-    with pytest.raises(sg.EvaluationError, match=r"fast.*the constraint function returned .*" + re.escape(shown)):
+    with pytest.raises(sg.error.EvaluationError, match=r"fast.*the constraint function returned .*" + re.escape(shown)):
         env.step(np.zeros(1, dtype=np.float32))
 
 
@@ -522,7 +532,7 @@ def _raises_at_build():
     ids=["factory", "make keyword", "execute"],
 )
 def test_factory_make_and_execute_errors_are_spec_errors_naming_the_culprit(initial, names):
-    with pytest.raises(sg.InitialEnvError, match=names):
+    with pytest.raises(sg.error.InitialEnvError, match=names):
         env = sg.make_env(initial(), sg.Goal("g", x=(0.9, 1.0)))
         env.reset(seed=0)
         env.step(np.zeros(1, dtype=np.float32))
@@ -575,7 +585,7 @@ def test_an_env_without_masks_for_the_agents_actions_says_why(kwargs, problem):
     env = sg.make_env(sg.InitialEnv(factory, features=CARTPOLE_FEATURES, **kwargs), FAR)
     env.reset(seed=0)
     assert re.match(problem, action_masks_problem(env))
-    with pytest.raises(sg.InitialEnvError, match=rf"far: no action masks: {problem}"):
+    with pytest.raises(sg.error.InitialEnvError, match=rf"far: no action masks: {problem}"):
         env.action_masks()
 
 
@@ -607,10 +617,14 @@ def test_an_env_made_with_a_start_space_starts_where_it_is_told_in_that_space(ma
 
 
 def test_an_env_made_without_a_start_space_has_none_and_a_wrong_one_is_refused_naming_it():
-    with pytest.raises(sg.InvalidSpec, match=r"CartPole-v1: the env has no StartWrapper .* without a start space"):
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"CartPole-v1: the env has no StartWrapper .* without a start space"
+    ):
         starts_of(sg.make_env(CARTPOLE, FAR))
     assert starts_of(sg.make_env(CARTPOLE, FAR, starts={"x": (-1.0, 1.0)})).high.tolist() == [1.0, 0.05, 0.05, 0.05]
-    with pytest.raises(sg.InvalidSpec, match=r"^make_env: expected starts to be a StartSpace or \{name: \(lo, hi\)\}"):
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"^make_env: expected starts to be a StartSpace or \{name: \(lo, hi\)\}"
+    ):
         sg.make_env(CARTPOLE, FAR, starts=5)
-    with pytest.raises(sg.UnknownFeature, match=r"the start space names 'height'"):
+    with pytest.raises(sg.error.UnknownFeature, match=r"the start space names 'height'"):
         sg.make_baseline_env(CARTPOLE, FAR, starts={"height": (0.0, 1.0)})

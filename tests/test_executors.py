@@ -10,6 +10,7 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
+from specguard.cache.store import Cache
 from specguard.parallel.executors import DaskExecutor, ExecutorError, LocalExecutor, check_address, make_executor
 from specguard.utils.numerics import portable_environ
 
@@ -100,7 +101,7 @@ def test_the_cluster_gives_the_local_pools_figures_and_a_warm_cache_submits_noth
         # The driver stored what came back: the next run is served from its own cache.
         again = sg.run_spec(s, executor=executor, cache_dir=tmp_path, progress=None)
         assert executor.submitted == 2 and again.cached == {0: True, 1: True}
-        assert sg.Cache(tmp_path).load(s, 1) == remote.runs[1]
+        assert Cache(tmp_path).load(s, 1) == remote.runs[1]
     finally:
         executor.close()
 
@@ -133,7 +134,7 @@ def test_a_cluster_worker_killed_mid_run_fails_one_seed(cluster, tmp_path):
     assert [r.seed for r in result.runs] == [0]
     assert result.errors[1].startswith("seed 1, training step ")
     assert "cluster worker failed (KilledWorker" in result.errors[1]
-    assert sg.Cache(tmp_path).load(s, 0) == result.runs[0]
+    assert Cache(tmp_path).load(s, 0) == result.runs[0]
 
 
 class FailsInEvaluation(gym.Wrapper):
@@ -160,7 +161,7 @@ def test_errors_on_the_cluster_are_the_same_one_line_per_seed(cluster):
 
 @pytest.mark.slow
 def test_spec_errors_found_on_the_cluster_reach_the_caller(cluster):
-    with pytest.raises(sg.InvalidSpec, match=r"Spec 'pendulum'.algorithm: DQN cannot act in a Box action space"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"Spec 'pendulum'.algorithm: DQN cannot act in a Box action space"):
         dqn = spec(algorithm="DQN", hyperparameters={})
         sg.run_spec(dqn, executor=cluster.scheduler_address, cache_dir=None, progress=None)
 

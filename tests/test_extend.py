@@ -57,14 +57,14 @@ def test_goal_test_refuses_a_node_with_own_state():
         def state_slots(self) -> tuple[Slot, ...]:
             return (Slot("n", 0.0, 1.0),)
 
-    with pytest.raises(sg.InvalidSpec, match=r"r: Bare has own state, so its goal is not a set of states"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"r: Bare has own state, so its goal is not a set of states"):
         goal_test(Counting(sg.Goal("a", x=(0, 1)), name="r"))
 
 
 def test_check_children():
-    with pytest.raises(sg.InvalidSpec, match=r"Bare 'r': expected at least one child node, got none"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"Bare 'r': expected at least one child node, got none"):
         check_children("Bare", "r", ())
-    with pytest.raises(sg.InvalidSpec, match=r"two children are named 'a'"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"two children are named 'a'"):
         check_children("Bare", "r", (sg.Goal("a", x=1), sg.Goal("a", y=1)))
 
 
@@ -109,9 +109,9 @@ def test_init_node_checks_and_sets_name_and_children_with_no_annotations():
     assert (pair.name, pair.children, pair.nodes, pair.annotations) == ("p", (a, b), (a, b), ())
     assert [path for path, _ in pair.walk()] == ["p", "p/a", "p/b"]
     assert pair.annotate(sg.Distance(abs, scale=1.0)).children == (a, b)
-    with pytest.raises(sg.InvalidSpec, match="Pair 'p': expected at least one child node, got none"):
+    with pytest.raises(sg.error.InvalidSpec, match="Pair 'p': expected at least one child node, got none"):
         Pair(name="p")
-    with pytest.raises(sg.InvalidSpec, match=r"Pair 3: expected a non-empty string as name, got 3"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"Pair 3: expected a non-empty string as name, got 3"):
         Pair(a, name=3)
 
 
@@ -167,7 +167,7 @@ def test_child_weights_none_is_the_default_and_numbers_become_floats():
 def test_bad_child_weights_name_the_node_and_what_was_given(weights, message):
     from specguard.extend import check_child_weights
 
-    with pytest.raises(sg.InvalidSpec) as e:
+    with pytest.raises(sg.error.InvalidSpec) as e:
         check_child_weights("Op 'o'", KIDS, weights, scales="it", default="1 each")
     assert message in str(e.value)
     if "at least one" in message:
@@ -179,9 +179,9 @@ def test_all_and_the_plugins_share_the_child_weights_rule():
 
     for make in (sg.All, AnyOf, Sequence):
         for weights, says in [((1,), "expected 2 weights (one per child)"), ((0, 0), "at least one weight > 0")]:
-            with pytest.raises(sg.InvalidSpec, match=re.escape(says)):
+            with pytest.raises(sg.error.InvalidSpec, match=re.escape(says)):
                 make(*KIDS, name="n", weights=weights)
-    with pytest.raises(sg.InvalidSpec, match="expected weights to be a sequence of numbers, None or 'auto'"):
+    with pytest.raises(sg.error.InvalidSpec, match="expected weights to be a sequence of numbers, None or 'auto'"):
         sg.All(*KIDS, name="n", weights="sometimes")
     assert sg.All(*KIDS, name="n", weights="auto").adapts_weights
 

@@ -99,7 +99,7 @@ def test_the_runners_envs_are_made_in_its_start_space_and_one_made_without_it_is
         (2, {"x": 3.0, "y": 1.0}),
     ]
     assert [starts_of(env).names for env in run._ready(3)] == [("x", "y")] * 3  # each env made in the space
-    with pytest.raises(sg.InvalidSpec, match="made without a start space"):
+    with pytest.raises(sg.error.InvalidSpec, match="made without a start space"):
         EpisodeRunner(lambda **kwargs: sg.make_env(LINE, TREE), still_at_rest, SPACE, ["home"])
 
 
@@ -224,9 +224,9 @@ def pendulum_file(tmp_path):
 
 @pytest.mark.parametrize("seed", [-1, True, 1.5, "0"])
 def test_a_falsification_s_seed_is_an_integer_from_zero(seed):
-    with pytest.raises(sg.InvalidSpec, match=rf"^Falsify: expected seed to be an integer >= 0 .*got {seed!r}\n"):
+    with pytest.raises(sg.error.InvalidSpec, match=rf"^Falsify: expected seed to be an integer >= 0 .*got {seed!r}\n"):
         sg.Falsify(seed=seed)
-    with pytest.raises(sg.InvalidSpec, match=rf"^falsify: expected seed to be an integer >= 0 .*got {seed!r}\n"):
+    with pytest.raises(sg.error.InvalidSpec, match=rf"^falsify: expected seed to be an integer >= 0 .*got {seed!r}\n"):
         falsify(runner(clean), examples=1, uniform=0, seed=seed)
 
 
@@ -241,7 +241,7 @@ def test_a_falsification_s_seed_is_an_integer_from_zero(seed):
     ],
 )
 def test_the_search_refuses_bad_arguments_naming_them(kwargs, message):
-    with pytest.raises(sg.InvalidSpec, match=message):
+    with pytest.raises(sg.error.InvalidSpec, match=message):
         falsify(runner(clean), **{"examples": 1, "uniform": 0, **kwargs})
 
 

@@ -145,7 +145,7 @@ def test_the_verdict_with_max_rate_is_the_interval_rule_of_thresholds():
     ],
 )
 def test_as_falsify_refuses_what_is_not_a_falsification(value, message):
-    with pytest.raises(sg.InvalidSpec, match=message):
+    with pytest.raises(sg.error.InvalidSpec, match=message):
         as_falsify("goal_spec 'test'", value)
 
 
@@ -173,7 +173,7 @@ def test_as_falsify_reads_every_declared_form():
 )
 def test_falsify_refuses_bad_arguments_naming_them(kwargs, message):
     starts = kwargs.pop("starts", None)
-    with pytest.raises(sg.InvalidSpec, match=message):
+    with pytest.raises(sg.error.InvalidSpec, match=message):
         Falsify(starts, **kwargs)
 
 
@@ -194,7 +194,7 @@ def test_goal_specs_take_falsify_per_spec(pytester):
 def test_goal_specs_refuse_falsify_for_a_spec_they_do_not_have():
     pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
     spec = sg.Spec(pendulum, sg.Goal("up", x=(0.9, 1.0)), budget=sg.Budget(timesteps=128), expect={"up": 0.5})
-    with pytest.raises(sg.InvalidSpec, match=r"goal_specs\(falsify=...\).*names specs \['down'\]"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"goal_specs\(falsify=...\).*names specs \['down'\]"):
         sg.goal_specs({"up": spec}, falsify={"down": True})
 
 

@@ -223,7 +223,7 @@ def test_an_object_that_cannot_be_fingerprinted_is_an_error_naming_it():
         with lock:
             return abs(s.x)
 
-    with pytest.raises(sg.FingerprintError, match=r"closure 'lock'.*cannot fingerprint _thread.lock exactly"):
+    with pytest.raises(sg.error.FingerprintError, match=r"closure 'lock'.*cannot fingerprint _thread.lock exactly"):
         fingerprint_spec(spec(shaped(near)))
 
 
@@ -275,7 +275,7 @@ def test_a_start_space_changes_neither_key_it_is_only_where_the_falsifier_search
     assert searched.starts == sg.StartSpace({"theta": (-1.0, 1.0)})  # ranges read as a StartSpace
     assert fingerprint_spec(searched).spec_key == fingerprint_spec(base).spec_key
     assert fingerprint_spec(searched).run_key(0) == fingerprint_spec(base).run_key(0)
-    with pytest.raises(sg.InvalidSpec, match=r"Spec 'pendulum'.starts: expected starts to be a StartSpace"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"Spec 'pendulum'.starts: expected starts to be a StartSpace"):
         dataclasses.replace(base, starts=[("theta", -1.0, 1.0)])
 
 

@@ -80,3 +80,20 @@ def test_the_public_paths_import():
     assert importlib.import_module(entry).pytest_addoption  # the plugin's hooks, by the entry point's own path
     script = {e.name: e for e in metadata.entry_points(group="console_scripts")}["specguard"]
     assert callable(script.load())
+
+
+def test_every_error_a_user_may_catch_is_under_sg_error_and_its_root_at_the_top():
+    from specguard import error
+
+    assert sg.error is error and sg.SpecError is error.SpecError
+    assert issubclass(sg.error.InvalidSpec, sg.SpecError)
+    assert all(getattr(sg, name) is importlib.import_module(f"specguard.{name}") for name in sg._SUBMODULES)
+
+
+@pytest.mark.parametrize("name", ["InvalidSpec", "SpecWarning", "Cache", "check_spec", "load_normalizer", "Annotation"])
+def test_a_name_the_face_gave_up_still_resolves_with_a_warning_naming_its_home(name):
+    home = sg._MOVED[name]
+    with pytest.warns(DeprecationWarning, match=rf"specguard\.{name} moved to {home}\.{name}"):
+        value = getattr(sg, name)
+    assert value is getattr(importlib.import_module(home), name)
+    assert name not in sg.__all__ and name not in dir(sg)

@@ -19,38 +19,38 @@ def test_declaring_builds_nothing_and_reads_well():
 
 
 def test_unknown_env_id():
-    with pytest.raises(sg.InitialEnvError, match=r"InitialEnv 'Pendulum-v9': no such Gymnasium environment id"):
+    with pytest.raises(sg.error.InitialEnvError, match=r"InitialEnv 'Pendulum-v9': no such Gymnasium environment id"):
         sg.InitialEnv("Pendulum-v9", features=("x",))
-    with pytest.raises(sg.InitialEnvError, match=r"InitialEnv 'NoSuchEnv-v0': no such Gymnasium environment id"):
+    with pytest.raises(sg.error.InitialEnvError, match=r"InitialEnv 'NoSuchEnv-v0': no such Gymnasium environment id"):
         sg.InitialEnv("NoSuchEnv-v0", features=("x",))
 
 
 @pytest.mark.parametrize("features", [(), "xy", ("x", "x"), ("x", "1y"), ("_x",), ("class",), [3]])
 def test_bad_feature_names(features):
-    with pytest.raises(sg.InitialEnvError, match=r"InitialEnv features"):
+    with pytest.raises(sg.error.InitialEnvError, match=r"InitialEnv features"):
         sg.InitialEnv("Pendulum-v1", features=features)
 
 
 def test_mappings_must_be_callable():
-    with pytest.raises(sg.InitialEnvError, match=r"expected state to be callable"):
+    with pytest.raises(sg.error.InitialEnvError, match=r"expected state to be callable"):
         sg.InitialEnv("Pendulum-v1", features=("x",), state=3)
 
 
 def test_factory_must_return_an_env():
     env = sg.InitialEnv(lambda: "not an env", features=("x",))
-    with pytest.raises(sg.InitialEnvError, match=r"the factory returned str, expected a gymnasium.Env"):
+    with pytest.raises(sg.error.InitialEnvError, match=r"the factory returned str, expected a gymnasium.Env"):
         env.make()
 
 
 def test_env_must_be_id_or_factory():
-    with pytest.raises(sg.InitialEnvError, match=r"expected an env id or a factory"):
+    with pytest.raises(sg.error.InitialEnvError, match=r"expected an env id or a factory"):
         sg.InitialEnv(42, features=("x",))
 
 
 def test_bounds_are_checked_and_used():
-    with pytest.raises(sg.InitialEnvError, match=r"bounds name unknown feature 'z'; known features: x, y"):
+    with pytest.raises(sg.error.InitialEnvError, match=r"bounds name unknown feature 'z'; known features: x, y"):
         sg.InitialEnv("Pendulum-v1", features=("x", "y"), state=lambda o: o[:2], bounds={"z": (0, 1)})
-    with pytest.raises(sg.InitialEnvError, match=r"bounds for 'x' must satisfy lo <= hi"):
+    with pytest.raises(sg.error.InitialEnvError, match=r"bounds for 'x' must satisfy lo <= hi"):
         sg.InitialEnv("Pendulum-v1", features=("x", "y"), state=lambda o: o[:2], bounds={"x": (1, 0)})
     env = sg.InitialEnv("Pendulum-v1", features=("x", "y"), state=lambda o: o[:2], bounds={"x": (-1, 1)})
     lo, hi = env.feature_bounds(gym.spaces.Box(-5, 5, (3,)))
@@ -65,9 +65,9 @@ def test_identity_state_takes_bounds_from_the_observation_space():
 
 def test_identity_state_bounds_need_one_feature_per_component():
     env = sg.InitialEnv("CartPole-v1", features=("a", "b", "c", "d", "e"))
-    with pytest.raises(sg.StateMappingError, match=r"InitialEnv 'CartPole-v1': .* 5 features .* 4 components"):
+    with pytest.raises(sg.error.StateMappingError, match=r"InitialEnv 'CartPole-v1': .* 5 features .* 4 components"):
         env.feature_bounds(gym.spaces.Box(-1, 1, (4,)))
-    with pytest.raises(sg.StateMappingError, match=r"Hint: name exactly 4 features"):
+    with pytest.raises(sg.error.StateMappingError, match=r"Hint: name exactly 4 features"):
         env.check_observation_space(gym.spaces.Box(-1, 1, (4,)))
     env.check_observation_space(gym.spaces.Box(-1, 1, (5,)))
     mapped = sg.InitialEnv("CartPole-v1", features=("a",), state=lambda o: o[:1])
@@ -75,5 +75,5 @@ def test_identity_state_bounds_need_one_feature_per_component():
 
 
 def test_action_space_must_be_a_space():
-    with pytest.raises(sg.InitialEnvError, match=r"expected action_space to be a gymnasium Space"):
+    with pytest.raises(sg.error.InitialEnvError, match=r"expected action_space to be a gymnasium Space"):
         sg.InitialEnv("Pendulum-v1", features=("x",), action_space=(0, 1))

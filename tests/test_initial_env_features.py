@@ -155,13 +155,13 @@ def test_a_dict_observation_with_features_from_state_and_the_env():
 def test_a_missing_info_key_names_the_feature_and_the_step(drop_key_at, when):
     env = sg.make_env(line(drop_key_at=drop_key_at), RIGHT) if drop_key_at else None
     if env is None:
-        with pytest.raises(sg.StateMappingError, match=rf"feature 'hit' reads info\['hit'\].*{when}.*'other'"):
+        with pytest.raises(sg.error.StateMappingError, match=rf"feature 'hit' reads info\['hit'\].*{when}.*'other'"):
             sg.make_env(line(drop_key_at=drop_key_at), RIGHT).reset(seed=0)
         return
     env.reset(seed=0)
     env.step(1)
     env.step(1)
-    with pytest.raises(sg.StateMappingError, match=rf"feature 'hit' reads info\['hit'\].*{when}"):
+    with pytest.raises(sg.error.StateMappingError, match=rf"feature 'hit' reads info\['hit'\].*{when}"):
         env.step(1)
 
 
@@ -169,7 +169,7 @@ def test_a_missing_info_key_names_the_feature_and_the_step(drop_key_at, when):
 def test_an_info_value_that_is_not_a_number_or_a_bool_names_the_feature(value):
     env = sg.make_env(line(), RIGHT)
     env.unwrapped.bad_value = value if value is not None else "none"
-    with pytest.raises(sg.StateMappingError, match=r"feature 'hit' reads info\['hit'\] = .* at reset: expected"):
+    with pytest.raises(sg.error.StateMappingError, match=r"feature 'hit' reads info\['hit'\] = .* at reset: expected"):
         env.reset(seed=0)
 
 
@@ -178,7 +178,7 @@ def test_an_int_past_a_floats_range_names_the_feature_and_the_step_in_bounded_wo
     big = 10 ** (digits - 1)
     env = sg.make_env(line(), RIGHT)
     env.unwrapped.bad_value = big
-    with pytest.raises(sg.StateMappingError) as e:  # not an OverflowError naming nothing
+    with pytest.raises(sg.error.StateMappingError) as e:  # not an OverflowError naming nothing
         env.reset(seed=0)
     assert e.value.message.endswith(
         f"feature 'hit' reads info['hit'] = an int of about {digits} digits, past a float's range, at reset: "
@@ -188,7 +188,9 @@ def test_an_int_past_a_floats_range_names_the_feature_and_the_step_in_bounded_wo
     env = sg.make_env(initial, RIGHT)
     env.reset(seed=0)
     env.step(1)
-    with pytest.raises(sg.StateMappingError, match=r"feature 'x' reads from_env\['x'\]\(env\) = an int of about") as e:
+    with pytest.raises(
+        sg.error.StateMappingError, match=r"feature 'x' reads from_env\['x'\]\(env\) = an int of about"
+    ) as e:
         env.step(1)
     assert "at step 2: expected" in e.value.message and len(e.value.message) < 300
 
@@ -196,14 +198,17 @@ def test_an_int_past_a_floats_range_names_the_feature_and_the_step_in_bounded_wo
 def test_an_env_feature_that_raises_or_returns_a_non_number_names_the_feature_and_the_step():
     initial = sg.InitialEnv(LineEnv, features=("noise",), from_env={"x": lambda env: env.nope})
     with pytest.raises(
-        sg.StateMappingError, match=r"feature 'x' reads from_env\['x'\]\(env\), which raised AttributeError.*at reset"
+        sg.error.StateMappingError,
+        match=r"feature 'x' reads from_env\['x'\]\(env\), which raised AttributeError.*at reset",
     ):
         sg.make_env(initial, RIGHT).reset(seed=0)
     initial = sg.InitialEnv(LineEnv, features=("noise",), from_env={"x": lambda env: "left" if env.t == 2 else 0})
     env = sg.make_env(initial, RIGHT)
     env.reset(seed=0)
     env.step(1)
-    with pytest.raises(sg.StateMappingError, match=r"feature 'x' reads from_env\['x'\]\(env\) = 'left' at step 2"):
+    with pytest.raises(
+        sg.error.StateMappingError, match=r"feature 'x' reads from_env\['x'\]\(env\) = 'left' at step 2"
+    ):
         env.step(1)
 
 
@@ -217,17 +222,17 @@ def test_bools_and_numpy_numbers_are_features():
 
 
 def test_declarations_are_checked():
-    with pytest.raises(sg.InitialEnvError, match=r"InitialEnv features"):
+    with pytest.raises(sg.error.InitialEnvError, match=r"InitialEnv features"):
         sg.InitialEnv(LineEnv)
-    with pytest.raises(sg.InitialEnvError, match=r"names must be unique, \['x'\]"):
+    with pytest.raises(sg.error.InitialEnvError, match=r"names must be unique, \['x'\]"):
         sg.InitialEnv(LineEnv, features=("x",), state=lambda o: o, from_env={"x": lambda env: env.pos})
-    with pytest.raises(sg.InitialEnvError, match=r"from_env: expected .*'x'.* callable"):
+    with pytest.raises(sg.error.InitialEnvError, match=r"from_env: expected .*'x'.* callable"):
         sg.InitialEnv(LineEnv, from_env={"x": 3})
-    with pytest.raises(sg.InitialEnvError, match=r"from_info: expected .*'hit'.* info key"):
+    with pytest.raises(sg.error.InitialEnvError, match=r"from_info: expected .*'hit'.* info key"):
         sg.InitialEnv(LineEnv, from_info={"hit": 3})
-    with pytest.raises(sg.InitialEnvError, match=r"from_info"):
+    with pytest.raises(sg.error.InitialEnvError, match=r"from_info"):
         sg.InitialEnv(LineEnv, from_info="hit")
-    with pytest.raises(sg.InitialEnvError, match=r"state.*no features"):
+    with pytest.raises(sg.error.InitialEnvError, match=r"state.*no features"):
         sg.InitialEnv(LineEnv, state=lambda o: o, from_env={"x": lambda env: env.pos})
     assert sg.InitialEnv(LineEnv, from_info=("hit",)).from_info == (("hit", "hit"),)
 
@@ -268,5 +273,5 @@ def test_a_falsifier_start_set_on_the_env_is_read_by_the_env_features():
 def test_a_missing_info_key_at_reset_is_refused_before_any_seed_trains():
     # Found once only inside a training worker ("seed 0 failed", exit 1): now the start check's, a SpecError.
     spec = sg.Spec(line(drop_key_at=0), RIGHT, budget=sg.Budget(timesteps=64, min_seeds=1), expect=0.5)
-    with pytest.raises(sg.StateMappingError, match=r"feature 'hit' reads info\['hit'\].*at reset"):
+    with pytest.raises(sg.error.StateMappingError, match=r"feature 'hit' reads info\['hit'\].*at reset"):
         sg.run_spec(spec, workers=1, cache_dir=None, progress=None)

@@ -113,7 +113,9 @@ def test_with_thresholds_resolves_decorator_goals():
     s, paths = with_thresholds(spec(), {ROOT: 0.5, "position": 0.7}, "position")
     assert s.thresholds == {"pendulum": 0.5, "pendulum/position": 0.7} and paths == ["pendulum/position"]
     assert with_thresholds(spec(), None, None)[1] == ["pendulum"]
-    with pytest.raises(sg.InvalidSpec, match=r"expected at least one threshold, got \{\}: there is nothing to assert"):
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"expected at least one threshold, got \{\}: there is nothing to assert"
+    ):
         with_thresholds(sg.Spec(pendulum.initial_env, pendulum.trees["b"], budget=sg.Budget(10)), None, None)
 
 

@@ -46,9 +46,11 @@ def test_resolve_goal(key, path):
 
 
 def test_resolve_goal_errors_name_the_place_and_the_paths():
-    with pytest.raises(sg.InvalidSpec, match=r"here: the name 'x' is ambiguous; use one of the paths task/left/x, "):
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"here: the name 'x' is ambiguous; use one of the paths task/left/x, "
+    ):
         resolve_goal(TREE, "x", "here")
-    with pytest.raises(sg.InvalidSpec, match=r"here: no node is named 'y'; the tree's goals are task, task/left"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"here: no node is named 'y'; the tree's goals are task, task/left"):
         resolve_goal(TREE, "y", "here")
 
 
@@ -80,9 +82,9 @@ def test_spec_and_goal_spec_resolve_alike(key):
     ],
 )
 def test_one_threshold_rule_everywhere(value, message):
-    with pytest.raises(sg.InvalidSpec, match=message):
+    with pytest.raises(sg.error.InvalidSpec, match=message):
         check_threshold("here", value)
-    with pytest.raises(sg.InvalidSpec, match=message):
+    with pytest.raises(sg.error.InvalidSpec, match=message):
         spec(expect={"root": value})
     declared = sg.goal_spec(expect={"root": value})(_a_test)
     assert re.search(message, declared.pytestmark[-1].kwargs["error"])
@@ -124,7 +126,7 @@ def test_expect_is_a_mapping_or_one_number_for_the_root():
     ],
 )
 def test_bad_expect(expect, message):
-    with pytest.raises(sg.InvalidSpec, match=message):
+    with pytest.raises(sg.error.InvalidSpec, match=message):
         check_expect("Here", expect)
 
 
@@ -148,7 +150,7 @@ def test_xfail_is_a_mapping_of_reasons_or_a_list_of_goals():
     ],
 )
 def test_bad_xfail(xfail, message):
-    with pytest.raises(sg.InvalidSpec, match=message):
+    with pytest.raises(sg.error.InvalidSpec, match=message):
         check_xfail("Here", xfail)
 
 
@@ -156,13 +158,15 @@ def test_xfail_names_only_thresholded_goals():
     check_xfail_thresholded("Here", {"a": "why"}, {"a": 0.5, "b": 0.5})
     check_xfail_thresholded("Here", {}, {})
     message = r"Here: expected xfail to name goals that expect gives a threshold to \(\['a'\]\), got \['b'\]"
-    with pytest.raises(sg.InvalidSpec, match=message):
+    with pytest.raises(sg.error.InvalidSpec, match=message):
         check_xfail_thresholded("Here", {"a": "why", "b": "why"}, {"a": 0.5})
 
 
 def test_what_is_asserted_has_thresholds():
     require_thresholds("Here", {"a": 0.5})
-    with pytest.raises(sg.InvalidSpec, match=r"Here: expected at least one threshold, got \{\}: there is nothing to"):
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"Here: expected at least one threshold, got \{\}: there is nothing to"
+    ):
         require_thresholds("Here", {})
 
 
@@ -180,7 +184,7 @@ def test_what_is_asserted_has_thresholds():
     ],
 )
 def test_spec_and_goal_spec_read_expect_and_xfail_alike(kwargs, message):
-    with pytest.raises(sg.InvalidSpec, match=message):
+    with pytest.raises(sg.error.InvalidSpec, match=message):
         spec(**kwargs)
     declared = sg.goal_spec(**kwargs)(_a_test)
     assert re.search(message, declared.pytestmark[-1].kwargs["error"])
@@ -254,19 +258,21 @@ def test_resolve_safety_keys(key, resolved):
 
 def test_safety_key_errors_list_the_goals_and_the_safety_rates():
     with pytest.raises(
-        sg.InvalidSpec, match=r"here: the name 'spin' is ambiguous; use one of the keys lunar/spin, lunar/up:spin"
+        sg.error.InvalidSpec, match=r"here: the name 'spin' is ambiguous; use one of the keys lunar/spin, lunar/up:spin"
     ):
         resolve_goal(SAFE_TREE, "spin", "here")
     with pytest.raises(
-        sg.InvalidSpec,
+        sg.error.InvalidSpec,
         match=r"here: no node or safety annotation is named 'lunar:crsh'; the tree's goals are lunar, lunar/up, "
         r"lunar/spin, lunar/near; its safety rates are lunar:crash, lunar/up:spin",
     ):
         resolve_goal(SAFE_TREE, "lunar:crsh", "here")
-    with pytest.raises(sg.InvalidSpec, match=r"'lunar/near:distance' names an annotation that is not a safety") as e:
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"'lunar/near:distance' names an annotation that is not a safety"
+    ) as e:
         resolve_goal(SAFE_TREE, "lunar/near:distance", "here")
     assert "not to shaping annotations such as Distance" in str(e.value)
-    with pytest.raises(sg.InvalidSpec, match=r"'distance' names an annotation that is not a safety annotation"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"'distance' names an annotation that is not a safety annotation"):
         resolve_goal(SAFE_TREE, "distance", "here")
 
 
@@ -277,5 +283,5 @@ def test_safety_thresholds_in_spec_and_goal_spec():
     assert s.thresholds == {"lunar:crash": 0.8}  # both name the same rate; the later one wins, as for goals
     spec_, paths = with_thresholds(sg.Spec(cartpole, tree, budget=sg.Budget(timesteps=10)), {"crash": 0.9}, "crash")
     assert spec_.thresholds == {"lunar:crash": 0.9} and paths == ["lunar:crash"]
-    with pytest.raises(sg.InvalidSpec, match=r"expect\['lunar:crsh'\]: no node or safety annotation is named"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"expect\['lunar:crsh'\]: no node or safety annotation is named"):
         sg.Spec(cartpole, tree, budget=sg.Budget(timesteps=10), expect={"lunar:crsh": 0.9})

@@ -635,6 +635,15 @@ def misnamed_tests(tests: Path, package: Path, topics: Iterable[str] = TOPICS) -
     return out
 
 
+FACE = 32
+"""The most names ``specguard.__all__`` holds (Gymnasium's shape: the language, the spec, the doors; the rest in
+its parts and ``specguard.error``)."""
+
+
+def test_the_public_face_stays_small():
+    assert len(specguard.__all__) <= FACE, sorted(specguard.__all__)
+
+
 def test_every_test_file_names_the_module_part_or_topic_it_tests():
     assert misnamed_tests(TESTS, PACKAGE) == [], "rename them after what they test, or add a topic to TOPICS"
 

@@ -86,92 +86,96 @@ def test_component_weights_follow_spec():
 
 
 def test_lo_greater_than_hi():
-    with pytest.raises(sg.InvalidSpec, match=r"Goal 'g', feature 'x': expected lo <= hi, got lo=2 > hi=1"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"Goal 'g', feature 'x': expected lo <= hi, got lo=2 > hi=1"):
         sg.Goal("g", x=(2, 1))
 
 
 @pytest.mark.parametrize("bound", [(math.nan, 1), (0, math.nan)])
 def test_nan_bounds(bound):
-    with pytest.raises(sg.InvalidSpec, match=r"Goal 'g', feature 'x': (lo|hi) is NaN"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"Goal 'g', feature 'x': (lo|hi) is NaN"):
         sg.Goal("g", x=bound)
 
 
 @pytest.mark.parametrize("bound", ["0..1", (0, 1, 2), ("a", 1)])
 def test_malformed_bounds(bound):
-    with pytest.raises(sg.InvalidSpec, match=r"Goal 'g', feature 'x': expected"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"Goal 'g', feature 'x': expected"):
         sg.Goal("g", x=bound)
 
 
 def test_goal_without_features():
-    with pytest.raises(sg.InvalidSpec, match=r"Goal 'g': expected at least one feature"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"Goal 'g': expected at least one feature"):
         sg.Goal("g")
 
 
 def test_empty_all():
-    with pytest.raises(sg.InvalidSpec, match=r"All 'r': expected at least one child node, got none"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"All 'r': expected at least one child node, got none"):
         sg.All(name="r")
 
 
 def test_wrong_number_of_weights():
-    with pytest.raises(sg.InvalidSpec, match=r"All 'r': expected 2 weights \(one per child\), got 3"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"All 'r': expected 2 weights \(one per child\), got 3"):
         sg.All(sg.Goal("a", x=0), sg.Goal("b", x=0), name="r", weights=(1, 2, 3))
 
 
 def test_negative_weights():
-    with pytest.raises(sg.InvalidSpec, match=r"All 'r', weight of 'b': expected a finite weight >= 0, got -1"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"All 'r', weight of 'b': expected a finite weight >= 0, got -1"):
         sg.All(sg.Goal("a", x=0), sg.Goal("b", x=0), name="r", weights=(1, -1))
 
 
 def test_negative_annotation_weight():
-    with pytest.raises(sg.InvalidSpec, match=r"Distance 'distance': expected a finite weight >= 0, got -0.5"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"Distance 'distance': expected a finite weight >= 0, got -0.5"):
         sg.Distance(dist, scale=1.0, weight=-0.5)
 
 
 def test_duplicate_sibling_names():
-    with pytest.raises(sg.InvalidSpec, match=r"All 'r': two children are named 'a'"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"All 'r': two children are named 'a'"):
         sg.All(sg.Goal("a", x=0), sg.Goal("a", y=0), name="r")
 
 
 def test_duplicate_annotation_names():
     g = sg.Goal("g", x=0)
-    with pytest.raises(sg.InvalidSpec, match=r"Goal 'g': two annotations are named 'distance'"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"Goal 'g': two annotations are named 'distance'"):
         g.annotate(sg.Distance(dist, scale=1.0), sg.Distance(dist, scale=2.0))
 
 
 def test_non_node_child():
-    with pytest.raises(sg.InvalidSpec, match=r"All 'r': expected children to be nodes \(Goal, All, ...\), got 'a'"):
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"All 'r': expected children to be nodes \(Goal, All, ...\), got 'a'"
+    ):
         sg.All("a", name="r")  # type: ignore[arg-type]
 
 
 def test_annotate_with_a_non_annotation():
     with pytest.raises(
-        sg.InvalidSpec, match=r"Goal 'g': annotate\(\) expects annotations \(Distance, Constraint, ...\)"
+        sg.error.InvalidSpec, match=r"Goal 'g': annotate\(\) expects annotations \(Distance, Constraint, ...\)"
     ):
         sg.Goal("g", x=0).annotate(dist)  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("scale", [0, -1.0, math.inf, math.nan])
 def test_scale_must_be_positive(scale):
-    with pytest.raises(sg.InvalidSpec, match=r"Distance 'distance': expected scale to be a finite number > 0"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"Distance 'distance': expected scale to be a finite number > 0"):
         sg.Distance(dist, scale=scale)
 
 
 @pytest.mark.parametrize("budget", [0, -2, 1.5, True])
 def test_budget_must_be_an_integer_at_least_one(budget):
-    with pytest.raises(sg.InvalidSpec, match=r"Constraint 'crash': expected budget to be an integer >= 1"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"Constraint 'crash': expected budget to be an integer >= 1"):
         sg.Constraint(lambda s, a: False, budget=budget, name="crash")
 
 
 def test_functions_must_be_callable():
-    with pytest.raises(sg.InvalidSpec, match=r"Distance 'distance': expected fn to be callable as fn\(s\)"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"Distance 'distance': expected fn to be callable as fn\(s\)"):
         sg.Distance(1.0, scale=1.0)  # type: ignore[arg-type]
-    with pytest.raises(sg.InvalidSpec, match=r"Constraint 'constraint': expected fn to be callable as fn\(s, a\)"):
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"Constraint 'constraint': expected fn to be callable as fn\(s, a\)"
+    ):
         sg.Constraint("x > 1")  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("name", ["", "a/b", "a:b", 3])
 def test_node_names_are_checked(name):
-    with pytest.raises(sg.InvalidSpec, match=r"Goal"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"Goal"):
         sg.Goal(name, x=0)
 
 
@@ -203,14 +207,16 @@ def test_infinite_bounds_are_open_sides(bound, expected):
     ],
 )
 def test_impossible_infinite_bounds(bound, message):
-    with pytest.raises(sg.InvalidSpec, match=r"Goal 'g', feature 'x': " + message) as info:
+    with pytest.raises(sg.error.InvalidSpec, match=r"Goal 'g', feature 'x': " + message) as info:
         sg.Goal("g", x=bound)
     assert "could never hold" in str(info.value)
 
 
 @pytest.mark.parametrize("bound", [(None, None), (-math.inf, math.inf), (None, math.inf)])
 def test_goal_must_bound_at_least_one_side(bound):
-    with pytest.raises(sg.InvalidSpec, match=r"Goal 'g': a goal must bound at least one side of one feature") as info:
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"Goal 'g': a goal must bound at least one side of one feature"
+    ) as info:
         sg.Goal("g", x=bound, y=(None, None))
     assert "every state would satisfy it" in str(info.value)
     assert "x=(None, None), y=(None, None)" in str(info.value)
@@ -223,7 +229,7 @@ def test_goal_may_leave_some_features_open():
 
 @pytest.mark.parametrize("weights", [(0, 0), (0.0, np.float64(0.0))])
 def test_all_zero_weights(weights):
-    with pytest.raises(sg.InvalidSpec, match=r"All 'r': expected at least one weight > 0, got weights=\(0, 0\)"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"All 'r': expected at least one weight > 0, got weights=\(0, 0\)"):
         sg.All(sg.Goal("a", x=0), sg.Goal("b", x=0), name="r", weights=weights)
 
 

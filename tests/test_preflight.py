@@ -95,5 +95,7 @@ def test_an_unreachable_alternative_of_an_or_warns_instead_of_refusing_the_spec(
     with pytest.warns(UserWarning, match=r"any/far: goal box x in \[10, inf\] lies outside .*; any is not a box"):
         env = sg.make_env(cartpole, tree)
     env.close()
-    with pytest.raises(sg.UnreachableGoal, match=r"any/far"):  # the same alternative under an All: the root never holds
+    with pytest.raises(
+        sg.error.UnreachableGoal, match=r"any/far"
+    ):  # the same alternative under an All: the root never holds
         sg.make_env(cartpole, sg.All(sg.Goal("far", x=(10, None)), sg.Goal("left", x=(None, -1)), name="any"))

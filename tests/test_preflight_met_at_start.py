@@ -19,6 +19,7 @@ import specguard as sg
 from specguard.cli.main import main
 from specguard.construction.preflight import START_SAMPLES
 from specguard.error import GoalMetAtStart, InvalidSpec, SpecWarning
+from specguard.spec.spec import check_spec
 
 TINY = {"n_steps": 32, "batch_size": 32, "n_epochs": 1}
 
@@ -171,7 +172,7 @@ def test_the_notes_say_nothing_when_no_episode_started_in_the_root_goal():
 def test_a_spec_is_checked_once_however_many_envs_it_builds():
     spec = sg.Spec(sg.InitialEnv(sometimes_inside, features=("x",)), UP, budget=sg.Budget(timesteps=64), expect=0.5)
     with pytest.warns(SpecWarning) as caught:
-        sg.check_spec(spec)  # as Gymnasium's check_env: explicit, once
+        check_spec(spec)  # as Gymnasium's check_env: explicit, once
         for _ in range(3):
             spec.make_env().close()
         assert spec.env_factory() is spec.env_factory()  # one factory: compiled once
@@ -186,6 +187,6 @@ def test_check_false_builds_without_the_checks_and_check_spec_refuses():
     spec.make_env(check=False).close()  # met at every start, but not checked: built, as disable_env_checker
     sg.make_env(spec.initial_env, UP, check=False).close()
     with pytest.raises(GoalMetAtStart):
-        sg.check_spec(spec)
+        check_spec(spec)
     with pytest.raises(GoalMetAtStart):
         spec.make_env()

@@ -205,7 +205,7 @@ def test_distances_must_be_finite_and_non_negative(bad):
     ev = ReferenceEvaluator(tree, FEATURES)
     ev.reset([5.0, 1.0, 0.0])
     message = rf"g:distance: expected a finite distance >= 0, got {bad!r} \(state State\(a=5.0, b={bad!r}, c=0.0\)\)"
-    with pytest.raises(sg.EvaluationError, match=message):
+    with pytest.raises(sg.error.EvaluationError, match=message):
         ev.step(0, [5.0, bad, 0.0])
 
 
@@ -213,5 +213,5 @@ def test_a_raising_distance_is_named():
     tree = sg.Goal("g", a=(0, 1)).annotate(sg.Distance(lambda s: s.zz, scale=1.0))
     ev = ReferenceEvaluator(tree, FEATURES)
     ev.reset([5.0, 1.0, 0.0])
-    with pytest.raises(sg.EvaluationError, match=r"g:distance: the distance function raised AttributeError"):
+    with pytest.raises(sg.error.EvaluationError, match=r"g:distance: the distance function raised AttributeError"):
         ev.step(0, [5.0, 1.0, 0.0])

@@ -93,9 +93,13 @@ def test_explicit_registration_and_its_errors(plugins):
     plugins()
     assert registry.register(Shiny) is Shiny
     assert registry.lookup("Shiny") is Shiny
-    with pytest.raises(sg.InvalidSpec, match=r"register\('Goal'\): the name 'Goal' is already taken by specguard"):
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"register\('Goal'\): the name 'Goal' is already taken by specguard"
+    ):
         registry.register(Shiny, name="Goal")
-    with pytest.raises(sg.InvalidSpec, match=r"expected a subclass of specguard.extend.Node or Annotation, got 3"):
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"expected a subclass of specguard.extend.Node or Annotation, got 3"
+    ):
         registry.register(3)  # type: ignore[arg-type]
     with pytest.raises(KeyError, match=r"no specguard operator or annotation named 'Nope'; known: .*Shiny"):
         registry.lookup("Nope")

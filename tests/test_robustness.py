@@ -226,11 +226,11 @@ def test_the_score_travels_from_falsify_agent_falsify_runs_falsify_and_the_cli_t
 @pytest.mark.parametrize("bad", ["best", "Last", None, 1])
 def test_a_score_that_is_not_one_of_the_choices_is_refused_in_one_line_naming_it(bad, tmp_path, capsys):
     line = rf"expected score to be one of last, episode, got {re.escape(repr(bad))}\n"
-    with pytest.raises(sg.InvalidSpec, match=rf"^EpisodeRunner: {line}"):
+    with pytest.raises(sg.error.InvalidSpec, match=rf"^EpisodeRunner: {line}"):
         run(sg.Always(UPRIGHT, name="balance"), ["balance"], [0.0], score=bad)
-    with pytest.raises(sg.InvalidSpec, match=rf"^falsify_agent\('balance'\): {line}"):
+    with pytest.raises(sg.error.InvalidSpec, match=rf"^falsify_agent\('balance'\): {line}"):
         sg.falsify_agent(BALANCE, lambda obs: 0, StartSpace({"theta": (-0.05, 0.05)}), score=bad)
-    with pytest.raises(sg.InvalidSpec, match=rf"^Falsify: {line}"):
+    with pytest.raises(sg.error.InvalidSpec, match=rf"^Falsify: {line}"):
         sg.Falsify(score=bad)
     if isinstance(bad, str):
         with pytest.raises(SystemExit) as exit_info:

@@ -17,6 +17,7 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
+from specguard.cache.store import Cache
 from specguard.parallel.workers import resolve_workers
 
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
@@ -87,7 +88,7 @@ def test_a_failing_seed_keeps_the_others(tmp_path):
 
 @pytest.mark.slow
 def test_spec_errors_from_workers_reach_the_caller(tmp_path):
-    with pytest.raises(sg.InvalidSpec, match=r"Spec 'pendulum'.algorithm: DQN cannot act in a Box action space"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"Spec 'pendulum'.algorithm: DQN cannot act in a Box action space"):
         sg.run_spec(spec(algorithm="DQN", hyperparameters={}), workers=1, cache_dir=None, progress=None)
 
 
@@ -133,8 +134,8 @@ def test_a_killed_worker_fails_its_seed_alone_and_the_other_seed_is_stored(tmp_p
     assert [r.seed for r in result.runs] == [0]
     assert result.errors[1].startswith("seed 1, training step ")
     assert result.errors[1].endswith(": worker process died (killed by signal SIGKILL)")
-    assert sg.Cache(tmp_path).load(s, 0) == result.runs[0]
-    assert sg.Cache(tmp_path).load(s, 1) is None
+    assert Cache(tmp_path).load(s, 0) == result.runs[0]
+    assert Cache(tmp_path).load(s, 1) is None
 
 
 def raising_factory():
@@ -166,7 +167,7 @@ class FailsInEvaluation(gym.Wrapper):
 def test_an_env_that_cannot_be_built_is_a_spec_error_naming_it(tmp_path, initial, message, cached):
     # Every seed would fail the same way: a mistake in the spec, raised once, not a failure per seed.
     s = sg.Spec(initial, pendulum.trees["b"], budget=sg.Budget(timesteps=64, eval_episodes=2), hyperparameters=TINY)
-    with pytest.raises(sg.InitialEnvError, match=message):
+    with pytest.raises(sg.error.InitialEnvError, match=message):
         sg.run_spec(s, workers=2, cache_dir=tmp_path if cached else None, progress=None)
 
 
@@ -390,7 +391,9 @@ def test_a_worker_running_other_code_than_the_key_names_refuses_to_train(tmp_pat
 
     keyed = {**versions(), "specguard": "0.0.0+edited"}
     monkeypatch.setattr(engine, "versions", lambda: keyed)
-    with pytest.raises(sg.VersionMismatch, match=r"seed \d: .*specguard 0\.0\.0\+edited \(keyed\) != \S+ \(here\)"):
+    with pytest.raises(
+        sg.error.VersionMismatch, match=r"seed \d: .*specguard 0\.0\.0\+edited \(keyed\) != \S+ \(here\)"
+    ):
         sg.run_spec(spec(), workers=2, cache_dir=tmp_path, progress=None)
     assert not list(tmp_path.rglob("result.json"))  # nothing stored under a key that does not describe the code
 
@@ -405,7 +408,9 @@ def test_a_worker_whose_loaded_library_is_not_the_installed_one_refuses(monkeypa
     keyed = versions()
     check_versions(keyed, "seed 0")  # the loaded libraries are the installed ones
     monkeypatch.setattr(cloudpickle, "__version__", "0.0.1")
-    with pytest.raises(sg.VersionMismatch, match=r"seed 0: .* cloudpickle 0\.0\.1 \(loaded\) != \S+ \(installed\)"):
+    with pytest.raises(
+        sg.error.VersionMismatch, match=r"seed 0: .* cloudpickle 0\.0\.1 \(loaded\) != \S+ \(installed\)"
+    ):
         check_versions(keyed, "seed 0")
 
 
@@ -529,7 +534,7 @@ def test_a_cache_that_cannot_be_written_warns_once_and_keeps_the_trained_result(
     if os.geteuid() == 0 and make_cache is _a_read_only_cache:
         pytest.skip("root writes into read-only folders")
     expected = sg.run_spec(spec(expect={"pendulum": 0.95}), workers=2, cache_dir=None, progress=None)
-    with pytest.warns(sg.CacheWarning) as caught:
+    with pytest.warns(sg.error.CacheWarning) as caught:
         result = sg.run_spec(spec(expect={"pendulum": 0.95}), workers=2, cache_dir=cache, progress=None)
     assert len(caught) == 1 and str(cache) in str(caught[0].message)
     assert [r.successes for r in result.runs] == [r.successes for r in expected.runs] and len(result.runs) == 2
@@ -546,7 +551,7 @@ def test_a_full_disk_warns_with_its_cause_and_keeps_every_run(tmp_path, monkeypa
         raise OSError(errno.ENOSPC, "No space left on device", str(self.folder(key)))
 
     monkeypatch.setattr(Cache, "store_files", full)
-    with pytest.warns(sg.CacheWarning, match="No space left on device") as caught:
+    with pytest.warns(sg.error.CacheWarning, match="No space left on device") as caught:
         result = sg.run_spec(spec(expect={"pendulum": 0.95}), workers=2, cache_dir=tmp_path, progress=None)
     assert len(caught) == 1
     assert len(result.runs) == 2 and not result.errors  # both seeds kept, judged
@@ -562,6 +567,6 @@ def test_a_lock_that_cannot_be_created_warns_and_keeps_every_run(tmp_path, monke
         raise PermissionError(errno.EACCES, "Permission denied", str(self.folder(key).parent / f"{key}.lock"))
 
     monkeypatch.setattr(Cache, "lock", denied)
-    with pytest.warns(sg.CacheWarning, match="Permission denied") as caught:
+    with pytest.warns(sg.error.CacheWarning, match="Permission denied") as caught:
         result = sg.run_spec(spec(expect={"pendulum": 0.95}), workers=2, cache_dir=tmp_path, progress=None)
     assert len(caught) == 1 and len(result.runs) == 2 and not result.errors

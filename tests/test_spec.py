@@ -48,7 +48,7 @@ def test_quorum_defaults_to_every_run():
     ],
 )
 def test_bad_specs(kwargs, message):
-    with pytest.raises(sg.InvalidSpec, match=message):
+    with pytest.raises(sg.error.InvalidSpec, match=message):
         spec(**kwargs)
 
 
@@ -56,25 +56,27 @@ def test_counts_reach_the_shared_rule():
     # validation.check_count: numpy integers are integers, a bool is not a count
     s = spec(n_envs=np.int64(4), quorum=np.int64(2))
     assert (s.n_envs, s.quorum) == (4, 2) and type(s.n_envs) is int and type(s.quorum) is int
-    with pytest.raises(sg.InvalidSpec, match=r"expected quorum to be an integer >= 1 .*got True"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"expected quorum to be an integer >= 1 .*got True"):
         spec(quorum=True)
-    with pytest.raises(sg.InvalidSpec, match=r"expected n_envs to be an integer >= 1 .*got 2.0"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"expected n_envs to be an integer >= 1 .*got 2.0"):
         spec(n_envs=2.0)
 
 
 def test_ambiguous_names_ask_for_a_path():
     tree = sg.All(sg.All(sg.Goal("x", a=0), name="l"), sg.All(sg.Goal("x", a=1), name="r"), name="root")
     initial = sg.InitialEnv(lambda: None, features=("a",))
-    with pytest.raises(sg.InvalidSpec, match=r"the name 'x' is ambiguous; use one of the paths root/l/x, root/r/x"):
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"the name 'x' is ambiguous; use one of the paths root/l/x, root/r/x"
+    ):
         sg.Spec(initial, tree, budget=BUDGET, expect={"x": 0.5})
 
 
 def test_wrong_field_types():
-    with pytest.raises(sg.InvalidSpec, match=r"\.budget: expected a Budget"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"\.budget: expected a Budget"):
         sg.Spec(pendulum.initial_env, pendulum.trees["w"], budget=1000)
-    with pytest.raises(sg.InvalidSpec, match=r"\.initial_env: expected an InitialEnv"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"\.initial_env: expected an InitialEnv"):
         sg.Spec("Pendulum-v1", pendulum.trees["w"], budget=BUDGET)
-    with pytest.raises(sg.InvalidSpec, match=r"\.tree: expected a Goal or All node"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"\.tree: expected a Goal or All node"):
         sg.Spec(lunar_lander.initial_env, "lander", budget=BUDGET)
 
 
@@ -95,7 +97,8 @@ def test_xfail_names_thresholded_goals_and_resolves_them():
     )
     assert spec.xfail == {"pendulum/position": "the paper's local optimum"}
     with pytest.raises(
-        sg.InvalidSpec, match=r"expected xfail to name goals that expect gives a threshold to \(\['pendulum'\]\), got"
+        sg.error.InvalidSpec,
+        match=r"expected xfail to name goals that expect gives a threshold to \(\['pendulum'\]\), got",
     ):
         sg.Spec(
             pendulum.initial_env,
@@ -104,7 +107,9 @@ def test_xfail_names_thresholded_goals_and_resolves_them():
             expect=0.5,
             xfail={"stabilization": "x"},
         )
-    with pytest.raises(sg.InvalidSpec, match=r"xfail\['pendulum'\]: expected the reason as non-empty text, got 3"):
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"xfail\['pendulum'\]: expected the reason as non-empty text, got 3"
+    ):
         sg.Spec(
             pendulum.initial_env, pendulum.trees["b"], budget=sg.Budget(timesteps=10), expect=0.5, xfail={"pendulum": 3}
         )

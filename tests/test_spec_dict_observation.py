@@ -18,6 +18,7 @@ import specguard as sg
 from specguard.cache.fingerprint import _algorithm_fields, _fields, fingerprint_spec
 from specguard.construction.env import ENV_KEY, SPEC_KEY, stack_observations
 from specguard.engine.falsify_run import batch_policy, property_keys
+from specguard.engine.trained import load_normalizer
 from specguard.evaluation.policy import policy
 from specguard.falsify.search import EpisodeRunner
 from specguard.report.show import render_spec
@@ -167,7 +168,7 @@ class Talking(Corridor):
 
 def test_an_env_key_stable_baselines3_cannot_take_or_that_clashes_is_refused_one_line_each():
     talking = sg.InitialEnv(Talking, from_env={"x": lambda env: env.x}, bounds={"x": (0, LENGTH - 1)})
-    with pytest.raises(sg.InvalidSpec) as caught:
+    with pytest.raises(sg.error.InvalidSpec) as caught:
         sg.make_env(talking, TREE, observation="features+env")
     lines = str(caught.value).splitlines()
     assert lines[0] == (
@@ -192,7 +193,7 @@ class Bare(Corridor):
 
 def test_an_env_key_that_is_no_string_or_an_empty_part_is_refused_naming_the_observation():
     bare = sg.InitialEnv(Bare, from_env={"x": lambda env: env.x}, bounds={"x": (0, LENGTH - 1)})
-    with pytest.raises(sg.InvalidSpec) as caught:
+    with pytest.raises(sg.error.InvalidSpec) as caught:
         sg.make_env(bare, TREE, observation="features+env")
     assert str(caught.value).splitlines()[:2] == [
         "end: observation='features+env': the env's observation has a key 7 of type int, and stable-baselines3 takes "
@@ -223,13 +224,13 @@ def test_an_env_key_that_is_no_string_or_an_empty_part_is_refused_naming_the_obs
     ],
 )
 def test_combinations_that_cannot_work_are_refused(kwargs, message):
-    with pytest.raises(sg.InvalidSpec, match=message):
+    with pytest.raises(sg.error.InvalidSpec, match=message):
         spec(observation=kwargs.pop("observation", "features+env"), **kwargs)
 
 
 def test_a_dict_policy_for_the_flat_observation_is_refused_naming_the_one_that_fits():
     with pytest.raises(
-        sg.InvalidSpec, match=r"the agent's observation is a flat Box .*'MultiInputPolicy' does not"
+        sg.error.InvalidSpec, match=r"the agent's observation is a flat Box .*'MultiInputPolicy' does not"
     ) as e:
         spec(policy="MultiInputPolicy")
     assert e.value.message.endswith("one that does: MlpPolicy")  # not CnnPolicy: the features are no image
@@ -287,9 +288,9 @@ def test_normalize_normalizes_the_features_and_own_state_only(tmp_path):
     assert normalizer.norm_obs_keys == [SPEC_KEY] and set(normalizer.obs_rms) == {SPEC_KEY}
     assert result.timesteps == 128
     cached = sg.run_spec(spec(observation="features+env", normalize=True), workers=1, cache_dir=tmp_path, progress=None)
-    assert set(sg.load_normalizer(cached, 0).obs_rms) == {SPEC_KEY}  # the statistics kept in the cache, per key
+    assert set(load_normalizer(cached, 0).obs_rms) == {SPEC_KEY}  # the statistics kept in the cache, per key
     obs = sg.rollout(cached, 0)[0][0]["obs"]  # the cached policy acts through them
-    normalized = sg.load_normalizer(cached, 0).normalize_obs(obs)
+    normalized = load_normalizer(cached, 0).normalize_obs(obs)
     assert np.array_equal(normalized["view"], obs["view"]) and not np.array_equal(normalized[SPEC_KEY], obs[SPEC_KEY])
 
 
@@ -339,7 +340,7 @@ def test_show_draws_the_dict_observation():
 
 
 def test_dataclass_replace_keeps_the_checks():
-    with pytest.raises(sg.InvalidSpec, match="baseline=True"):
+    with pytest.raises(sg.error.InvalidSpec, match="baseline=True"):
         dataclasses.replace(spec(observation="features+env"), baseline=True)
 
 

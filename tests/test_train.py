@@ -12,6 +12,7 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
+from specguard.engine.trained import load_normalizer
 from specguard.error import TrainingError
 from specguard.evaluation.episodes import EVAL_SEED_BASE, evaluate
 from specguard.stats.anytime import min_successes_to_meet
@@ -89,14 +90,14 @@ def test_evaluate_tells_an_episode_policy_as_each_episode_starts():
 
 @pytest.mark.slow
 def test_algorithm_must_fit_the_action_space():
-    with pytest.raises(sg.InvalidSpec, match=r"Spec 'pendulum'.algorithm: DQN cannot act in a Box action space"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"Spec 'pendulum'.algorithm: DQN cannot act in a Box action space"):
         train_run(tiny_spec(algorithm="DQN", hyperparameters={}), seed=0)
 
 
 @pytest.mark.slow
 def test_hyperparameters_sb3_rejects_are_attributed_to_the_spec():
     # A value SB3 refuses (names it does not take are refused by the Spec: tests/test_algorithms.py).
-    with pytest.raises(sg.InvalidSpec, match=r"Spec 'pendulum'.hyperparameters: PPO rejected them: .*batch_size"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"Spec 'pendulum'.hyperparameters: PPO rejected them: .*batch_size"):
         train_run(tiny_spec(hyperparameters={**TINY, "batch_size": 1}), seed=0)
 
 
@@ -335,7 +336,7 @@ def test_a_runs_weights_digest_is_the_digest_of_its_model_loaded_back_from_the_c
     digests = [run.weights_digest for run in result.runs]
     assert all(re.fullmatch("[0-9a-f]{64}", d) for d in digests) and len(set(digests)) == 2  # each seed its own
     for run in result.runs:
-        model, normalizer = sg.load_model(result, run.seed), sg.load_normalizer(result, run.seed)
+        model, normalizer = sg.load_model(result, run.seed), load_normalizer(result, run.seed)
         assert normalizer is not None
         assert weights_digest(model, normalizer, name="PPO") == run.weights_digest
         assert weights_digest(model, None, name="PPO") != run.weights_digest  # its statistics are part of it
@@ -365,7 +366,7 @@ def test_a_runs_weights_digest_is_in_its_json_the_table_and_the_junit_properties
 def test_an_agent_checked_against_a_spec_carries_its_identity_as_its_weights_digest(digested):
     spec, result = digested
     run = result.runs[0]
-    agent = sg.load_agent(sg.load_model(result, run.seed), normalizer=sg.load_normalizer(result, run.seed))
+    agent = sg.load_agent(sg.load_model(result, run.seed), normalizer=load_normalizer(result, run.seed))
     checked = sg.check_agent(spec, agent, episodes=2, max_episodes=2, observation="spec", cache_dir=None)
     assert checked.runs[0].weights_digest == agent.identity == run.weights_digest  # the trained run's weights
     assert f"weights seed 0: {run.weights_digest[:12]}" in sg.table(checked).splitlines()

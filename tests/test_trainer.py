@@ -232,7 +232,9 @@ def test_auto_weights_are_refused_with_a_trainer():
 
 def test_the_doors_tensorboard_folder_leaves_a_trainer_spec_as_it_is_and_says_so(tmp_path):
     s = spec()
-    with pytest.warns(sg.SpecWarning, match=r"trains with its own trainer \(.*improving.*\): the TensorBoard folder"):
+    with pytest.warns(
+        sg.error.SpecWarning, match=r"trains with its own trainer \(.*improving.*\): the TensorBoard folder"
+    ):
         assert s.as_run(tensorboard_log=tmp_path) is s
 
 
@@ -347,9 +349,9 @@ def test_a_partial_trainer_is_named_by_the_function_it_wraps():
 
 @pytest.mark.slow
 def test_a_warning_of_run_spec_points_at_the_users_line(tmp_path):
-    with pytest.warns(sg.SpecWarning, match="gets nothing from it") as caught:
+    with pytest.warns(sg.error.SpecWarning, match="gets nothing from it") as caught:
         sg.run_spec(spec(), workers=1, cache_dir=None, progress=None, tensorboard_log=tmp_path / "runs")
-    assert [w.filename for w in caught if issubclass(w.category, sg.SpecWarning)] == [__file__]
+    assert [w.filename for w in caught if issubclass(w.category, sg.error.SpecWarning)] == [__file__]
 
 
 @pytest.mark.slow

@@ -33,9 +33,9 @@ from specguard.validation import (
 
 def test_names():
     assert type(check_name("Goal", type("S", (str,), {})("up"))) is str  # a str subclass becomes a plain str
-    with pytest.raises(sg.InvalidSpec, match=r"Goal 'a/b': a name may not contain '/'"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"Goal 'a/b': a name may not contain '/'"):
         check_name("Goal", "a/b")
-    with pytest.raises(sg.InvalidSpec, match=r"Goal ' ': expected a non-empty string as name, got ' '"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"Goal ' ': expected a non-empty string as name, got ' '"):
         check_name("Goal", " ")
 
 
@@ -54,7 +54,7 @@ def test_names():
     ],
 )
 def test_bad_arguments_are_named(check, value, message):
-    with pytest.raises(sg.InvalidSpec, match=message):
+    with pytest.raises(sg.error.InvalidSpec, match=message):
         check(value)
 
 
@@ -74,7 +74,7 @@ def test_counts_are_integers_from_one(value):
 def test_a_count_is_never_a_bool_a_float_or_text(value):
     # "3" is a count only as option text (parse_count), not as a spec's argument
     message = rf"Here: expected n to be an integer >= 1 \(runs\), got {re.escape(repr(value))}\n"
-    with pytest.raises(sg.InvalidSpec, match=message):
+    with pytest.raises(sg.error.InvalidSpec, match=message):
         check_count("Here", "n", value, "runs")
 
 
@@ -110,7 +110,7 @@ def test_positive_numbers_are_finite_and_above_zero(value):
 
 @pytest.mark.parametrize("value", NOT_POSITIVE)
 def test_a_positive_number_is_never_infinite_nan_or_a_bool(value):
-    with pytest.raises(sg.InvalidSpec, match=r"Here: expected x to be a finite number > 0 \(a scale\), got "):
+    with pytest.raises(sg.error.InvalidSpec, match=r"Here: expected x to be a finite number > 0 \(a scale\), got "):
         check_positive("Here", "x", value, "a scale")
     with pytest.raises(ValueError, match=r"^expected a finite number > 0, got "):
         parse_positive(value)
@@ -118,7 +118,7 @@ def test_a_positive_number_is_never_infinite_nan_or_a_bool(value):
 
 def test_text_is_a_positive_number_only_as_option_text():
     assert parse_positive("1") == 1.0
-    with pytest.raises(sg.InvalidSpec, match=r"Here: expected x to be a finite number > 0, got '1'"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"Here: expected x to be a finite number > 0, got '1'"):
         check_positive("Here", "x", "1")
 
 
@@ -217,15 +217,17 @@ def test_open_fractions_lie_strictly_between_zero_and_one(value):
 @pytest.mark.parametrize("value", [0, 0.0, 1, 1.0, -0.1, 2, math.nan, math.inf, True, "0.5", None, np.bool_(True)])
 def test_an_open_fraction_is_never_an_end_nan_a_bool_or_text(value):
     message = rf"Here: expected p to be a number in \(0, 1\) \(a level\), got {re.escape(repr(value))}\n"
-    with pytest.raises(sg.InvalidSpec, match=message):
+    with pytest.raises(sg.error.InvalidSpec, match=message):
         check_open_fraction("Here", "p", value, "a level")
 
 
 def test_choices_are_checked_in_specs_and_read_from_option_text():
     assert check_choice("Spec 's'", "undecided", "xfail", ("fail", "xfail")) == "xfail"
-    with pytest.raises(sg.InvalidSpec, match=r"Spec 's': expected undecided to be one of fail, xfail, got 'maybe'\n"):
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"Spec 's': expected undecided to be one of fail, xfail, got 'maybe'\n"
+    ):
         check_choice("Spec 's'", "undecided", "maybe", ("fail", "xfail"))
-    with pytest.raises(sg.InvalidSpec, match=r"got \['fail'\]"):  # unhashable: refused, not a TypeError
+    with pytest.raises(sg.error.InvalidSpec, match=r"got \['fail'\]"):  # unhashable: refused, not a TypeError
         check_choice("Spec 's'", "undecided", ["fail"], ("fail", "xfail"))
     assert parse_choice(" pass ", ("fail", "pass")) == "pass"
     with pytest.raises(ValueError, match=r"^expected one of fail, pass, got 'PASS'$"):
@@ -240,7 +242,7 @@ def test_natural_numbers_start_at_zero(value):
 @pytest.mark.parametrize("value", [-1, np.int64(-1), True, 1.0, "3", None])
 def test_a_natural_number_is_never_negative_a_bool_a_float_or_text(value):
     message = rf"Here: expected seed to be an integer >= 0 \(a seed\), got {re.escape(repr(value))}\n"
-    with pytest.raises(sg.InvalidSpec, match=message):
+    with pytest.raises(sg.error.InvalidSpec, match=message):
         check_natural("Here", "seed", value, "a seed")
 
 
@@ -262,27 +264,31 @@ def test_finite_numbers(value):
 
 @pytest.mark.parametrize("value", ["0", True, np.bool_(False), math.nan, -math.inf, None, 1j])
 def test_a_finite_number_is_never_text_a_bool_or_infinite(value):
-    with pytest.raises(sg.InvalidSpec, match=rf"Here: expected lo to be a finite number, got {re.escape(repr(value))}"):
+    with pytest.raises(
+        sg.error.InvalidSpec, match=rf"Here: expected lo to be a finite number, got {re.escape(repr(value))}"
+    ):
         check_finite("Here", "lo", value)
 
 
 def test_flags_are_bools_only():
     assert check_flag("Here", "on", np.bool_(True)) is True and check_flag("Here", "on", False) is False
     for value in ("no", 1, 0, None):
-        with pytest.raises(sg.InvalidSpec, match=rf"Here: expected on to be True or False, got {value!r}"):
+        with pytest.raises(sg.error.InvalidSpec, match=rf"Here: expected on to be True or False, got {value!r}"):
             check_flag("Here", "on", value)
 
 
 def test_texts_are_non_empty_strings():
     assert type(check_text("Here", "a name", type("S", (str,), {})("x"))) is str
     for value in (5, None, "", " ", b"x"):
-        with pytest.raises(sg.InvalidSpec, match=rf"Here: expected a name to be a non-empty string, got {value!r}"):
+        with pytest.raises(
+            sg.error.InvalidSpec, match=rf"Here: expected a name to be a non-empty string, got {value!r}"
+        ):
             check_text("Here", "a name", value)
 
 
 def test_names_given_twice_are_named_with_both_values():
     assert check_unique("--starts", [("x", 1), ("y", 2)]) == {"x": 1, "y": 2}
-    with pytest.raises(sg.InvalidSpec, match=r"^--starts: 'x' is given twice: \(0, 1\), then \(2, 3\)\n"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"^--starts: 'x' is given twice: \(0, 1\), then \(2, 3\)\n"):
         check_unique("--starts", [("x", (0, 1)), ("y", (0, 1)), ("x", (2, 3))])
 
 

@@ -29,7 +29,7 @@ def zoo(algorithm, env_id, **kwargs):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         settings = sg.zoo_settings(algorithm, env_id, **kwargs)
-    return settings, [str(w.message) for w in caught if issubclass(w.category, sg.SpecWarning)]
+    return settings, [str(w.message) for w in caught if issubclass(w.category, sg.error.SpecWarning)]
 
 
 def write(tmp_path, text):
@@ -102,13 +102,13 @@ def test_every_entry_of_the_zoos_files_maps_onto_a_spec():
         for env_id in yaml.safe_load(path.read_text()):
             try:
                 settings, _ = zoo(algorithm, env_id)
-            except sg.InvalidSpec as e:
+            except sg.error.InvalidSpec as e:
                 assert ".policy: expected policy to be one of" in str(e), (algorithm, env_id, str(e))
                 refused += 1
                 continue
             try:
                 sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=settings.timesteps), **settings)
-            except sg.InvalidSpec as e:
+            except sg.error.InvalidSpec as e:
                 assert str(settings.policy).startswith("Cnn") and "not an image" in str(e), (algorithm, env_id)
                 images += 1
                 continue
@@ -118,7 +118,7 @@ def test_every_entry_of_the_zoos_files_maps_onto_a_spec():
 
 def test_the_atari_entry_on_a_spec_of_numbers_is_refused_naming_the_policy():
     settings, _ = zoo("PPO", "atari")
-    with pytest.raises(sg.InvalidSpec) as e:
+    with pytest.raises(sg.error.InvalidSpec) as e:
         sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=1000), **settings)
     assert e.value.where == "Spec 'right'.policy"
     assert "which 'CnnPolicy' does not take; one that does: MlpPolicy" in e.value.message
@@ -146,7 +146,7 @@ def test_an_entry_whose_policy_takes_a_dict_lets_the_agent_see_the_envs_own_obse
     ],
 )
 def test_a_name_the_zoo_lacks_is_one_line(algorithm, env_id, message):
-    with pytest.raises(sg.InvalidSpec, match=message) as e:
+    with pytest.raises(sg.error.InvalidSpec, match=message) as e:
         sg.zoo_settings(algorithm, env_id)
     assert "\n" not in e.value.message
 
@@ -173,7 +173,7 @@ def test_the_default_entry_is_asked_for_by_name():
 )
 def test_policy_kwargs_outside_the_closed_scope_are_refused(tmp_path, text):
     path = write(tmp_path, f'CartPole-v1:\n  n_timesteps: 1000\n  policy_kwargs: "{text}"\n')
-    with pytest.raises(sg.InvalidSpec, match=r"policy_kwargs.*(cannot evaluate|is not a torch.nn module class)"):
+    with pytest.raises(sg.error.InvalidSpec, match=r"policy_kwargs.*(cannot evaluate|is not a torch.nn module class)"):
         sg.zoo_settings("PPO", "CartPole-v1", file=path)
 
 
@@ -181,7 +181,9 @@ def test_without_sb3_contrib_its_algorithms_say_what_to_install(monkeypatch):
     import sys
 
     monkeypatch.setitem(sys.modules, "sb3_contrib", None)  # import sb3_contrib raises ImportError
-    with pytest.raises(sg.InvalidSpec, match=r"^zoo_settings\('TQC', 'Pendulum-v1'\): TQC is an sb3-contrib algorithm"):
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"^zoo_settings\('TQC', 'Pendulum-v1'\): TQC is an sb3-contrib algorithm"
+    ):
         sg.zoo_settings("TQC", "Pendulum-v1")
 
 
@@ -190,7 +192,7 @@ def test_without_rl_zoo3_it_says_what_to_install(monkeypatch):
 
     real = importlib.util.find_spec
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "rl_zoo3" else real(name, *a))
-    with pytest.raises(sg.InvalidSpec, match="rl-zoo3 is not installed") as e:
+    with pytest.raises(sg.error.InvalidSpec, match="rl-zoo3 is not installed") as e:
         sg.zoo_settings("PPO", "CartPole-v1")
     assert e.value.hint == "pip install 'specguard[zoo]'"
 
@@ -289,7 +291,9 @@ def test_train_freq_as_a_list_is_a_tuple_and_a_bad_schedule_is_refused(tmp_path)
     settings, _ = zoo("SAC", "E-v0", file=path)
     assert settings.hyperparameters["train_freq"] == (1, "episode")
     path = write(tmp_path, "E-v0:\n  n_timesteps: 100\n  learning_rate: exp_0.1\n")
-    with pytest.raises(sg.InvalidSpec, match=r"learning_rate: expected a number or a schedule 'lin_<initial value>'"):
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"learning_rate: expected a number or a schedule 'lin_<initial value>'"
+    ):
         sg.zoo_settings("SAC", "E-v0", file=path)
 
 
@@ -298,7 +302,7 @@ def test_train_freq_as_a_list_is_a_tuple_and_a_bad_schedule_is_refused(tmp_path)
 
 def refused(path, match):
     """The one InvalidSpec zoo_settings raises for ``path``'s entry E-v0, its message one line."""
-    with pytest.raises(sg.InvalidSpec, match=match) as e:
+    with pytest.raises(sg.error.InvalidSpec, match=match) as e:
         sg.zoo_settings("PPO", "E-v0", file=path)
     assert "\n" not in e.value.message and len(e.value.message) < 500
     return e.value
@@ -365,7 +369,7 @@ def test_an_alias_bomb_is_refused_and_what_is_not_taken_is_bounded(tmp_path):
 def test_a_schedule_that_is_not_finite_is_refused_naming_the_hyperparameter(tmp_path, text):
     path = write(tmp_path, f"E-v0:\n  n_timesteps: 100\n  learning_rate: {text}\n")
     with pytest.raises(
-        sg.InvalidSpec, match=rf"learning_rate: expected .*'lin_<initial value>', a finite one, got '{text}'"
+        sg.error.InvalidSpec, match=rf"learning_rate: expected .*'lin_<initial value>', a finite one, got '{text}'"
     ):
         sg.zoo_settings("PPO", "E-v0", file=path)
 
@@ -380,7 +384,7 @@ def test_a_schedule_that_is_not_finite_is_refused_naming_the_hyperparameter(tmp_
 )
 def test_a_spec_refuses_a_schedule_that_is_not_finite_naming_the_hyperparameter(key, value, message):
     # It trained to NaN logits, which fail the agent at evaluation ("the agent raised ValueError"): refused first.
-    with pytest.raises(sg.InvalidSpec, match=rf"^Spec 'right'.hyperparameters: {message}"):
+    with pytest.raises(sg.error.InvalidSpec, match=rf"^Spec 'right'.hyperparameters: {message}"):
         sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=64), hyperparameters={key: value})
 
 

@@ -310,7 +310,9 @@ def test_a_bad_distance_of_the_active_stage_is_one_error_naming_the_sequence(eva
     env.reset(seed=0)
     env.step(0)
     # The flat evaluator names the sequence (whose potential asked the distance), the reference its key.
-    with pytest.raises(sg.EvaluationError, match=f"^seq{'' if evaluator == 'flat' else '/a:distance'}: {message}"):
+    with pytest.raises(
+        sg.error.EvaluationError, match=f"^seq{'' if evaluator == 'flat' else '/a:distance'}: {message}"
+    ):
         env.step(0)
 
 

@@ -453,7 +453,7 @@ def check_spec(spec: Spec) -> None:
         >>> import specguard as sg
         >>> cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
         >>> spec = sg.Spec(cartpole, sg.Goal("far", x=(10, None)), budget=sg.Budget(timesteps=1000))
-        >>> sg.check_spec(spec)
+        >>> check_spec(spec)
         Traceback (most recent call last):
         ...
         specguard.error.UnreachableGoal: far: goal box x in [10, inf] lies outside the bounds of x, [-4.8, 4.8]: ...
