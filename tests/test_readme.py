@@ -37,3 +37,30 @@ def test_readme_summary_names_the_cluster_engine_and_its_extra():
     assert "Dask cluster" in summary and "the `cluster` extra" in summary
     extras = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]["optional-dependencies"]
     assert [d for d in extras["cluster"] if d.startswith("distributed")], "the cluster extra installs Dask"
+
+
+def test_readme_first_screen_holds_the_tagline_a_goal_spec_test_and_the_two_commands():
+    first_screen = README.read_text(encoding="utf-8").splitlines()[:40]
+    text = "\n".join(first_screen)
+    assert first_screen[2].startswith("**pytest for reinforcement-learning specifications.**")
+    assert "@sg.goal_spec(" in text and "$ pytest --goal-specs test_pendulum_specs.py" in text
+    assert 'pip install -c constraints.txt -e ".[examples]" -e ./plugins && pytest --goal-specs example_specs' in text
+    assert 'pip install -c constraints.txt -e ".[dev]" -e ./plugins && pytest -n 2' in text
+
+
+def test_readme_goal_spec_test_builds_the_spec_its_output_shows():
+    import specguard as sg
+
+    block = next(b for b in python_blocks(README) if "@sg.goal_spec" in b)
+    namespace: dict[str, object] = {}
+    exec(compile(block, str(README), "exec"), namespace)
+    spec = namespace["test_upright_and_still"]()
+    assert isinstance(spec, sg.Spec) and spec.tree.name == "pendulum"
+    assert spec.budget.timesteps == 100_000 and spec.n_envs == 4
+
+
+def test_readme_cites_the_source_paper_by_its_title_where_it_first_names_it():
+    text = " ".join(README.read_text(encoding="utf-8").split())  # one line: the title may wrap anywhere
+    title = "*Iterative Environment Design for Deep Reinforcement Learning Based on Goal-Oriented Specification*"
+    first = min(text.find(word) for word in ("paper", title) if word in text)
+    assert text.find(title) == first, text[max(0, first - 200) : first + 100]
