@@ -23,7 +23,7 @@ from typing import Any
 import pytest
 
 from specguard.pytest_plugin.items import GoalMissed, group_of, one_line_errors, spec_of
-from specguard.pytest_plugin.session import Session, run, scaled, terminal_lines
+from specguard.pytest_plugin.session import GoalSpecSession, run, scaled, terminal_lines
 
 __all__ = ["COUNTEREXAMPLES", "run_falsify_item"]
 
@@ -31,7 +31,7 @@ COUNTEREXAMPLES = "specguard.counterexamples"
 """The user property carrying a falsify item's runs (JSON) to the reports, on the xdist controller too."""
 
 
-def run_falsify_item(item: pytest.Function, state: Session, check: Any, expect: Any) -> None:
+def run_falsify_item(item: pytest.Function, state: GoalSpecSession, check: Any, expect: Any) -> None:
     """Train (or read back) the item's spec, falsify every run, and pass, fail or xfail the item."""
     from specguard.engine.check_agent import spec_agent
     from specguard.engine.falsify_run import falsify_agent, falsify_runs, start_space

@@ -26,7 +26,7 @@ from specguard.pytest_plugin.items import GoalMissed, falsify_check, group_of, o
 from specguard.pytest_plugin.options import add_options, baseline_path, parse_options
 from specguard.pytest_plugin.recorder import PROPERTY, Recorder
 from specguard.pytest_plugin.session import (
-    Session,
+    GoalSpecSession,
     agent_gate_of,
     baseline_name,
     close_ahead,
@@ -45,7 +45,7 @@ __all__ = ["GoalMissed"]
 MARKER = "goal_spec"
 SKIP_REASON = "goal spec: run `pytest --goal-specs` to train it and check its goals"
 
-_SESSION = pytest.StashKey[Session]()
+_SESSION = pytest.StashKey[GoalSpecSession]()
 
 
 def pytest_addhooks(pluginmanager: pytest.PytestPluginManager) -> None:
@@ -71,7 +71,7 @@ def pytest_configure(config: pytest.Config) -> None:
         "`pytest --goal-specs`, or a specguard.AgentCheck, its agent judged (declare it with @specguard.goal_spec)",
     )
     options = parse_options(config)
-    state = Session(options)
+    state = GoalSpecSession(options)
     if options.enabled and options.compare:
         from specguard.gate.baseline import BaselineError, load_baseline
 

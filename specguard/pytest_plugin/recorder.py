@@ -16,7 +16,7 @@ from typing import Any
 import pytest
 
 from specguard.pytest_plugin.falsify_item import COUNTEREXAMPLES
-from specguard.pytest_plugin.session import Session
+from specguard.pytest_plugin.session import GoalSpecSession
 
 __all__ = ["PROPERTY", "Recorder", "apply_family", "interruption", "unsigned_cache_note", "write_outputs"]
 
@@ -37,7 +37,7 @@ def _verdict(report: pytest.TestReport, outcome: str) -> str:
 class Recorder:
     """Collects the figures of goal items as reports arrive (on the xdist controller too) and reports them."""
 
-    def __init__(self, config: pytest.Config, state: Session) -> None:
+    def __init__(self, config: pytest.Config, state: GoalSpecSession) -> None:
         self.config = config
         self.state = state
 
@@ -114,7 +114,7 @@ def unsigned_cache_note(rows: list[dict[str, Any]], environ: Mapping[str, str]) 
     )
 
 
-def write_outputs(config: pytest.Config, state: Session) -> list[str]:
+def write_outputs(config: pytest.Config, state: GoalSpecSession) -> list[str]:
     """Write the reports and the baseline this session asked for; a line for each file written or note.
 
     A destination that cannot be written (a file where a folder should be, no
@@ -137,7 +137,7 @@ def _reason(error: OSError) -> str:
     return f"{type(error).__name__}: {error.strerror or error}"
 
 
-def _write_report(state: Session, directory: Path) -> list[str]:
+def _write_report(state: GoalSpecSession, directory: Path) -> list[str]:
     """The ``--goal-specs-report`` files and GIFs: a line per file written and per spec without a GIF."""
     from specguard.report.gifs import report_gifs
     from specguard.report.session_report import write_reports
@@ -155,7 +155,7 @@ def _write_report(state: Session, directory: Path) -> list[str]:
     return [f"specguard: wrote {path}" for path in written] + notes
 
 
-def _save_baseline(state: Session, name: str) -> str:
+def _save_baseline(state: GoalSpecSession, name: str) -> str:
     """Merge the session's runs (and its agents' episodes) into baseline ``name``: the line saying what it replaced,
     or why it was not saved."""
     from specguard.error import BaselineError

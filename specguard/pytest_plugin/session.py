@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     from specguard.training.progress import ProgressEvent
 
 __all__ = [
-    "Session",
+    "GoalSpecSession",
     "agent_gate_of",
     "baseline_name",
     "close_ahead",
@@ -45,8 +45,9 @@ __all__ = [
 
 
 @dataclasses.dataclass
-class Session:
-    """What a session keeps: options, the baseline compared with, the executor, results and report rows."""
+class GoalSpecSession:
+    """What a ``--goal-specs`` session keeps: options, the baseline compared with, the executor, results and report
+    rows (named apart from pytest's own ``Session``, which holds it in its stash)."""
 
     options: Options
     baseline: Baseline | None = None
@@ -71,7 +72,7 @@ class Session:
     ahead: TrainAhead | None = None  # the runs trained ahead (specguard.engine.ahead), made at the first training
 
 
-def run_options(state: Session) -> RunOptions:
+def run_options(state: GoalSpecSession) -> RunOptions:
     """How this session trains: its workers, cache, progress sink and executor, one value for every call."""
     from specguard.engine.run_spec import RunOptions
     from specguard.parallel.slots import PooledExecutor
@@ -85,7 +86,7 @@ def run_options(state: Session) -> RunOptions:
     )
 
 
-def upcoming_specs(state: Session, items: list[pytest.Item]) -> list[Spec]:
+def upcoming_specs(state: GoalSpecSession, items: list[pytest.Item]) -> list[Spec]:
     """The specs ``items`` will train, in their order, as the session trains them (its options, the items'
     thresholds): those of ``sg.goal_specs``, known at collection (a ``@goal_spec`` function's spec is known only
     once it runs with its fixtures); an item a mark skips, or an agent's (nothing to train), is left out."""
@@ -112,7 +113,7 @@ def upcoming_specs(state: Session, items: list[pytest.Item]) -> list[Spec]:
     return specs
 
 
-def _start_ahead(state: Session) -> None:
+def _start_ahead(state: GoalSpecSession) -> None:
     """At the session's first training: its slots, and the seeds of its upcoming specs queued behind the item."""
     if state.upcoming is None:
         return
@@ -128,7 +129,7 @@ def _start_ahead(state: Session) -> None:
     state.ahead.plan(upcoming)
 
 
-def close_ahead(state: Session) -> None:
+def close_ahead(state: GoalSpecSession) -> None:
     """Stop what trains ahead, store what finished, and close the slots (the session's end, Ctrl-C)."""
     ahead, pool = state.ahead, state.pool
     state.ahead, state.pool = None, None
@@ -140,7 +141,7 @@ def close_ahead(state: Session) -> None:
             pool.close()
 
 
-def scaled(state: Session, spec: Spec) -> Spec:
+def scaled(state: GoalSpecSession, spec: Spec) -> Spec:
     """The spec as this session trains and judges it: the session's options applied, the spec's own where unset."""
     options = state.options
     return spec.as_run(
@@ -207,7 +208,7 @@ def _terminal_line(config: pytest.Config, text: str, *, final: bool, fallback: C
     return True
 
 
-def run(state: Session, spec: Spec, item: pytest.Item) -> SpecResult:
+def run(state: GoalSpecSession, spec: Spec, item: pytest.Item) -> SpecResult:
     """The spec's result: trained (or read from the cache) once per session, shared by all its goal items.
 
     The first time, other plugins hear of it (``pytest_goal_spec_result``, :mod:`~specguard.pytest_plugin.hooks`),
@@ -228,7 +229,9 @@ def run(state: Session, spec: Spec, item: pytest.Item) -> SpecResult:
     return state.memo[key]
 
 
-def judge_agent(state: Session, check: AgentCheck, item: pytest.Item, group: str) -> tuple[AgentCheck, SpecResult]:
+def judge_agent(
+    state: GoalSpecSession, check: AgentCheck, item: pytest.Item, group: str
+) -> tuple[AgentCheck, SpecResult]:
     """The agent check as this session judges it (its ``--goal-specs-undecided``; there is no budget to scale, nothing
     is trained) and its result: judged once per test, shared by all its goal items; other plugins hear of it as of a
     trained spec's (``pytest_goal_spec_result``)."""
@@ -249,12 +252,12 @@ def judge_agent(state: Session, check: AgentCheck, item: pytest.Item, group: str
     return check, state.agents[group]
 
 
-def baseline_name(state: Session) -> str:
+def baseline_name(state: GoalSpecSession) -> str:
     """The name of the baseline compared with, as the comparisons' lines say it."""
     return state.options.compare or "latest"
 
 
-def agent_gate_of(state: Session, check: AgentCheck, group: str) -> SavedAgentGate | None:
+def agent_gate_of(state: GoalSpecSession, check: AgentCheck, group: str) -> SavedAgentGate | None:
     """The agent's comparison with the agent the session's baseline saved for its test (None without a baseline),
     once per test, on the baseline's own episodes (:func:`specguard.gate.saved_agent.compare_saved`), each key
     judged at Holm's first step over the baseline's comparisons."""
@@ -276,7 +279,7 @@ def agent_gate_of(state: Session, check: AgentCheck, group: str) -> SavedAgentGa
     return state.agent_gates[group]
 
 
-def saved_agent(state: Session, check: AgentCheck, group: str) -> AgentEntry | str:
+def saved_agent(state: GoalSpecSession, check: AgentCheck, group: str) -> AgentEntry | str:
     """What ``--goal-specs-save`` stores for the agent's test (:func:`specguard.gate.saved_agent.saved_entry`), or
     the line saying why nothing is (an agent, spec or ``wrap`` without an exact identity), once per test."""
     if group not in state.agent_entries:
@@ -291,7 +294,7 @@ def saved_agent(state: Session, check: AgentCheck, group: str) -> AgentEntry | s
     return state.agent_entries[group]
 
 
-def _train(state: Session, spec: Spec) -> Callable[[list[int]], SpecResult]:
+def _train(state: GoalSpecSession, spec: Spec) -> Callable[[list[int]], SpecResult]:
     """Train given seeds of ``spec`` with the session's options (cached seeds are reused)."""
     from specguard.engine.run_spec import train_seeds
 
@@ -301,7 +304,7 @@ def _train(state: Session, spec: Spec) -> Callable[[list[int]], SpecResult]:
     return train
 
 
-def gate_of(state: Session, spec: Spec, result: SpecResult, group: str) -> SpecGate | None:
+def gate_of(state: GoalSpecSession, spec: Spec, result: SpecResult, group: str) -> SpecGate | None:
     """The spec's comparisons with the session's baseline (None without one), once per spec: extra seeds are
     trained here while a comparison is open (:func:`specguard.gate.comparison.compare_spec`).
 
@@ -327,7 +330,7 @@ def gate_of(state: Session, spec: Spec, result: SpecResult, group: str) -> SpecG
     return state.gates[key]
 
 
-def saved_runs(state: Session, spec: Spec, result: SpecResult, gate: SpecGate | None) -> SpecGate:
+def saved_runs(state: GoalSpecSession, spec: Spec, result: SpecResult, gate: SpecGate | None) -> SpecGate:
     """The runs ``--goal-specs-save`` stores for the spec: its own and more, up to the ceiling, once per spec."""
     key = result.spec_key or spec.label
     if key not in state.saved:
