@@ -19,7 +19,7 @@ import specguard as sg
 from example_specs import pendulum
 from specguard.cache.canonical import canonical
 from specguard.cache.fingerprint import fingerprint_spec
-from specguard.evaluation.rollout import rollout
+from specguard.evaluation.rollout import rollout_model
 from specguard.spec.algorithms import (
     ALGORITHMS,
     CONTRIB,
@@ -373,7 +373,7 @@ def test_maskable_ppo_acts_on_the_initial_envs_masks_in_training_and_evaluation(
     s = masked_spec(expect=0.5)
     result, model = train_run(s, seed=0)
     assert result.successes["clean"] == result.episodes  # every action valid: the masks reached predict
-    steps = rollout(model, s, episodes=2)
+    steps = rollout_model(model, s, episodes=2)
     assert all(int(step["action"]) == int(step["obs"][2]) for episode in steps for step in episode)
     untrained_ppo, _ = train_run(masked_spec(algorithm="PPO", expect=0.5), seed=0)
     assert untrained_ppo.successes["clean"] < untrained_ppo.episodes  # without masks, 64 steps do not learn them

@@ -11,7 +11,7 @@ import specguard as sg
 from specguard.construction.episode_policy import EpisodePolicy
 from specguard.engine.falsify_run import batch_policy, property_keys
 from specguard.evaluation.policy import Policy, policy
-from specguard.evaluation.rollout import rollout
+from specguard.evaluation.rollout import rollout_model
 from specguard.falsify.search import EpisodeRunner
 
 CARTPOLE = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
@@ -95,7 +95,7 @@ def test_a_models_actions_without_state_are_predicts_own(lstm):
 
 def test_rollouts_carry_the_state_through_each_episode(lstm):
     spec, model = lstm
-    episodes = rollout(model, spec, episodes=2, seed=5)
+    episodes = rollout_model(model, spec, episodes=2, seed=5)
     for steps in episodes:
         assert same(np.array([s["action"] for s in steps]), by_hand(model, [s["obs"] for s in steps]))
 

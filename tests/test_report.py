@@ -281,7 +281,7 @@ def test_report_gifs_link_each_spec_to_its_own_file(tmp_path, monkeypatch):
         Path(path).write_bytes(b"GIF89a")
         return Gif(Path(path), f"{spec}, 9 steps", 2)
 
-    monkeypatch.setattr(gifs, "load_model", lambda spec, seed, cache: (None, None))
+    monkeypatch.setattr(gifs, "load_cached", lambda spec, seed, cache: (None, None))
     monkeypatch.setattr(gifs, "write_gif", fake_gif)
     groups = ["t.py::test_[a/b]", "t.py::test_[a b]", "t.py::test_ü", "t.py::test_ö"]
     rows = [{**ROW, "group": g, "per_seed": [{"seed": 0, "successes": 1, "episodes": 1}]} for g in groups]

@@ -8,9 +8,9 @@ import pytest
 from PIL import Image
 
 import specguard as sg
-from specguard.cache.models import load_model
+from specguard.cache.models import load_cached
 from specguard.cache.store import Cache
-from specguard.evaluation.rollout import rollout
+from specguard.evaluation.rollout import rollout_model
 from specguard.report.gifs import Gif, report_gifs, write_gif
 from specguard.training.train import train_run
 
@@ -35,14 +35,14 @@ def trained():
 @pytest.mark.slow
 def test_rollout_returns_the_steps_of_each_episode(trained):
     spec, _, model = trained
-    episodes = rollout(model, spec, episodes=2)
+    episodes = rollout_model(model, spec, episodes=2)
     assert len(episodes) == 2
     for steps in episodes:
         assert steps and all(set(s) == {"obs", "action", "reward", "terminated", "truncated", "info"} for s in steps)
         assert steps[-1]["terminated"] or steps[-1]["truncated"]
         assert not any(s["terminated"] or s["truncated"] for s in steps[:-1])
         assert set(steps[-1]["info"]["goals"]) == {"cartpole", "cartpole/centre", "cartpole/fast"}
-    again = rollout(model, spec, episodes=2)  # deterministic policy, seeded episodes
+    again = rollout_model(model, spec, episodes=2)  # deterministic policy, seeded episodes
     assert [len(s) for s in again] == [len(s) for s in episodes]
     assert np.array_equal(again[1][-1]["obs"], episodes[1][-1]["obs"])
 
@@ -60,7 +60,7 @@ def test_gif_has_the_episode_and_a_caption_naming_the_goals(trained, tmp_path):
         last = np.asarray(image.convert("L"))
     # the caption is drawn at the bottom of the last frame (CartPole leaves that area blank)
     assert (first[-20:] < 100).sum() == 0 and (last[-20:] < 100).sum() > 50
-    (steps,) = rollout(model, spec)  # the same episode: same seed, deterministic
+    (steps,) = rollout_model(model, spec)  # the same episode: same seed, deterministic
     goals = steps[-1]["info"]["goals"]
     met = ", ".join(p for p, inside in goals.items() if inside) or "none"
     assert f"{len(steps)} steps; goals met at the end: {met}" in gif.text
@@ -138,7 +138,7 @@ def test_a_factory_without_render_mode_is_told_to_render_rgb_array_frames(traine
     assert gif.written and gif.frames > 1
     with Image.open(gif.path) as image:
         assert image.format == "GIF" and image.n_frames > 1
-    (steps,) = rollout(model, spec)  # the same episode as the env made with render_mode
+    (steps,) = rollout_model(model, spec)  # the same episode as the env made with render_mode
     assert f"{len(steps)} steps;" in gif.text
 
 
@@ -167,7 +167,7 @@ def test_a_render_that_raises_gives_a_note(tmp_path, monkeypatch):
 def test_report_gifs_load_the_first_seeds_cached_model(trained, tmp_path):
     spec, result, model = trained
     Cache(tmp_path / "cache").store(spec, 0, result, model)
-    loaded, normalizer = load_model(spec, 0, tmp_path / "cache")
+    loaded, normalizer = load_cached(spec, 0, tmp_path / "cache")
     assert normalizer is None and type(loaded) is type(model)
     rows = [
         {"group": "t.py::test_cart", "per_seed": [{"seed": 0}]},
@@ -235,7 +235,7 @@ def test_a_policy_acts_on_one_torch_thread_and_the_process_keeps_its_setting(tra
     before = torch.get_num_threads()
     torch.set_num_threads(2)
     try:
-        rollout(model, spec, episodes=1)
+        rollout_model(model, spec, episodes=1)
         falsify_run(spec, model, None, seed=0, spec_key=None, examples=2, uniform=0)
         assert seen and set(seen) == {1}
         assert torch.get_num_threads() == 2

@@ -9,12 +9,13 @@ from typing import Any
 from specguard.spec import algorithms as sb3
 from specguard.spec.spec import Spec
 
-__all__ = ["load_model"]
+__all__ = ["load_cached"]
 
 
-def load_model(spec: Spec, seed: int, cache_dir: Path | str) -> tuple[Any, Any]:
+def load_cached(spec: Spec, seed: int, cache_dir: Path | str) -> tuple[Any, Any]:
     """The cached model of run ``seed`` of ``spec`` and its ``VecNormalize`` statistics (or ``None``); for a spec
-    with a trainer, the agent its last checkpoint yielded (unpickled) and ``None``.
+    with a trainer, the agent its last checkpoint yielded (unpickled) and ``None``. A result's run is
+    :func:`specguard.load_model` (``sg.load_model(result, seed)``), which reads it here.
 
     Raises:
         FileNotFoundError: the run is not (or no longer validly) cached.

@@ -17,10 +17,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from specguard.cache.models import load_model as load_cached
+from specguard.cache.models import load_cached
 from specguard.engine.spec_result import SpecResult
 from specguard.error import SpecError
-from specguard.evaluation.rollout import rollout as roll_out
+from specguard.evaluation.rollout import rollout_model
 from specguard.spec.spec import Spec
 
 __all__ = ["load_model", "load_normalizer", "load_run", "rollout"]
@@ -87,4 +87,4 @@ def rollout(
         SpecError: the run was not cached, or is gone (:func:`load_run`).
     """
     spec, model, normalizer = load_run(result, seed)
-    return roll_out(model, spec, episodes=episodes, deterministic=deterministic, normalizer=normalizer)
+    return rollout_model(model, spec, episodes=episodes, deterministic=deterministic, normalizer=normalizer)

@@ -1,10 +1,10 @@
 """Watching a trained policy: trajectories of evaluation episodes on the env its run trained on.
 
-:func:`rollout` runs the policy (:func:`specguard.evaluation.policy.policy`) on the env a
+:func:`rollout_model` runs a model's policy (:func:`specguard.evaluation.policy.policy`) on the env a
 run trained on (:meth:`Spec.make_env <specguard.spec.spec.Spec.make_env>`: the constructed
-env, or the initial env for a baseline spec) and returns every step. GIFs of
-an episode are :mod:`specguard.report.gifs`; loading a cached model is
-:mod:`specguard.cache.models`.
+env, or the initial env for a baseline spec) and returns every step; a result's run is rolled out by
+:func:`specguard.rollout` (``sg.rollout(result, seed)``), which loads its model and calls it. GIFs of
+an episode are :mod:`specguard.report.gifs`; loading a cached model is :mod:`specguard.cache.models`.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from specguard.evaluation.episodes import EVAL_SEED_BASE
 from specguard.evaluation.policy import one_torch_thread, policy
 from specguard.spec.spec import Spec
 
-__all__ = ["episode", "rollout"]
+__all__ = ["episode", "rollout_model"]
 
 
 def episode(
@@ -56,7 +56,7 @@ def episode(
     return steps
 
 
-def rollout(
+def rollout_model(
     model: Any,
     spec: Spec,
     *,
@@ -68,7 +68,7 @@ def rollout(
     """Run ``model`` for ``episodes`` episodes on the env ``spec`` trains on (episode ``i`` seeded ``seed + i``).
 
     Args:
-        model: a trained SB3 model (``train_run``'s second value, or :func:`load_model`).
+        model: a trained SB3 model (``train_run``'s second value, or :func:`specguard.load_model`).
         normalizer: the ``VecNormalize`` statistics of a ``normalize=True`` spec;
             default: the model's own training env when it is one.
 

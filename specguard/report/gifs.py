@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from specguard.cache.models import load_model
+from specguard.cache.models import load_cached
 from specguard.error import InitialEnvError, SpecError
 from specguard.evaluation.episodes import EVAL_SEED_BASE
 from specguard.evaluation.policy import policy
@@ -316,7 +316,7 @@ def report_gifs(
             gifs[group] = Gif(None, "no rollout GIF: no run of the spec finished")
         else:
             try:
-                model, normalizer = load_model(spec, seeds[0], cache_dir)
+                model, normalizer = load_cached(spec, seeds[0], cache_dir)
                 gif = write_gif(model, spec, directory / f"{gif_stem(group)}.gif", normalizer=normalizer)
                 gifs[group] = gif
             except Exception as e:  # a report must not fail the session
@@ -382,6 +382,6 @@ def counterexample_gifs(
         if result.cache_dir is None or result.trained is None:
             gifs[seed] = Gif(None, "no GIF: the run cache is off, no model to load")
             continue
-        model, normalizer = load_model(result.trained, seed, result.cache_dir)
+        model, normalizer = load_cached(result.trained, seed, result.cache_dir)
         gifs[seed] = write_gif(model, result.trained, path, normalizer=normalizer, start=start, starts=starts)
     return gifs
