@@ -146,7 +146,8 @@ class Spec:
         hyperparameters: keyword arguments for the algorithm (``n_steps``, ...); a name its
             constructor does not take is refused here, before anything trains, and so is a
             schedule (``learning_rate``, ``clip_range``, ...) that is not a finite number or schedule.
-        n_envs: parallel environments per run (a ``DummyVecEnv``).
+        n_envs: parallel environments per run, stepped together in one process (a ``DummyVecEnv``:
+            :class:`~specguard.training.vec_env.SpecVecEnv` for the constructed env).
         normalize: wrap the training env in ``VecNormalize``.
         quorum: runs that must meet each threshold; default every run
             (``budget.max_seeds``).
