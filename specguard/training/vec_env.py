@@ -58,10 +58,10 @@ class SpecVecEnv(DummyVecEnv):
 
     def __init__(self, env_fns: list[Callable[[], gym.Env]]) -> None:
         super().__init__(env_fns)
-        self._lean = [isinstance(env, SpecEnv) and env.flat for env in self.envs]
+        self._lean = all(isinstance(env, SpecEnv) and env.flat for env in self.envs)
 
     def step_wait(self) -> VecEnvStepReturn:
-        if not all(self._lean):
+        if not self._lean:
             return super().step_wait()
         envs, actions, buffer = self.envs, self.actions, self.buf_obs[None]  # type: ignore[index]
         rewards, dones, infos = self.buf_rews, self.buf_dones, self.buf_infos
