@@ -60,8 +60,7 @@ def main() -> None:
     tiny = dataclasses.replace(
         pendulum.specs["w"],
         budget=sg.Budget(timesteps=64, min_seeds=2, eval_episodes=2),
-        hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1},
-        n_envs=1,
+        trainer=sg.SB3(hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1}, n_envs=1),
     )
     local = _timed(tiny, workers=2)  # the first run in this process starts the fork server (where there is one)
     local_again = _timed(tiny, workers=2)

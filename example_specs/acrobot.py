@@ -54,7 +54,7 @@ def height_distance(s):  # type: ignore[no-untyped-def]
 # reach the goal in 30/30 episodes at 15k and 30k steps.
 ZOO_PPO: dict[str, object] = {"n_steps": 256, "gae_lambda": 0.94, "n_epochs": 4, "ent_coef": 0.0}
 BUDGET = sg.Budget(timesteps=150_000, min_seeds=2, eval_episodes=30)
-COMMON: dict[str, Any] = dict(budget=BUDGET, hyperparameters=ZOO_PPO, n_envs=16, normalize=True)
+COMMON: dict[str, Any] = dict(budget=BUDGET, trainer=sg.SB3(hyperparameters=ZOO_PPO, n_envs=16, normalize=True))
 
 height = sg.Goal("height", height=(1.0, 3.0))
 trees: dict[str, sg.Node] = {}

@@ -54,7 +54,7 @@ ZOO_PPO: dict[str, Any] = {
     "clip_range": 0.2,
 }
 BUDGET = sg.Budget(timesteps=50_000, min_seeds=2, eval_episodes=30)
-COMMON: dict[str, Any] = dict(budget=BUDGET, hyperparameters=ZOO_PPO, n_envs=8)
+COMMON: dict[str, Any] = dict(budget=BUDGET, trainer=sg.SB3(hyperparameters=ZOO_PPO, n_envs=8))
 
 specs: dict[str, sg.Spec] = {
     "lean_and_catch": sg.Spec(

@@ -91,8 +91,7 @@ specs: dict[str, sg.Spec] = {
         expect={"keep_fast": 0.8, "keep_fast:crash": 0.8},
         xfail={"keep_fast": MEASURED, "keep_fast:crash": MEASURED},
         name="highway",
-        algorithm="DQN",
-        hyperparameters=DQN,
+        trainer=sg.SB3("DQN", hyperparameters=DQN),
         budget=BUDGET,
     )
 }

@@ -71,7 +71,7 @@ ppo_kwargs: dict[str, object] = {
     "policy_kwargs": {"optimizer_kwargs": {"fused": True}},
 }
 BUDGET = sg.Budget(timesteps=1_000_000, min_seeds=2, eval_episodes=30)
-COMMON: dict[str, Any] = dict(budget=BUDGET, hyperparameters=ppo_kwargs, n_envs=16)
+COMMON: dict[str, Any] = dict(budget=BUDGET, trainer=sg.SB3(hyperparameters=ppo_kwargs, n_envs=16))
 
 trees: dict[str, sg.Node] = {}
 specs: dict[str, sg.Spec] = {}

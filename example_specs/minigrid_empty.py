@@ -68,8 +68,7 @@ specs: dict[str, sg.Spec] = {
         expect={"green_square": 0.8},
         name="minigrid",
         budget=BUDGET,
-        hyperparameters=PPO,
-        n_envs=4,
+        trainer=sg.SB3(hyperparameters=PPO, n_envs=4),
     )
 }
 

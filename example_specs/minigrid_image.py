@@ -53,8 +53,7 @@ specs: dict[str, sg.Spec] = {
         expect={"green_square": 0.8},
         name="minigrid_image",
         budget=minigrid_empty.BUDGET,
-        hyperparameters=minigrid_empty.PPO,
-        n_envs=4,
+        trainer=sg.SB3(hyperparameters=minigrid_empty.PPO, n_envs=4),
         observation="features+env",
     )
 }

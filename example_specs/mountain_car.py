@@ -24,7 +24,7 @@ def velocity_distance(s):  # type: ignore[no-untyped-def]
 # deterministic evaluation episodes on the 2-core development machine.
 ppo_kwargs: dict[str, object] = {"use_sde": True}
 BUDGET = sg.Budget(timesteps=50_000, min_seeds=2, eval_episodes=30)
-COMMON: dict[str, Any] = dict(budget=BUDGET, hyperparameters=ppo_kwargs)
+COMMON: dict[str, Any] = dict(budget=BUDGET, trainer=sg.SB3(hyperparameters=ppo_kwargs))
 
 trees: dict[str, sg.Node] = {}
 specs: dict[str, sg.Spec] = {}
@@ -83,8 +83,7 @@ specs["c+"] = sg.Spec(
     expect={"mountain_car": 0.8},
     name="mountain_car-c+",
     budget=BUDGET,
-    hyperparameters=EXPLORE,
-    normalize=True,
+    trainer=sg.SB3(hyperparameters=EXPLORE, normalize=True),
 )
 
 # The baseline: MountainCarContinuous-v0's own reward (+100 at the flag, minus the energy spent).

@@ -44,7 +44,7 @@ ZOO_PPO: dict[str, object] = {
     "policy_kwargs": {"optimizer_kwargs": {"fused": True}},
 }
 BUDGET = sg.Budget(timesteps=100_000, min_seeds=2, eval_episodes=30)
-COMMON: dict[str, Any] = dict(budget=BUDGET, hyperparameters=ZOO_PPO, n_envs=4)
+COMMON: dict[str, Any] = dict(budget=BUDGET, trainer=sg.SB3(hyperparameters=ZOO_PPO, n_envs=4))
 
 trees: dict[str, sg.Node] = {}
 specs: dict[str, sg.Spec] = {}

@@ -46,10 +46,10 @@ _EXPORTS = {
     # the spec, its budget, its trainer's settings
     "Spec": "specguard.spec.spec",
     "Budget": "specguard.spec.budget",
+    "SB3": "specguard.spec.trainers",
     "zoo_settings": "specguard.spec.zoo",
     # the constructed env
     "make_env": "specguard.construction.env",
-    "make_baseline_env": "specguard.construction.env",
     "SpecEnv": "specguard.construction.env",
     "compile_tree": "specguard.construction.compiled",
     # training and judging a spec
@@ -96,6 +96,7 @@ _MOVED = {
         "specguard.error",
     ),
     "BaselineEnv": "specguard.construction.env",
+    "make_baseline_env": "specguard.construction.env",
     "CompiledTree": "specguard.construction.compiled",
     "Annotation": "specguard.extend",
     "Cache": "specguard.cache.store",
@@ -143,7 +144,6 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.agents.sources import load_agent as load_agent
     from specguard.construction.compiled import compile_tree as compile_tree
     from specguard.construction.env import SpecEnv as SpecEnv
-    from specguard.construction.env import make_baseline_env as make_baseline_env
     from specguard.construction.env import make_env as make_env
     from specguard.construction.initial_env import InitialEnv as InitialEnv
     from specguard.engine.check_agent import AgentCheck as AgentCheck
@@ -163,6 +163,7 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.report.table import table as table
     from specguard.spec.budget import Budget as Budget
     from specguard.spec.spec import Spec as Spec
+    from specguard.spec.trainers import SB3 as SB3
     from specguard.spec.zoo import zoo_settings as zoo_settings
     from specguard.starts.space import StartSpace as StartSpace
     from specguard.tree.builtin_annotations import Constraint as Constraint

@@ -26,7 +26,8 @@ pytest_plugins = ["pytester"]
 def spec(timesteps=128, **kwargs):
     budget = sg.Budget(timesteps=timesteps, min_seeds=2, max_seeds=2, eval_episodes=4, checkpoints=1)
     tree, expect = pendulum.trees["w"], {"pendulum": 0.0}
-    return sg.Spec(pendulum.initial_env, tree, budget=budget, hyperparameters=TINY, expect=expect, **kwargs)
+    kwargs.setdefault("trainer", sg.SB3(hyperparameters=TINY))
+    return sg.Spec(pendulum.initial_env, tree, budget=budget, expect=expect, **kwargs)
 
 
 @pytest.fixture
@@ -164,7 +165,7 @@ def spec(steps, loud=False):
     env = sg.InitialEnv(make(loud), features=("x", "y", "omega"))
     tree = sg.Always(sg.Goal("calm", omega=(-8, 8)), name="calm")
     budget = sg.Budget(timesteps=steps, min_seeds=2, eval_episodes=4, checkpoints=1)
-    return sg.Spec(env, tree, budget=budget, hyperparameters=TINY, expect=0.5)
+    return sg.Spec(env, tree, budget=budget, trainer=sg.SB3(hyperparameters=TINY), expect=0.5)
 
 
 test_specs = sg.goal_specs({"first": spec(128), "second": spec(192, loud=True)})

@@ -91,7 +91,7 @@ def test_an_algorithm_by_module_and_class(tmp_path, monkeypatch):
     monkeypatch.syspath_prepend(str(tmp_path))
     import my_algos
 
-    assert spec(algorithm="my_algos:Mine").algorithm is my_algos.Mine
+    assert spec(trainer=sg.SB3(algorithm="my_algos:Mine")).trainer.algorithm is my_algos.Mine
 
 
 @pytest.mark.parametrize(
@@ -106,8 +106,8 @@ def test_an_algorithm_by_module_and_class(tmp_path, monkeypatch):
     ],
 )
 def test_an_unknown_algorithm_is_one_line_listing_what_is_accepted(given, message):
-    with pytest.raises(sg.error.InvalidSpec, match=rf"^Spec 'pendulum'.algorithm: {message}") as e:
-        spec(algorithm=given)
+    with pytest.raises(sg.error.InvalidSpec, match=rf"^SB3.algorithm: {message}") as e:
+        spec(trainer=sg.SB3(algorithm=given))
     assert "\n" not in e.value.message
 
 
@@ -117,8 +117,8 @@ def test_a_module_that_cannot_be_imported_is_one_error_naming_the_string(module,
     monkeypatch.syspath_prepend(str(tmp_path))
     text = f"{module}:PPO"
     with pytest.raises(sg.error.InvalidSpec) as e:  # not the module's own error, nor its SystemExit
-        spec(algorithm=text)
-    assert e.value.where == "Spec 'pendulum'.algorithm"
+        spec(trainer=sg.SB3(algorithm=text))
+    assert e.value.where == "SB3.algorithm"
     assert e.value.message.startswith(f"cannot import algorithm {text!r}: {says}")
     assert "\n" not in e.value.message
 
@@ -130,33 +130,37 @@ def test_without_sb3_contrib_its_names_say_what_to_install(monkeypatch):
     with pytest.raises(
         sg.error.InvalidSpec, match=r"TQC is an sb3-contrib algorithm, and sb3-contrib is not installed"
     ):
-        spec(algorithm="TQC")
+        spec(trainer=sg.SB3(algorithm="TQC"))
 
 
 # -- policies ----------------------------------------------------------------------------------
 
 
 def test_the_default_policy_is_mlp_and_the_recurrent_algorithms_lstm():
-    assert spec().policy == "MlpPolicy"
-    assert spec(algorithm="TQC").policy == "MlpPolicy"
-    assert spec(algorithm="RecurrentPPO", hyperparameters=TINY).policy == "MlpLstmPolicy"
+    assert spec().trainer.policy == "MlpPolicy"
+    assert spec(trainer=sg.SB3(algorithm="TQC")).trainer.policy == "MlpPolicy"
+    assert spec(trainer=sg.SB3(algorithm="RecurrentPPO", hyperparameters=TINY)).trainer.policy == "MlpLstmPolicy"
     assert default_policy(ExtraPPO) == "MlpPolicy"
 
 
 def test_a_policy_by_name_or_class():
     from stable_baselines3.common.policies import ActorCriticCnnPolicy, ActorCriticPolicy
 
-    assert spec(policy="MlpPolicy").policy == "MlpPolicy"
-    assert spec(policy="CnnPolicy", baseline=True).policy == "CnnPolicy"  # the env's own observation: SB3 checks it
-    assert spec(policy=ActorCriticPolicy).policy is ActorCriticPolicy
-    assert spec(policy=ActorCriticCnnPolicy).policy is ActorCriticCnnPolicy  # a class: SB3 checks the observation
+    assert spec(trainer=sg.SB3(policy="MlpPolicy")).trainer.policy == "MlpPolicy"
+    assert (
+        spec(baseline=True, trainer=sg.SB3(policy="CnnPolicy")).trainer.policy == "CnnPolicy"
+    )  # the env's own observation: SB3 checks it
+    assert spec(trainer=sg.SB3(policy=ActorCriticPolicy)).trainer.policy is ActorCriticPolicy
+    assert (
+        spec(trainer=sg.SB3(policy=ActorCriticCnnPolicy)).trainer.policy is ActorCriticCnnPolicy
+    )  # a class: SB3 checks the observation
 
 
 @pytest.mark.parametrize(("algorithm", "policy"), [("PPO", "CnnPolicy"), ("RecurrentPPO", "CnnLstmPolicy")])
 def test_an_image_policy_on_the_flat_features_is_refused_naming_the_policy_that_fits(algorithm, policy):
     with pytest.raises(sg.error.InvalidSpec) as e:
-        spec(algorithm=algorithm, policy=policy, hyperparameters=TINY)
-    assert e.value.where == "Spec 'pendulum'.policy"
+        spec(trainer=sg.SB3(algorithm=algorithm, policy=policy, hyperparameters=TINY))
+    assert e.value.where == "Spec 'pendulum'.trainer.policy"
     fits = default_policy(algorithm)
     assert e.value.message == (
         f"the agent's observation is a flat Box of numbers, not an image (observation='features'), "
@@ -169,8 +173,8 @@ def test_a_policy_class_of_another_algorithm_is_refused_naming_the_policy():
     from stable_baselines3.dqn.policies import DQNPolicy
 
     with pytest.raises(sg.error.InvalidSpec) as e:
-        spec(policy=DQNPolicy)
-    assert e.value.where == "Spec 'pendulum'.policy"
+        sg.SB3(policy=DQNPolicy)
+    assert e.value.where == "SB3.policy"
     assert e.value.message == (
         "DQNPolicy is no policy of PPO: expected a subclass of one of its policy classes "
         "(ActorCriticPolicy, ActorCriticCnnPolicy, MultiInputActorCriticPolicy)"
@@ -186,15 +190,15 @@ def test_a_policy_class_of_another_algorithm_is_refused_naming_the_policy():
     ],
 )
 def test_a_policy_the_algorithm_cannot_take_is_refused(kwargs, message):
-    with pytest.raises(sg.error.InvalidSpec, match=rf"^Spec 'pendulum'.policy: expected policy to be {message}"):
-        spec(**kwargs)
+    with pytest.raises(sg.error.InvalidSpec, match=rf"^SB3.policy: expected policy to be {message}"):
+        sg.SB3(**kwargs)
 
 
 def test_a_policy_among_the_hyperparameters_is_refused_with_a_hint_to_the_field():
     with pytest.raises(sg.error.InvalidSpec, match=r"'policy' is not a hyperparameter here") as e:
-        spec(hyperparameters={"policy": "CnnPolicy"})
+        spec(trainer=sg.SB3(hyperparameters={"policy": "CnnPolicy"}))
     assert "\n" not in e.value.message
-    assert e.value.hint == "use Spec(..., policy=...)"
+    assert e.value.hint == "use sg.SB3(..., policy=...)"
 
 
 @pytest.mark.slow
@@ -204,7 +208,7 @@ def test_the_policy_trains():
     class Marked(ActorCriticPolicy):
         pass
 
-    _, model = train_run(spec(policy=Marked, hyperparameters=TINY), seed=0)
+    _, model = train_run(spec(trainer=sg.SB3(policy=Marked, hyperparameters=TINY)), seed=0)
     assert type(model.policy) is Marked
 
 
@@ -213,8 +217,8 @@ def test_the_policy_trains():
 
 def test_an_unknown_hyperparameter_is_refused_at_construction_naming_it_the_algorithm_and_close_matches():
     with pytest.raises(sg.error.InvalidSpec) as e:
-        spec(hyperparameters={"bogus": 1, "n_stepz": 64, "gamma": 0.9})
-    assert e.value.where == "Spec 'pendulum'.hyperparameters"
+        spec(trainer=sg.SB3(hyperparameters={"bogus": 1, "n_stepz": 64, "gamma": 0.9}))
+    assert e.value.where == "SB3.hyperparameters"
     assert e.value.message.splitlines() == [
         "PPO takes no hyperparameter 'bogus'",
         "PPO takes no hyperparameter 'n_stepz'; did you mean 'n_steps'?",
@@ -225,26 +229,26 @@ def test_an_unknown_hyperparameter_is_refused_at_construction_naming_it_the_algo
 @pytest.mark.parametrize("key", ["seed", "env", "device", "verbose"])
 def test_what_specguard_passes_itself_is_no_hyperparameter(key):
     with pytest.raises(sg.error.InvalidSpec, match=rf"'{key}' is not a hyperparameter here: "):
-        spec(hyperparameters={key: 0})
+        spec(trainer=sg.SB3(hyperparameters={key: 0}))
 
 
 def test_hyperparameter_names_follow_kwargs_to_the_base_class():
     names = hyperparameter_names(ExtraPPO)
     assert names[0] == "extra" and "n_steps" in names and "gae_lambda" in names
     assert "_init_setup_model" not in names and "policy" not in names
-    spec(algorithm=ExtraPPO, hyperparameters={"extra": 2, **TINY})
+    spec(trainer=sg.SB3(algorithm=ExtraPPO, hyperparameters={"extra": 2, **TINY}))
     with pytest.raises(sg.error.InvalidSpec, match=r"test_algorithms:ExtraPPO takes no hyperparameter 'extr'; did you"):
-        spec(algorithm=ExtraPPO, hyperparameters={"extr": 2})
+        spec(trainer=sg.SB3(algorithm=ExtraPPO, hyperparameters={"extr": 2}))
 
 
 def test_each_algorithm_checks_its_own_names():
-    spec(algorithm="TQC", hyperparameters={"top_quantiles_to_drop_per_net": 2})
+    spec(trainer=sg.SB3(algorithm="TQC", hyperparameters={"top_quantiles_to_drop_per_net": 2}))
     with pytest.raises(sg.error.InvalidSpec, match=r"SAC takes no hyperparameter 'top_quantiles_to_drop_per_net'"):
-        spec(algorithm="SAC", hyperparameters={"top_quantiles_to_drop_per_net": 2})
+        spec(trainer=sg.SB3(algorithm="SAC", hyperparameters={"top_quantiles_to_drop_per_net": 2}))
 
 
 def test_values_are_sb3s_to_check():
-    spec(hyperparameters={"n_steps": "many"})  # accepted here; SB3 rejects it when the run is built
+    spec(trainer=sg.SB3(hyperparameters={"n_steps": "many"}))  # accepted here; SB3 rejects it when the run is built
 
 
 # -- collections -------------------------------------------------------------------------------------
@@ -281,13 +285,13 @@ def test_a_contrib_algorithm_is_keyed_by_module_class_and_sb3_contribs_version()
         "TQC",
         f"sb3_contrib=={version('sb3_contrib')}",
     ]
-    by_name, by_class = spec(algorithm="TQC"), spec(algorithm=sb3_contrib.TQC)
+    by_name, by_class = spec(trainer=sg.SB3(algorithm="TQC")), spec(trainer=sg.SB3(algorithm=sb3_contrib.TQC))
     assert fingerprint_spec(by_name).run_base == fingerprint_spec(by_class).run_base
-    assert fingerprint_spec(by_name).run_base != fingerprint_spec(spec(algorithm="SAC")).run_base
+    assert fingerprint_spec(by_name).run_base != fingerprint_spec(spec(trainer=sg.SB3(algorithm="SAC"))).run_base
 
 
 def test_a_users_algorithm_is_keyed_by_its_code():
-    assert fingerprint_spec(spec(algorithm=ExtraPPO)).run_base != fingerprint_spec(spec()).run_base
+    assert fingerprint_spec(spec(trainer=sg.SB3(algorithm=ExtraPPO))).run_base != fingerprint_spec(spec()).run_base
 
     class Edited(ExtraPPO):
         def train(self):
@@ -297,14 +301,23 @@ def test_a_users_algorithm_is_keyed_by_its_code():
         def train(self):
             return None
 
-    assert fingerprint_spec(spec(algorithm=Edited)).run_base != fingerprint_spec(spec(algorithm=Again)).run_base
+    assert (
+        fingerprint_spec(spec(trainer=sg.SB3(algorithm=Edited))).run_base
+        != fingerprint_spec(spec(trainer=sg.SB3(algorithm=Again))).run_base
+    )
 
 
 def test_the_policy_is_in_the_key_only_when_it_is_not_the_default():
     default = fingerprint_spec(spec()).run_base
-    assert fingerprint_spec(spec(policy="MlpPolicy")).run_base == default
-    assert fingerprint_spec(spec(policy=stable_baselines3.common.policies.ActorCriticPolicy)).run_base != default
-    recurrent, named = spec(algorithm="RecurrentPPO"), spec(algorithm="RecurrentPPO", policy="MlpLstmPolicy")
+    assert fingerprint_spec(spec(trainer=sg.SB3(policy="MlpPolicy"))).run_base == default
+    assert (
+        fingerprint_spec(spec(trainer=sg.SB3(policy=stable_baselines3.common.policies.ActorCriticPolicy))).run_base
+        != default
+    )
+    recurrent, named = (
+        spec(trainer=sg.SB3(algorithm="RecurrentPPO")),
+        spec(trainer=sg.SB3(algorithm="RecurrentPPO", policy="MlpLstmPolicy")),
+    )
     assert fingerprint_spec(recurrent).run_base == fingerprint_spec(named).run_base
 
 
@@ -317,13 +330,15 @@ def test_the_policy_is_in_the_key_only_when_it_is_not_the_default():
     [("RecurrentPPO", TINY), ("TQC", {"learning_starts": 32, "batch_size": 32})],
 )
 def test_a_contrib_spec_trains_is_judged_and_is_served_from_the_cache(tmp_path, algorithm, hyperparameters):
-    first = spec(algorithm=algorithm, hyperparameters=hyperparameters, expect={"pendulum": 0.5})
+    first = spec(expect={"pendulum": 0.5}, trainer=sg.SB3(algorithm=algorithm, hyperparameters=hyperparameters))
     result = sg.run_spec(first, workers=1, cache_dir=tmp_path, progress=None)
     assert [r.timesteps for r in result.runs] == [64] and result.cached == {0: False}
     assert not result.passed  # 64 steps hold no pendulum up: judged, missed
     assert type(sg.load_model(result, 0)) is getattr(sb3_contrib, algorithm)
     assert len(sg.rollout(result, 0)[0]) == 200  # the cached model acts (Pendulum's episodes are 200 steps)
-    by_class = spec(algorithm=getattr(sb3_contrib, algorithm), hyperparameters=hyperparameters, expect=0.5)
+    by_class = spec(
+        expect=0.5, trainer=sg.SB3(algorithm=getattr(sb3_contrib, algorithm), hyperparameters=hyperparameters)
+    )
     again = sg.run_spec(by_class, workers=1, cache_dir=tmp_path, progress=None)
     assert again.cached == {0: True} and again.runs[0].successes == result.runs[0].successes
 
@@ -362,8 +377,7 @@ CLEAN = sg.Goal("clean", t=(8.5, 9), bad=(0, 0.5))
 
 
 def masked_spec(initial=Masked, **kwargs):
-    kwargs.setdefault("algorithm", "MaskablePPO")
-    kwargs.setdefault("hyperparameters", TINY)
+    kwargs.setdefault("trainer", sg.SB3("MaskablePPO", hyperparameters=TINY))
     env = sg.InitialEnv(initial, features=("t", "bad", "valid"), **kwargs.pop("env_kwargs", {}))
     return sg.Spec(env, CLEAN, budget=sg.Budget(timesteps=64, min_seeds=1, eval_episodes=4, checkpoints=1), **kwargs)
 
@@ -375,7 +389,7 @@ def test_maskable_ppo_acts_on_the_initial_envs_masks_in_training_and_evaluation(
     assert result.successes["clean"] == result.episodes  # every action valid: the masks reached predict
     steps = rollout_model(model, s, episodes=2)
     assert all(int(step["action"]) == int(step["obs"][2]) for episode in steps for step in episode)
-    untrained_ppo, _ = train_run(masked_spec(algorithm="PPO", expect=0.5), seed=0)
+    untrained_ppo, _ = train_run(masked_spec(trainer=sg.SB3("PPO", hyperparameters=TINY), expect=0.5), seed=0)
     assert untrained_ppo.successes["clean"] < untrained_ppo.episodes  # without masks, 64 steps do not learn them
 
 

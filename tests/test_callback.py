@@ -283,10 +283,12 @@ BALANCE = sg.Always(sg.Goal("upright", theta=(-0.2, 0.2)), name="balance")
 QUICK = sg.Budget(timesteps=256, min_seeds=2, max_seeds=2, eval_episodes=4, max_eval_episodes=4)
 
 
+QUICK_HP = {"n_steps": 64, "batch_size": 32}
+
+
 def quick_spec(**kwargs):
-    return sg.Spec(
-        CARTPOLE, BALANCE, budget=QUICK, expect=0.01, hyperparameters={"n_steps": 64, "batch_size": 32}, **kwargs
-    )
+    kwargs.setdefault("trainer", sg.SB3(hyperparameters=QUICK_HP))
+    return sg.Spec(CARTPOLE, BALANCE, budget=QUICK, expect=0.01, **kwargs)
 
 
 class MarkTraining(BaseCallback):
@@ -324,7 +326,10 @@ def scalars(folder):
 @pytest.mark.slow
 def test_a_users_callback_runs_in_every_training_worker(tmp_path):
     result = sg.run_spec(
-        quick_spec(callbacks=[functools.partial(MarkTraining, tmp_path)]), workers=2, cache_dir=None, progress=None
+        quick_spec(trainer=sg.SB3(callbacks=[functools.partial(MarkTraining, tmp_path)], hyperparameters=QUICK_HP)),
+        workers=2,
+        cache_dir=None,
+        progress=None,
     )
     assert not result.errors
     marks = sorted(p.name for p in tmp_path.iterdir())
@@ -334,7 +339,12 @@ def test_a_users_callback_runs_in_every_training_worker(tmp_path):
 
 @pytest.mark.slow
 def test_a_callback_that_raises_fails_its_seeds_in_one_line_naming_it():
-    result = sg.run_spec(quick_spec(callbacks=[Raises]), workers=1, cache_dir=None, progress=None)
+    result = sg.run_spec(
+        quick_spec(trainer=sg.SB3(callbacks=[Raises], hyperparameters=QUICK_HP)),
+        workers=1,
+        cache_dir=None,
+        progress=None,
+    )
     assert sorted(result.errors) == [0, 1] and not result.passed
     for error in result.errors.values():
         assert "callback" in error and "Raises" in error and "the curriculum has no stage 2" in error
@@ -347,11 +357,15 @@ def test_callbacks_are_part_of_the_spec_identity_and_the_log_folder_is_not(tmp_p
     plain = quick_spec()
     keys = {
         fingerprint_spec(s).spec_key
-        for s in (plain, quick_spec(callbacks=[MarkTraining]), quick_spec(callbacks=[Raises]))
+        for s in (
+            plain,
+            quick_spec(trainer=sg.SB3(callbacks=[MarkTraining], hyperparameters=QUICK_HP)),
+            quick_spec(trainer=sg.SB3(callbacks=[Raises], hyperparameters=QUICK_HP)),
+        )
     }
     assert len(keys) == 3
     logged = plain.as_run(tensorboard_log=tmp_path)
-    assert logged.tensorboard_log == str(tmp_path)
+    assert logged.trainer.tensorboard_log == str(tmp_path)
     assert fingerprint_spec(logged) == fingerprint_spec(plain)
 
 
@@ -359,9 +373,9 @@ def test_a_callback_that_is_no_factory_is_refused_where_the_spec_is_made():
     with pytest.raises(
         sg.error.InvalidSpec, match=r"callbacks\[0\].*expected a callable returning an SB3 BaseCallback"
     ):
-        quick_spec(callbacks=[3])
+        quick_spec(trainer=sg.SB3(callbacks=[3], hyperparameters=QUICK_HP))
     with pytest.raises(sg.error.InvalidSpec, match="expected a list of callback factories"):
-        quick_spec(callbacks=MarkTraining)
+        quick_spec(trainer=sg.SB3(callbacks=MarkTraining, hyperparameters=QUICK_HP))
 
 
 def test_tensorboard_needs_its_package_in_one_line(tmp_path, monkeypatch):
@@ -384,7 +398,9 @@ def checkpoints_of_the_run(root, seed, spec):
 def test_a_factory_that_takes_the_seed_and_spec_gets_them_so_each_run_writes_its_own_folder(tmp_path):
     from specguard.training.train import train_run
 
-    spec = quick_spec(callbacks=[functools.partial(checkpoints_of_the_run, str(tmp_path))])
+    spec = quick_spec(
+        trainer=sg.SB3(callbacks=[functools.partial(checkpoints_of_the_run, str(tmp_path))], hyperparameters=QUICK_HP)
+    )
     for seed in (0, 1):
         train_run(spec, seed)
     saved = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*.zip"))
@@ -417,7 +433,7 @@ def test_a_tensorboard_folder_that_cannot_be_made_is_refused_in_one_line_naming_
     }
     for folder, message in refused.items():
         with pytest.raises(sg.error.InvalidSpec) as spec_error:
-            quick_spec(tensorboard_log=folder)
+            quick_spec(trainer=sg.SB3(tensorboard_log=folder, hyperparameters=QUICK_HP))
         with pytest.raises(sg.error.InvalidSpec) as door_error:
             quick_spec().as_run(tensorboard_log=folder)
         for error in (spec_error, door_error):
@@ -460,7 +476,7 @@ def test_specguard_run_and_pytest_write_tensorboard_logs(tmp_path, pytester, mon
         "balance = sg.Always(sg.Goal('upright', theta=(-0.2, 0.2)), name='balance')\n"
         "budget = sg.Budget(timesteps=128, min_seeds=1, max_seeds=1, eval_episodes=4, checkpoints=1)\n"
         "tiny = {'n_steps': 64, 'batch_size': 32}\n"
-        "spec = sg.Spec(cartpole, balance, budget=budget, expect=0.0, hyperparameters=tiny)\n"
+        "spec = sg.Spec(cartpole, balance, budget=budget, expect=0.0, trainer=sg.SB3(hyperparameters=tiny))\n"
     )
     assert (
         main(["run", str(specs), "--no-cache", "--quiet", "--workers", "1", "--tensorboard-log", str(tmp_path / "cli")])
@@ -494,7 +510,9 @@ def test_a_met_checkpoint_is_written_to_tensorboard_at_its_step(tmp_path):
     # A look at step 128 meets every threshold (>= 0) and stops training in the middle of SB3's second rollout,
     # after SB3's last write: the look is the run's result, and TensorBoard has it at its step.
     budget = sg.Budget(timesteps=256, min_seeds=1, max_seeds=1, eval_episodes=4, max_eval_episodes=4, checkpoints=2)
-    spec = sg.Spec(CARTPOLE, BALANCE, budget=budget, expect=0.0, hyperparameters={"n_steps": 64, "batch_size": 32})
+    spec = sg.Spec(
+        CARTPOLE, BALANCE, budget=budget, expect=0.0, trainer=sg.SB3(hyperparameters={"n_steps": 64, "batch_size": 32})
+    )
     result = sg.run_spec(spec, workers=1, cache_dir=None, progress=None, tensorboard_log=tmp_path)
     (run,) = result.runs
     assert run.met_early and run.timesteps == 128
@@ -539,12 +557,19 @@ def test_a_callback_that_stops_training_says_so_in_the_result_the_table_the_fail
     from specguard.report.table import table
 
     one_episode = functools.partial(StopTrainingOnMaxEpisodes, max_episodes=1)
-    result = sg.run_spec(quick_spec(callbacks=[one_episode]), workers=1, cache_dir=None, progress=None)
+    result = sg.run_spec(
+        quick_spec(trainer=sg.SB3(callbacks=[one_episode], hyperparameters=QUICK_HP)),
+        workers=1,
+        cache_dir=None,
+        progress=None,
+    )
     for run in result.runs:
         assert run.stop_reason == f"stopped by StopTrainingOnMaxEpisodes at {run.timesteps} of 256 steps"
         assert 0 < run.timesteps < 256
     tiny = {"n_steps": 64, "batch_size": 32}
-    spec = sg.Spec(CARTPOLE, BALANCE, budget=QUICK, expect=0.99, hyperparameters=tiny, callbacks=[Forgetful])
+    spec = sg.Spec(
+        CARTPOLE, BALANCE, budget=QUICK, expect=0.99, trainer=sg.SB3(hyperparameters=tiny, callbacks=[Forgetful])
+    )
     result = sg.run_spec(spec, workers=1, cache_dir=tmp_path, progress=None)
     said = "stopped by Forgetful at 1 of 256 steps: its _on_step returned None, which SB3 takes as False"
     assert [r.stop_reason for r in result.runs] == [said, said] and [r.timesteps for r in result.runs] == [1, 1]

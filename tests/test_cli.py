@@ -26,8 +26,9 @@ SPEC_FILE = textwrap.dedent(
     )
     budget = sg.Budget(timesteps=128, min_seeds=1, eval_episodes=2, checkpoints=1)  # judged once
     tiny = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
-    easy = sg.Spec(pendulum, tree, budget=budget, expect={"stabilization": 0.0}, hyperparameters=tiny)
-    specs = {"hard": sg.Spec(pendulum, tree, budget=budget, expect={"pendulum": 0.99}, hyperparameters=tiny)}
+    trainer = sg.SB3(hyperparameters=tiny)
+    easy = sg.Spec(pendulum, tree, budget=budget, expect={"stabilization": 0.0}, trainer=trainer)
+    specs = {"hard": sg.Spec(pendulum, tree, budget=budget, expect={"pendulum": 0.99}, trainer=trainer)}
     """
 )
 
@@ -76,7 +77,7 @@ TWO_SPECS = textwrap.dedent(
 
     def spec(steps):
         budget = sg.Budget(timesteps=steps, min_seeds=2, eval_episodes=2, checkpoints=1)
-        return sg.Spec(pendulum, calm, budget=budget, expect=0.5, hyperparameters=tiny)
+        return sg.Spec(pendulum, calm, budget=budget, expect=0.5, trainer=sg.SB3(hyperparameters=tiny))
 
 
     short, long = spec(128), spec(192)
@@ -122,7 +123,8 @@ def test_run_reports_safety_rates_in_the_table_and_the_json(tmp_path, capsys):
         + textwrap.dedent(
             """
             spin = sg.Constraint(lambda s, a: abs(s.omega) > 8.5, name="spin")  # |omega| <= 8: never violated
-            safe = sg.Spec(pendulum, tree.annotate(spin), budget=budget, expect={"spin": 0.3}, hyperparameters=tiny)
+            trainer = sg.SB3(hyperparameters=tiny)
+            safe = sg.Spec(pendulum, tree.annotate(spin), budget=budget, expect={"spin": 0.3}, trainer=trainer)
             """
         )
     )

@@ -40,7 +40,7 @@ spec = sg.Spec(
     pendulum,
     tree,
     budget=sg.Budget(timesteps=640, min_seeds=2, eval_episodes=10),
-    hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1},
+    trainer=sg.SB3(hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1}),
     expect={"anywhere": 0.3},
 )
 """
@@ -130,11 +130,12 @@ spec = sg.Spec(
     pendulum,
     tree,
     budget=budget,
-    hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1},
+    trainer=sg.SB3(hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1}),
     expect={"anywhere": 0.5},
     undecided=UNDECIDED,
 )
-measured = sg.Spec(pendulum, tree, budget=budget, hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1})
+tiny = sg.SB3(hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1})
+measured = sg.Spec(pendulum, tree, budget=budget, trainer=tiny)
 """
 
 # What an undecided goal counts as: exit status of `specguard run`, pytest outcome.
@@ -202,7 +203,7 @@ spec = sg.Spec(
     pendulum,
     tree,
     budget=sg.Budget(timesteps=128, min_seeds=1, eval_episodes=4),
-    hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1},
+    trainer=sg.SB3(hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1}),
     expect=0.9,
 )
 """
@@ -268,7 +269,9 @@ def bad_import_specs() -> list[tuple[str, str, str]]:
     """``(name, the Spec's source, what its error says)``: an algorithm and an env of each module that cannot import."""
     cases = []
     for i, (module, says) in enumerate(CASES):
-        cases.append((f"algorithm_{i}", f'sg.Spec(cartpole, tree, budget, algorithm="{module}:PPO")', says))
+        cases.append(
+            (f"algorithm_{i}", f'sg.Spec(cartpole, tree, budget, trainer=sg.SB3(algorithm="{module}:PPO"))', says)
+        )
         cases.append(
             (f"env_{i}", f'sg.Spec(sg.InitialEnv("{module}:CartPole-v1", features=("x",)), tree, budget)', says)
         )

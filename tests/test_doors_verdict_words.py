@@ -36,7 +36,7 @@ expected = sg.Spec(
     pendulum,
     tree,
     budget=budget,
-    hyperparameters=tiny,
+    trainer=sg.SB3(hyperparameters=tiny),
     expect={"anywhere": 0.3, "position": 0.9},
     xfail={"anywhere": "the paper says it misses", "position": "the paper says it misses"},
 )
@@ -45,7 +45,7 @@ unsure = sg.Spec(
     pendulum,
     tree,
     budget=sg.Budget(timesteps=128, min_seeds=1, eval_episodes=2, max_eval_episodes=2, checkpoints=1),
-    hyperparameters=tiny,
+    trainer=sg.SB3(hyperparameters=tiny),
     expect={"anywhere": 0.5},
 )
 """

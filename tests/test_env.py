@@ -17,7 +17,7 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 import specguard as sg
 from example_specs import acrobot, lunar_lander, mountain_car, pendulum
 from specguard import strategies as sgst
-from specguard.construction.env import BaselineEnv
+from specguard.construction.env import BaselineEnv, make_baseline_env
 from specguard.error import GoalMetAtStart, UnreachableGoal
 from specguard.starts.space import START_OPTION, starts_of
 from specguard.testing import ReplayEnv
@@ -235,7 +235,7 @@ def test_identity_state_needs_one_feature_per_observation():
         sg.make_env(initial, sg.Goal("g", x=(0, 1)))
 
 
-@pytest.mark.parametrize("make", [sg.make_env, sg.make_baseline_env])
+@pytest.mark.parametrize("make", [sg.make_env, make_baseline_env])
 @pytest.mark.parametrize(
     ("features", "given"),
     [
@@ -258,7 +258,7 @@ def test_identity_state_rejects_a_non_box_observation_early():
     with pytest.raises(
         sg.error.StateMappingError, match=r"InitialEnv 'FrozenLake-v1': .* the observation space is Discrete\(16\)"
     ):
-        sg.make_baseline_env(initial, sg.Goal("g", cell=(0, 1)))
+        make_baseline_env(initial, sg.Goal("g", cell=(0, 1)))
 
 
 def test_unknown_feature_fails_before_the_env_is_built():
@@ -277,7 +277,7 @@ def test_make_env_rejects_wrong_argument_types():
         sg.make_env(pendulum.initial_env, pendulum.trees["a"], evaluator="fast")
 
 
-@pytest.mark.parametrize("make", [sg.make_env, sg.make_baseline_env])
+@pytest.mark.parametrize("make", [sg.make_env, make_baseline_env])
 @pytest.mark.parametrize(
     ("initial", "tree", "error", "message"),
     [
@@ -300,7 +300,7 @@ def test_the_baseline_env_refuses_what_make_env_refuses(make, initial, tree, err
         assert str(info.value).startswith(make.__name__)
 
 
-@pytest.mark.parametrize("make", [sg.make_env, sg.make_baseline_env])
+@pytest.mark.parametrize("make", [sg.make_env, make_baseline_env])
 def test_make_env_compiles_and_generates_the_tree_once(build_counts, make):
     env = make(lunar_lander.initial_env, lunar_lander.trees["c"])
     assert build_counts == {"compile": 1, "codegen": 1}
@@ -434,7 +434,7 @@ def test_acrobot_height_feature_comes_from_state():
 
 
 def test_baseline_env_keeps_the_initial_env_and_reports_goals():
-    baseline = sg.make_baseline_env(acrobot.initial_env, acrobot.trees["c"])
+    baseline = make_baseline_env(acrobot.initial_env, acrobot.trees["c"])
     raw = gym.make("Acrobot-v1")
     (obs_b, info_b), (obs_r, _) = baseline.reset(seed=4), raw.reset(seed=4)
     assert obs_b.tolist() == obs_r.tolist() and info_b["goals"] == {"height": False}
@@ -453,7 +453,7 @@ class NanReward(gym.Wrapper):
 
 def test_baseline_env_rejects_non_finite_rewards():
     initial = sg.InitialEnv(lambda: NanReward(gym.make("Pendulum-v1")), features=("x", "y", "omega"))
-    env = sg.make_baseline_env(initial, pendulum.trees["b"])
+    env = make_baseline_env(initial, pendulum.trees["b"])
     env.reset(seed=0)
     with pytest.raises(sg.error.EvaluationError, match=r"pendulum: the initial env returned a non-finite reward nan"):
         env.step(np.zeros(1, dtype=np.float32))
@@ -599,7 +599,7 @@ WIDE = sg.StartSpace({"x": (-1.0, 1.0), "theta": (-0.2, 0.2)})
     "make",
     [
         lambda **kw: sg.make_env(CARTPOLE, FAR, **kw),
-        lambda **kw: sg.make_baseline_env(CARTPOLE, FAR, **kw),
+        lambda **kw: make_baseline_env(CARTPOLE, FAR, **kw),
         lambda **kw: sg.Spec(CARTPOLE, FAR, budget=sg.Budget(timesteps=64), expect=0.5).make_env(**kw),
     ],
     ids=["make_env", "make_baseline_env", "Spec.make_env"],
@@ -627,4 +627,4 @@ def test_an_env_made_without_a_start_space_has_none_and_a_wrong_one_is_refused_n
     ):
         sg.make_env(CARTPOLE, FAR, starts=5)
     with pytest.raises(sg.error.UnknownFeature, match=r"the start space names 'height'"):
-        sg.make_baseline_env(CARTPOLE, FAR, starts={"height": (0.0, 1.0)})
+        make_baseline_env(CARTPOLE, FAR, starts={"height": (0.0, 1.0)})

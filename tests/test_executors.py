@@ -22,7 +22,7 @@ DRIVER = "SPECGUARD_TEST_DRIVER_PID"
 
 def spec(initial=None, **kwargs):
     kwargs.setdefault("budget", sg.Budget(timesteps=256, min_seeds=2, eval_episodes=3, checkpoints=1))
-    kwargs.setdefault("hyperparameters", TINY)
+    kwargs.setdefault("trainer", sg.SB3(hyperparameters=TINY))
     return sg.Spec(
         initial or pendulum.initial_env,
         pendulum.trees["b"],
@@ -161,8 +161,10 @@ def test_errors_on_the_cluster_are_the_same_one_line_per_seed(cluster):
 
 @pytest.mark.slow
 def test_spec_errors_found_on_the_cluster_reach_the_caller(cluster):
-    with pytest.raises(sg.error.InvalidSpec, match=r"Spec 'pendulum'.algorithm: DQN cannot act in a Box action space"):
-        dqn = spec(algorithm="DQN", hyperparameters={})
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"Spec 'pendulum'.trainer.algorithm: DQN cannot act in a Box action space"
+    ):
+        dqn = spec(trainer=sg.SB3(algorithm="DQN", hyperparameters={}))
         sg.run_spec(dqn, executor=cluster.scheduler_address, cache_dir=None, progress=None)
 
 
@@ -175,7 +177,8 @@ def test_on_the_cluster():
     pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
     tree = sg.All(sg.Goal("position", x=(0.966, 1.0)), sg.Goal("stabilization", omega=(-0.25, 0.25)), name="pendulum")
     budget = sg.Budget(timesteps=128, min_seeds=2, eval_episodes=2)
-    return sg.Spec(pendulum, tree, budget=budget, hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1})
+    tiny = sg.SB3(hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1})
+    return sg.Spec(pendulum, tree, budget=budget, trainer=tiny)
 """
 
 

@@ -211,7 +211,7 @@ import specguard as sg
 pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
 budget = sg.Budget(timesteps=64, min_seeds=1, eval_episodes=1, checkpoints=1)
 up = sg.Spec(pendulum, sg.Goal("still", omega=(-0.25, 0.25)), budget=budget, expect={"still": 0.0},
-             hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1})
+             trainer=sg.SB3(hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1}))
 """
 
 

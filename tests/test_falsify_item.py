@@ -15,6 +15,8 @@ from specguard.starts.space import StartSpace
 from specguard.stats.verdicts import RunVerdict
 
 HEADER = """
+import dataclasses
+
 import pytest
 import specguard as sg
 
@@ -35,7 +37,7 @@ SEARCH = dict(examples=4, uniform=8)
 def tiny(tree):
     budget = sg.Budget(timesteps=128, min_seeds=1, eval_episodes=4, checkpoints=1)
     initial = STEP_IN if tree is ANYWHERE else PENDULUM
-    return sg.Spec(initial, tree, budget=budget, hyperparameters=TINY)
+    return sg.Spec(initial, tree, budget=budget, trainer=sg.SB3(hyperparameters=TINY))
 """
 
 
@@ -181,7 +183,7 @@ def test_goal_specs_take_falsify_per_spec(pytester):
     result = run(
         pytester,
         """
-        up = sg.Spec(PENDULUM, UPRIGHT, budget=tiny(UPRIGHT).budget, hyperparameters=TINY, expect={"slow": 0.0})
+        up = dataclasses.replace(tiny(UPRIGHT), expect={"slow": 0.0})
         test_specs = sg.goal_specs({"up": up}, falsify={"up": sg.Falsify(**SEARCH)})
         """,
         "--goal-specs",

@@ -39,7 +39,9 @@ def cache(tmp_path_factory):
 @pytest.mark.slow
 def test_the_command_line_falsifies_by_joint_name_with_no_setter_written(tmp_path, cache, capsys):
     path = tmp_path / "ip_specs.py"
-    path.write_text(SPEC + "balance = sg.Spec(PENDULUM, BALANCE, budget=BUDGET, hyperparameters=TINY)\n")
+    path.write_text(
+        SPEC + "balance = sg.Spec(PENDULUM, BALANCE, budget=BUDGET, trainer=sg.SB3(hyperparameters=TINY))\n"
+    )
     argv = ["falsify", f"{path}::balance", "--cache-dir", str(cache), "--examples", "40", "--uniform", "20", "--quiet"]
     code = main([*argv, "--starts", "hinge=-0.1:0.1", "hinge_vel=-0.5:0.5"])
     out = capsys.readouterr().out
@@ -63,7 +65,7 @@ def test_the_report_writes_the_counterexamples_gif_without_a_display(pytester, c
     body = f"""
         @sg.goal_spec(expect={{"balance": 0.5}}, falsify=sg.Falsify({STARTS!r}, examples=20, uniform=0))
         def test_balance():
-            return sg.Spec(PENDULUM, BALANCE, budget=BUDGET, hyperparameters=TINY)
+            return sg.Spec(PENDULUM, BALANCE, budget=BUDGET, trainer=sg.SB3(hyperparameters=TINY))
     """
     pytester.makepyfile(test_specs=SPEC + textwrap.dedent(body))
     pytester.makeini("[pytest]\ngoal_specs_workers = 1\n")

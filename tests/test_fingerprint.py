@@ -31,7 +31,7 @@ BUDGET = sg.Budget(timesteps=128, min_seeds=1, eval_episodes=2)
 
 def spec(tree=None, initial=None, **kwargs):
     kwargs.setdefault("budget", BUDGET)
-    kwargs.setdefault("hyperparameters", TINY)
+    kwargs.setdefault("trainer", sg.SB3(hyperparameters=TINY))
     return sg.Spec(initial or pendulum.initial_env, tree or pendulum.trees["w"], **kwargs)
 
 
@@ -250,14 +250,14 @@ def test_every_spec_field_is_in_the_spec_key_and_only_run_fields_in_the_run_key(
         assert other.spec_key != fp.spec_key, field
         assert other.run_key(0) == fp.run_key(0), field  # one run does not depend on how runs are counted
     deciding = {
-        "algorithm": dataclasses.replace(base, algorithm="A2C", hyperparameters={}),
-        "hyperparameters": dataclasses.replace(base, hyperparameters={**TINY, "gamma": 0.9}),
-        "n_envs": dataclasses.replace(base, n_envs=2),
-        "normalize": dataclasses.replace(base, normalize=True),
+        "algorithm": dataclasses.replace(base, trainer=sg.SB3("A2C")),
+        "hyperparameters": dataclasses.replace(base, trainer=sg.SB3(hyperparameters={**TINY, "gamma": 0.9})),
+        "n_envs": dataclasses.replace(base, trainer=sg.SB3(hyperparameters=TINY, n_envs=2)),
+        "normalize": dataclasses.replace(base, trainer=sg.SB3(hyperparameters=TINY, normalize=True)),
         "deterministic": dataclasses.replace(base, deterministic=False),
         "confidence": dataclasses.replace(base, confidence=0.9),
         "baseline": dataclasses.replace(base, baseline=True),
-        "observation": dataclasses.replace(base, observation="features+env", policy=None),
+        "observation": dataclasses.replace(base, observation="features+env", trainer=sg.SB3(hyperparameters=TINY)),
         "expect": dataclasses.replace(base, expect={"pendulum": 0.6}),
         "timesteps": dataclasses.replace(base, budget=dataclasses.replace(base.budget, timesteps=129)),
         "tree": dataclasses.replace(base, tree=pendulum.trees["c"], expect={}),
@@ -348,7 +348,8 @@ def test_the_key_is_the_same_across_processes_and_hash_seeds(tmp_path):
             sg.Goal("slow", omega=(-0.25, 0.25)),
             name="pendulum",
         )
-        spec = sg.Spec(pendulum.initial_env, tree, budget=sg.Budget(128), hyperparameters={"n_steps": 64})
+        trainer = sg.SB3(hyperparameters={"n_steps": 64})
+        spec = sg.Spec(pendulum.initial_env, tree, budget=sg.Budget(128), trainer=trainer)
         fp = fingerprint_spec(spec)
         print(fp.spec_key, fp.run_key(3))
         """

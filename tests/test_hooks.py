@@ -42,7 +42,7 @@ UPRIGHT = sg.All(sg.Goal("position", x=(0.966, 1.0), y=(-0.259, 0.259)), sg.Goal
 
 def tiny(seeds=1):
     budget = sg.Budget(timesteps=128, min_seeds=seeds, eval_episodes=4, checkpoints=1)
-    return sg.Spec(PENDULUM, UPRIGHT, budget=budget, hyperparameters=TINY)
+    return sg.Spec(PENDULUM, UPRIGHT, budget=budget, trainer=sg.SB3(hyperparameters=TINY))
 
 
 @sg.goal_spec(

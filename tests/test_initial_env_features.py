@@ -10,6 +10,7 @@ import pytest
 
 import specguard as sg
 from specguard.cache.fingerprint import fingerprint_spec
+from specguard.construction.env import make_baseline_env
 from specguard.report.show import render_spec
 from specguard.starts.space import START_OPTION, StartSpace
 
@@ -131,7 +132,7 @@ def test_a_dict_observation_with_all_features_from_the_env():
     for _ in range(3):
         obs, _, terminated, _, _ = env.step(1)
     assert obs.tolist() == [3.0] and terminated
-    baseline = sg.make_baseline_env(initial, RIGHT)
+    baseline = make_baseline_env(initial, RIGHT)
     obs, info = baseline.reset(seed=0)
     assert set(obs) == {"image", "direction"} and info["goals"] == {"right": False}
 

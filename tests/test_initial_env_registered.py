@@ -103,9 +103,9 @@ budget = sg.Budget(timesteps=64, min_seeds=1, max_seeds=1, eval_episodes=2)
 tiny = {"n_steps": 32, "batch_size": 32, "n_epochs": 1}
 goal = sg.Goal("right", x=(0.05, None))
 plain = sg.Spec(sg.InitialEnv("sgreg_cliLine-v0", features=("x",)), goal, budget=budget,
-                hyperparameters=tiny, expect=0.01)
+                trainer=sg.SB3(hyperparameters=tiny), expect=0.01)
 qualified = sg.Spec(sg.InitialEnv("sgreg_cli:sgreg_cliLine-v0", features=("x",)), goal, budget=budget,
-                    hyperparameters=tiny, expect=0.01)
+                    trainer=sg.SB3(hyperparameters=tiny), expect=0.01)
 """
 
 
@@ -153,7 +153,7 @@ grid_spec = sg.Spec(
     grid,
     sg.Goal("green_square", x=(3, 3), y=(3, 3)),
     budget=sg.Budget(timesteps=128, min_seeds=1, eval_episodes=2, checkpoints=1),
-    hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1},
+    trainer=sg.SB3(hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1}),
     expect=0.8,
     xfail={"green_square": "128 training steps"},
 )

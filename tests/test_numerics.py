@@ -21,7 +21,7 @@ balance = sg.Spec(
     sg.Always(sg.Goal("upright", theta=(-0.2, 0.2)), name="balance"),
     expect=0.5,
     budget=sg.Budget(timesteps=1024, eval_episodes=2, max_eval_episodes=2, min_seeds=1, max_seeds=1, checkpoints=1),
-    hyperparameters={"n_steps": 256, "batch_size": 64, "n_epochs": 2},
+    trainer=sg.SB3(hyperparameters={"n_steps": 256, "batch_size": 64, "n_epochs": 2}),
 )
 """
 _FILE: dict = {}

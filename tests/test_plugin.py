@@ -32,7 +32,7 @@ def tree():
 
 def tiny(pendulum, tree, seeds=1, episodes=4, max_episodes=None):
     budget = sg.Budget(timesteps=128, min_seeds=seeds, eval_episodes=episodes, max_eval_episodes=max_episodes)
-    return sg.Spec(pendulum, tree, budget=budget, hyperparameters=TINY)
+    return sg.Spec(pendulum, tree, budget=budget, trainer=sg.SB3(hyperparameters=TINY))
 """
 
 
@@ -191,7 +191,7 @@ def test_one_item_for_the_specs_own_thresholds_and_the_result_fixture(pytester):
         @sg.goal_spec()
         def test_whole(pendulum, tree):
             spec = tiny(pendulum, tree)
-            return sg.Spec(spec.initial_env, spec.tree, budget=spec.budget, hyperparameters=TINY,
+            return sg.Spec(spec.initial_env, spec.tree, budget=spec.budget, trainer=sg.SB3(hyperparameters=TINY),
                            expect={"stabilization": 0.0})
 
 
@@ -325,14 +325,17 @@ def test_xdist_runs_each_spec_once_and_reports_on_the_controller(pytester):
                 return True
 
 
+        COUNTING = sg.SB3(hyperparameters=TINY, callbacks=[CountTraining])
+
+
         @sg.goal_spec(expect={{"stabilization": 0.0, "pendulum": 0.0, "position": 0.0}})
         def test_a(pendulum, tree):
-            return dataclasses.replace(tiny(pendulum, tree), callbacks=[CountTraining])
+            return dataclasses.replace(tiny(pendulum, tree), trainer=COUNTING)
 
 
         @sg.goal_spec(expect={{"stabilization": 0.0}})
         def test_b(pendulum, tree):
-            return dataclasses.replace(tiny(pendulum, tree), callbacks=[CountTraining])
+            return dataclasses.replace(tiny(pendulum, tree), trainer=COUNTING)
         """,
     )
     result = run(pytester, "--goal-specs", "-n", "2", "--dist", "loadgroup")
@@ -420,7 +423,8 @@ def test_goal_specs_gates_specs_declared_once_by_their_own_thresholds(pytester):
             budget = sg.Budget(timesteps=128, min_seeds=1, eval_episodes=4)
             return {
                 "tiny": sg.Spec(
-                    env, tree, budget=budget, hyperparameters=TINY, expect={"stabilization": 0.0, "position": 0.95},
+                    env, tree, budget=budget, trainer=sg.SB3(hyperparameters=TINY),
+                    expect={"stabilization": 0.0, "position": 0.95},
                     xfail={"position": "never within 128 steps"},
                 ),
             }
@@ -538,7 +542,7 @@ class Boom(gym.Wrapper):
 def test_broken(tree):
     initial = sg.InitialEnv(lambda: Boom(gym.make("Pendulum-v1")), features=("x", "y", "omega"))
     budget = sg.Budget(timesteps=64, min_seeds=1, eval_episodes=2)
-    return sg.Spec(initial, tree, budget=budget, hyperparameters=TINY)
+    return sg.Spec(initial, tree, budget=budget, trainer=sg.SB3(hyperparameters=TINY))
 """
 
 
@@ -705,7 +709,7 @@ def test_stay_tall():
     initial = sg.InitialEnv(lambda: gym.wrappers.TimeLimit(Hopper(), 10), features=("z",))
     tree = sg.Always(sg.Goal("tall", z=(0.5, None)), name="stay")
     budget = sg.Budget(timesteps=64, min_seeds=1, eval_episodes=4)
-    return sg.Spec(initial, tree, budget=budget, hyperparameters=TINY)
+    return sg.Spec(initial, tree, budget=budget, trainer=sg.SB3(hyperparameters=TINY))
 """
 
 

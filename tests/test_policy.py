@@ -31,7 +31,7 @@ def pendulum_spec(**kwargs):
 @pytest.fixture(scope="module")
 def lstm():
     """An untrained recurrent policy on Pendulum: continuous actions, so every change of its state shows."""
-    spec = pendulum_spec(algorithm="RecurrentPPO")
+    spec = pendulum_spec(trainer=sg.SB3(algorithm="RecurrentPPO"))
     return spec, RecurrentPPO("MlpLstmPolicy", spec.make_env(), seed=0, device="cpu")
 
 
@@ -101,7 +101,7 @@ def test_rollouts_carry_the_state_through_each_episode(lstm):
 
 
 def test_the_falsifiers_lockstep_batches_give_each_start_its_own_state():
-    spec = cartpole_spec(algorithm="RecurrentPPO")
+    spec = cartpole_spec(trainer=sg.SB3(algorithm="RecurrentPPO"))
     model = RecurrentPPO("MlpLstmPolicy", spec.make_env(), seed=0, device="cpu")
     space = sg.StartSpace({"theta": (-0.2, 0.2), "omega": (-1.0, 1.0)})
     points = np.random.default_rng(1).uniform(-1, 1, size=(8, 4)) * [0, 0, 0.2, 1.0]
@@ -124,7 +124,7 @@ def test_a_masked_model_reads_each_rows_masks_from_its_env():
             assert name == "action_masks"
             return lambda: np.arange(2) == self.valid
 
-    spec = cartpole_spec(algorithm="MaskablePPO")
+    spec = cartpole_spec(trainer=sg.SB3(algorithm="MaskablePPO"))
     model = MaskablePPO("MlpPolicy", spec.make_env(), seed=0, device="cpu")
     act = policy(model, batch=True)
     assert act.masked
@@ -137,7 +137,9 @@ def test_a_masked_model_reads_each_rows_masks_from_its_env():
 
 
 def test_a_masked_model_not_told_its_envs_says_so():
-    model = MaskablePPO("MlpPolicy", cartpole_spec(algorithm="MaskablePPO").make_env(), seed=0, device="cpu")
+    model = MaskablePPO(
+        "MlpPolicy", cartpole_spec(trainer=sg.SB3(algorithm="MaskablePPO")).make_env(), seed=0, device="cpu"
+    )
     with pytest.raises(sg.SpecError, match=r"MaskablePPO acts on action masks, and the policy was not told its envs"):
         policy(model)(CART_OBS[0, 0])
 
@@ -149,7 +151,7 @@ def test_a_policys_actions_are_predicts_own_to_the_bit_and_the_model_and_torch_a
     from stable_baselines3 import PPO, SAC
     from torch.distributions import Distribution
 
-    spec = pendulum_spec(algorithm=algorithm)
+    spec = pendulum_spec(trainer=sg.SB3(algorithm=algorithm))
     model = {"PPO": PPO, "SAC": SAC, "RecurrentPPO": RecurrentPPO}[algorithm](
         "MlpLstmPolicy" if algorithm == "RecurrentPPO" else "MlpPolicy", spec.make_env(), seed=0, device="cpu"
     )

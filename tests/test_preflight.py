@@ -8,6 +8,7 @@ import pytest
 
 import specguard as sg
 from specguard.construction.compiled import compile_tree
+from specguard.construction.env import make_baseline_env
 from specguard.construction.preflight import check_goals_off_the_edge, check_goals_reachable, unreachable_reason
 from specguard.engine.run_spec import run_spec
 from specguard.error import InvalidSpec, UnreachableGoal
@@ -29,7 +30,7 @@ def test_a_goal_outside_the_bounds_is_refused_naming_feature_box_and_bounds(cart
     assert "goal box x in [10, inf] lies outside the bounds of x, [-4.8, 4.8]" in str(e.value)
     assert "Hint: move the box of 'x' inside [-4.8, 4.8]" in str(e.value)
     with pytest.raises(UnreachableGoal, match="cartpole/far"):
-        sg.make_baseline_env(cartpole, tree)
+        make_baseline_env(cartpole, tree)
 
 
 def test_run_spec_refuses_before_training(cartpole, tmp_path):

@@ -17,6 +17,7 @@ import pytest
 
 import specguard as sg
 from specguard.cli.main import main
+from specguard.construction.env import make_baseline_env
 from specguard.construction.preflight import START_SAMPLES
 from specguard.error import GoalMetAtStart, InvalidSpec, SpecWarning
 from specguard.spec.spec import check_spec
@@ -75,7 +76,7 @@ def test_a_root_goal_met_at_every_start_is_refused_naming_goal_and_share():
     assert f"holds at all {START_SAMPLES} of {START_SAMPLES} sampled starts" in str(e.value)
     assert "Hint: " in str(e.value) and "outside" in e.value.hint
     with pytest.raises(GoalMetAtStart, match="up"):  # the baseline refuses what the constructed env refuses
-        sg.make_baseline_env(initial, UP)
+        make_baseline_env(initial, UP)
 
 
 def test_a_root_goal_met_at_some_starts_warns_with_its_share():
@@ -117,7 +118,9 @@ def test_the_sampled_starts_leave_the_built_env_unseeded():
 
 def test_run_spec_refuses_before_training(tmp_path):
     initial = sg.InitialEnv(always_inside, features=("x",))
-    spec = sg.Spec(initial, UP, budget=sg.Budget(timesteps=64, min_seeds=1, eval_episodes=2), hyperparameters=TINY)
+    spec = sg.Spec(
+        initial, UP, budget=sg.Budget(timesteps=64, min_seeds=1, eval_episodes=2), trainer=sg.SB3(hyperparameters=TINY)
+    )
     events = []
     with pytest.raises(GoalMetAtStart, match="up"):
         sg.run_spec(spec, workers=1, cache_dir=None, progress=events.append)
@@ -144,7 +147,7 @@ def test_the_verdict_counts_evaluation_episodes_that_started_in_the_root_goal():
 
     initial = sg.InitialEnv(sometimes_inside, features=("x",))
     budget = sg.Budget(timesteps=64, min_seeds=1, max_seeds=1, eval_episodes=6, checkpoints=1)
-    spec = sg.Spec(initial, UP, budget=budget, hyperparameters=TINY, expect=0.1)
+    spec = sg.Spec(initial, UP, budget=budget, expect=0.1, trainer=sg.SB3(hyperparameters=TINY))
     with pytest.warns(SpecWarning):
         result = sg.run_spec(spec, workers=1, cache_dir=None, progress=None)
     (run,) = result.runs

@@ -99,7 +99,7 @@ def test_a_workers_update_round_trips_and_foreign_lines_pass_through():
 @pytest.mark.slow
 def test_two_seeds_lines_never_share_a_line(tmp_path):
     budget = sg.Budget(timesteps=640, min_seeds=2, eval_episodes=2)
-    spec = sg.Spec(pendulum.initial_env, pendulum.trees["b"], budget=budget, hyperparameters=TINY)
+    spec = sg.Spec(pendulum.initial_env, pendulum.trees["b"], budget=budget, trainer=sg.SB3(hyperparameters=TINY))
     events: list[ProgressEvent] = []
     sg.run_spec(spec, workers=2, cache_dir=tmp_path, progress=events.append)
     lines = [format_event(e) for e in events]

@@ -56,7 +56,7 @@ def test_readme_goal_spec_test_builds_the_spec_its_output_shows():
     exec(compile(block, str(README), "exec"), namespace)
     spec = namespace["test_upright_and_still"]()
     assert isinstance(spec, sg.Spec) and spec.tree.name == "pendulum"
-    assert spec.budget.timesteps == 100_000 and spec.n_envs == 4
+    assert spec.budget.timesteps == 100_000 and spec.trainer.n_envs == 4
 
 
 def test_readme_cites_the_source_paper_by_its_title_where_it_first_names_it():

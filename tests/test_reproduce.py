@@ -29,15 +29,16 @@ import specguard as sg
 initial_env = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 budget = sg.Budget(timesteps=128, eval_episodes=4, checkpoints=10)
+trainer = sg.SB3(hyperparameters=TINY)
 tree = sg.All(sg.Goal("position", x=(0.966, 1.0)), sg.Goal("stabilization", omega=(-0.25, 0.25)), name="p")
 specs = {
-    "b": sg.Spec(initial_env, tree, budget=budget, hyperparameters=TINY, expect={"stabilization": 0.0}),
-    "baseline": sg.Spec(initial_env, tree, budget=budget, hyperparameters=TINY, expect=0.5, baseline=True),
+    "b": sg.Spec(initial_env, tree, budget=budget, trainer=trainer, expect={"stabilization": 0.0}),
+    "baseline": sg.Spec(initial_env, tree, budget=budget, trainer=trainer, expect=0.5, baseline=True),
     "auto": sg.Spec(
         initial_env,
         sg.All(*tree.children, name="p", weights="auto"),
         budget=budget,
-        hyperparameters=TINY,
+        trainer=sg.SB3(hyperparameters=TINY),
         expect={"stabilization": 0.0},
     ),
 }
@@ -131,8 +132,9 @@ import specguard as sg
 initial_env = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 budget = sg.Budget(timesteps=200_000, eval_episodes=4)
+trainer = sg.SB3(hyperparameters=TINY)
 specs = {  # three different trees: identical specs would share one training run
-    name: sg.Spec(initial_env, sg.Goal(name, x=(low, 1.0)), budget=budget, hyperparameters=TINY, expect=0.0)
+    name: sg.Spec(initial_env, sg.Goal(name, x=(low, 1.0)), budget=budget, trainer=trainer, expect=0.0)
     for name, low in (("first", 0.9), ("second", 0.95), ("third", 0.966))
 }
 """

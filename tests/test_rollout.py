@@ -22,7 +22,8 @@ def cartpole_spec(**kwargs):
     # the root (both goals) is hardly reached, so the episode runs until the pole falls: many frames
     tree = sg.All(sg.Goal("centre", x=(-0.5, 0.5)), sg.Goal("fast", v=(2.0, 100.0)), name="cartpole")
     budget = sg.Budget(timesteps=128, min_seeds=1, eval_episodes=2)
-    return sg.Spec(cartpole, tree, budget=budget, hyperparameters=TINY, **kwargs)
+    kwargs.setdefault("trainer", sg.SB3(hyperparameters=TINY))
+    return sg.Spec(cartpole, tree, budget=budget, **kwargs)
 
 
 @pytest.fixture(scope="module")
@@ -202,7 +203,7 @@ def test_writing_a_gif_prints_nothing_to_stderr(tmp_path):
         pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
         up = sg.Goal("up", x=(0.9, 1.0), omega=(-0.1, 0.1))  # met at none of the sampled starts: no SpecWarning
         spec = sg.Spec(pendulum, up, budget=sg.Budget(timesteps=64, eval_episodes=1),
-                       hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1})
+                       trainer=sg.SB3(hyperparameters={"n_steps": 64, "batch_size": 32, "n_epochs": 1}))
         _, model = train_run(spec, seed=0)
         gif = write_gif(model, spec, sys.argv[1], max_frames=5)
         assert gif.written, gif.text

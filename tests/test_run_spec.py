@@ -25,7 +25,7 @@ TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 
 def spec(tree="w", **kwargs):
     kwargs.setdefault("budget", sg.Budget(timesteps=128, min_seeds=2, max_seeds=4, eval_episodes=4))
-    kwargs.setdefault("hyperparameters", TINY)
+    kwargs.setdefault("trainer", sg.SB3(hyperparameters=TINY))
     return sg.Spec(pendulum.initial_env, pendulum.trees[tree], **kwargs)
 
 
@@ -77,7 +77,12 @@ def make_failing():
 @pytest.mark.slow
 def test_a_failing_seed_keeps_the_others(tmp_path):
     initial = sg.InitialEnv(make_failing, features=("x", "y", "omega"))
-    s = sg.Spec(initial, pendulum.trees["b"], budget=sg.Budget(timesteps=128, eval_episodes=2), hyperparameters=TINY)
+    s = sg.Spec(
+        initial,
+        pendulum.trees["b"],
+        budget=sg.Budget(timesteps=128, eval_episodes=2),
+        trainer=sg.SB3(hyperparameters=TINY),
+    )
     lines = []
     result = sg.run_spec(s, workers=2, cache_dir=tmp_path, progress=lines.append)
     assert [r.seed for r in result.runs] == [0]
@@ -88,8 +93,10 @@ def test_a_failing_seed_keeps_the_others(tmp_path):
 
 @pytest.mark.slow
 def test_spec_errors_from_workers_reach_the_caller(tmp_path):
-    with pytest.raises(sg.error.InvalidSpec, match=r"Spec 'pendulum'.algorithm: DQN cannot act in a Box action space"):
-        sg.run_spec(spec(algorithm="DQN", hyperparameters={}), workers=1, cache_dir=None, progress=None)
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"Spec 'pendulum'.trainer.algorithm: DQN cannot act in a Box action space"
+    ):
+        sg.run_spec(spec(trainer=sg.SB3(algorithm="DQN", hyperparameters={})), workers=1, cache_dir=None, progress=None)
 
 
 def test_workers():
@@ -129,7 +136,12 @@ def make_killed():
 def test_a_killed_worker_fails_its_seed_alone_and_the_other_seed_is_stored(tmp_path, monkeypatch):
     monkeypatch.setenv(PARENT, str(os.getpid()))
     initial = sg.InitialEnv(make_killed, features=("x", "y", "omega"))
-    s = sg.Spec(initial, pendulum.trees["b"], budget=sg.Budget(timesteps=128, eval_episodes=2), hyperparameters=TINY)
+    s = sg.Spec(
+        initial,
+        pendulum.trees["b"],
+        budget=sg.Budget(timesteps=128, eval_episodes=2),
+        trainer=sg.SB3(hyperparameters=TINY),
+    )
     result = sg.run_spec(s, workers=2, cache_dir=tmp_path, progress=None)
     assert [r.seed for r in result.runs] == [0]
     assert result.errors[1].startswith("seed 1, training step ")
@@ -166,7 +178,12 @@ class FailsInEvaluation(gym.Wrapper):
 @pytest.mark.parametrize("cached", [True, False], ids=["cache", "no cache"])
 def test_an_env_that_cannot_be_built_is_a_spec_error_naming_it(tmp_path, initial, message, cached):
     # Every seed would fail the same way: a mistake in the spec, raised once, not a failure per seed.
-    s = sg.Spec(initial, pendulum.trees["b"], budget=sg.Budget(timesteps=64, eval_episodes=2), hyperparameters=TINY)
+    s = sg.Spec(
+        initial,
+        pendulum.trees["b"],
+        budget=sg.Budget(timesteps=64, eval_episodes=2),
+        trainer=sg.SB3(hyperparameters=TINY),
+    )
     with pytest.raises(sg.error.InitialEnvError, match=message):
         sg.run_spec(s, workers=2, cache_dir=tmp_path if cached else None, progress=None)
 
@@ -179,7 +196,7 @@ def test_env_failures_are_one_clean_line_per_seed(tmp_path, cached):
         r"Spec 'pendulum', seed {seed}, evaluation episode 0: the environment raised RuntimeError: evaluation broke"
     )
     budget = sg.Budget(timesteps=64, eval_episodes=2, checkpoints=1)
-    s = sg.Spec(initial, pendulum.trees["b"], budget=budget, hyperparameters=TINY)
+    s = sg.Spec(initial, pendulum.trees["b"], budget=budget, trainer=sg.SB3(hyperparameters=TINY))
     result = sg.run_spec(s, workers=2, cache_dir=tmp_path if cached else None, progress=None)
     assert not result.passed and result.runs == []
     for seed in (0, 1):
@@ -194,7 +211,7 @@ pendulum = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
 tree = sg.All(sg.Goal("position", x=(0.966, 1.0)), sg.Goal("stabilization", omega=(-0.25, 0.25)), name="pendulum")
 spec = sg.Spec(
     pendulum, tree, budget=sg.Budget(timesteps={steps}, min_seeds=1, eval_episodes=2),
-    hyperparameters={{"n_steps": 64, "batch_size": 64, "n_epochs": 1}},
+    trainer=sg.SB3(hyperparameters={{"n_steps": 64, "batch_size": 64, "n_epochs": 1}}),
     expect={{"position": {threshold}}},
 )
 """
@@ -343,7 +360,9 @@ def test_a_safety_threshold_is_asserted_end_to_end(tmp_path):
     never = sg.Constraint(lambda s, a: abs(s.omega) > 8.5, name="never")
     tree = sg.All(*pendulum.trees["b"].children, name="pendulum").annotate(never)
     budget = sg.Budget(timesteps=128, min_seeds=2, max_seeds=4, eval_episodes=4, checkpoints=1)
-    s = sg.Spec(pendulum.initial_env, tree, budget=budget, hyperparameters=TINY, expect={"never": 0.3}, quorum=2)
+    s = sg.Spec(
+        pendulum.initial_env, tree, budget=budget, expect={"never": 0.3}, quorum=2, trainer=sg.SB3(hyperparameters=TINY)
+    )
     result = sg.run_spec(s, workers=2, cache_dir=None, progress=None)
     assert result.passed and result.goals["pendulum:never"].runs == ["met", "met"]
     assert result.success("pendulum:never") == (8, 8)
@@ -365,7 +384,8 @@ def test_a_script_without_a_main_guard_fails_fast_instead_of_hanging(tmp_path):
             env = sg.InitialEnv("Pendulum-v1", features=("x", "y", "omega"))
             budget = sg.Budget(timesteps=64, min_seeds=1, eval_episodes=1)
             tiny = {{"n_steps": 64, "batch_size": 32, "n_epochs": 1}}
-            spec = sg.Spec(env, sg.Goal("up", x=(0.9, 1.0)), budget=budget, hyperparameters=tiny, expect=0.5)
+            trainer = sg.SB3(hyperparameters=tiny)
+            spec = sg.Spec(env, sg.Goal("up", x=(0.9, 1.0)), budget=budget, trainer=trainer, expect=0.5)
             result = sg.run_spec(spec, workers=1, cache_dir={str(tmp_path / "cache")!r}, progress=None)
             print("errors:", result.errors)
             """
@@ -456,7 +476,12 @@ class WaitsForAStoredRun(gym.Wrapper):
 def test_a_finished_seed_is_stored_while_the_other_still_trains(tmp_path):
     cache = tmp_path / "cache"
     initial = sg.InitialEnv(lambda: WaitsForAStoredRun(gym.make("Pendulum-v1"), cache), features=("x", "y", "omega"))
-    s = sg.Spec(initial, pendulum.trees["b"], budget=sg.Budget(timesteps=128, eval_episodes=2), hyperparameters=TINY)
+    s = sg.Spec(
+        initial,
+        pendulum.trees["b"],
+        budget=sg.Budget(timesteps=128, eval_episodes=2),
+        trainer=sg.SB3(hyperparameters=TINY),
+    )
     result = sg.run_spec(s, workers=2, cache_dir=cache, progress=None)
     assert result.errors == {} and [r.seed for r in result.runs] == [0, 1]
 

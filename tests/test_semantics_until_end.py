@@ -21,6 +21,7 @@ import specguard as sg
 from specguard import strategies as sgst
 from specguard.construction import cap
 from specguard.construction.cap import CAPPED, EPISODE_CAP
+from specguard.construction.env import make_baseline_env
 from specguard.construction.preflight import START_SAMPLES
 from specguard.construction.reference import ReferenceEvaluator
 from specguard.engine.judging import judged
@@ -223,7 +224,7 @@ def test_a_spec_trains_on_it_and_its_table_counts_the_episodes_that_started_outs
     initial = sg.InitialEnv(sometimes_inside, features=("x",))
     tree = sg.Always(sg.Goal("up", x=(0.5, None)), name="stay")
     budget = sg.Budget(timesteps=64, min_seeds=1, max_seeds=1, eval_episodes=6, checkpoints=1)
-    spec = sg.Spec(initial, tree, budget=budget, hyperparameters=TINY, expect=0.1)
+    spec = sg.Spec(initial, tree, budget=budget, expect=0.1, trainer=sg.SB3(hyperparameters=TINY))
     with pytest.warns(SpecWarning):
         result = sg.run_spec(spec, workers=1, cache_dir=None, progress=None)
     (run,) = result.runs
@@ -320,7 +321,7 @@ def test_beside_a_reach_goal_the_envs_termination_where_it_is_reached_is_success
 def test_the_baseline_env_reports_the_fall_too():
     initial = sg.InitialEnv(lambda: gym.wrappers.TimeLimit(Hopper(0.6), 20), features=("x",))
     tree = sg.Always(STAY_TALL, name="stay")
-    for env in (sg.make_baseline_env(initial, tree), sg.make_env(initial, tree)):
+    for env in (make_baseline_env(initial, tree), sg.make_env(initial, tree)):
         env.reset(seed=0)
         for _ in range(5):
             _, _, terminated, truncated, info = env.step(0)
@@ -334,7 +335,7 @@ def test_a_run_counts_the_episodes_the_env_ended_before_the_horizon(until):
     initial = sg.InitialEnv(lambda: gym.wrappers.TimeLimit(Hopper(0.6), 20), features=("x",))
     tree = sg.Always(STAY_TALL, name="stay", until=until)
     budget = sg.Budget(timesteps=64, min_seeds=1, max_seeds=1, eval_episodes=6, checkpoints=1)
-    spec = sg.Spec(initial, tree, budget=budget, hyperparameters=TINY, expect=0.5)
+    spec = sg.Spec(initial, tree, budget=budget, expect=0.5, trainer=sg.SB3(hyperparameters=TINY))
     result = sg.run_spec(spec, workers=1, cache_dir=None, progress=None)
     (run,) = result.runs
     assert run.terminated == run.episodes  # every episode fell at step 5 of 20
@@ -371,7 +372,7 @@ def test_a_run_on_an_env_that_never_ends_finishes_and_says_where_it_cut(monkeypa
     initial = sg.InitialEnv(lambda: Endless(0.6), features=("x",))
     tree = sg.Always(sg.Goal("up", x=(-2.0, None)), name="stay")
     budget = sg.Budget(timesteps=64, min_seeds=1, max_seeds=1, eval_episodes=6, checkpoints=1)
-    spec = sg.Spec(initial, tree, budget=budget, hyperparameters=TINY, expect=0.5)
+    spec = sg.Spec(initial, tree, budget=budget, expect=0.5, trainer=sg.SB3(hyperparameters=TINY))
     run, _ = train_run(spec, 0)
     assert run.capped == run.episodes and run.terminated == 0
     table = sg.table(judged(spec, [run]))

@@ -100,7 +100,7 @@ def test_specguard_show_on_a_pytest_goal_spec_file_resolves_its_fixtures(pyteste
 def test_render_spec_is_the_one_rendering():
     cartpole = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
     once = sg.Budget(timesteps=4096, checkpoints=1)
-    spec = sg.Spec(cartpole, sg.Goal("right", x=(0.5, 1.5)), budget=once, n_envs=2)
+    spec = sg.Spec(cartpole, sg.Goal("right", x=(0.5, 1.5)), budget=once, trainer=sg.SB3(n_envs=2))
     text = render_spec(spec, "mine")
     assert text.splitlines()[0] == "== mine"
     assert "budget: 4096 timesteps per seed (2 envs), 2 seeds, 30 eval episodes (up to 120)" in text.splitlines()

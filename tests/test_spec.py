@@ -37,14 +37,10 @@ def test_quorum_defaults_to_every_run():
             r"expect\['height'\]: no node is named 'height'; the tree's goals are pendulum, pendulum/position",
         ),
         ({"expect": "high"}, r"Spec 'pendulum': expected expect to be \{goal: min success\} or a number, got 'high'"),
-        ({"algorithm": "PPO2"}, r"Spec 'pendulum'.algorithm: unknown algorithm 'PPO2'; expected one of PPO, A2C"),
-        ({"n_envs": 0}, r"Spec 'pendulum': expected n_envs to be an integer >= 1 \(parallel environments"),
         ({"quorum": 3}, r"Spec 'pendulum': expected quorum <= budget.max_seeds=2 \(the runs trained\), got 3"),
         ({"quorum": 0}, r"Spec 'pendulum': expected quorum to be an integer >= 1 \(runs that must meet"),
         ({"confidence": 1.0}, r"Spec 'pendulum': expected confidence to be a number in \(0, 1\), got 1.0"),
         ({"undecided": "maybe"}, r"Spec 'pendulum': expected undecided to be one of fail, xfail, pass, got 'maybe'"),
-        ({"hyperparameters": [1]}, r"Spec 'pendulum'.hyperparameters: expected a mapping"),
-        ({"name": "mine", "n_envs": -1}, r"Spec 'mine': expected n_envs"),
     ],
 )
 def test_bad_specs(kwargs, message):
@@ -52,14 +48,29 @@ def test_bad_specs(kwargs, message):
         spec(**kwargs)
 
 
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"algorithm": "PPO2"}, r"^SB3.algorithm: unknown algorithm 'PPO2'; expected one of PPO, A2C"),
+        ({"n_envs": 0}, r"^SB3: expected n_envs to be an integer >= 1 \(parallel environments"),
+        ({"hyperparameters": [1]}, r"^SB3.hyperparameters: expected a mapping"),
+        ({"normalize": "yes"}, r"^SB3.normalize: expected True or False, got 'yes'"),
+        ({"tensorboard_log": 3}, r"^SB3: expected tensorboard_log to be a folder, got 3"),
+    ],
+)
+def test_bad_sb3_settings_are_refused_where_the_trainer_is_made(kwargs, message):
+    with pytest.raises(sg.error.InvalidSpec, match=message):
+        sg.SB3(**kwargs)
+
+
 def test_counts_reach_the_shared_rule():
     # validation.check_count: numpy integers are integers, a bool is not a count
-    s = spec(n_envs=np.int64(4), quorum=np.int64(2))
-    assert (s.n_envs, s.quorum) == (4, 2) and type(s.n_envs) is int and type(s.quorum) is int
+    s = spec(quorum=np.int64(2), trainer=sg.SB3(n_envs=np.int64(4)))
+    assert (s.trainer.n_envs, s.quorum) == (4, 2) and type(s.trainer.n_envs) is int and type(s.quorum) is int
     with pytest.raises(sg.error.InvalidSpec, match=r"expected quorum to be an integer >= 1 .*got True"):
         spec(quorum=True)
     with pytest.raises(sg.error.InvalidSpec, match=r"expected n_envs to be an integer >= 1 .*got 2.0"):
-        spec(n_envs=2.0)
+        spec(trainer=sg.SB3(n_envs=2.0))
 
 
 def test_ambiguous_names_ask_for_a_path():

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import specguard as sg
-from specguard.cache.fingerprint import _algorithm_fields, _fields, fingerprint_spec
+from specguard.cache.fingerprint import _fields, _trained_fields, fingerprint_spec
 from specguard.construction.env import ENV_KEY, SPEC_KEY, stack_observations
 from specguard.engine.falsify_run import batch_policy, property_keys
 from specguard.engine.trained import load_normalizer
@@ -74,7 +74,7 @@ BUDGET = sg.Budget(timesteps=128, min_seeds=1, eval_episodes=4, checkpoints=1)
 
 def spec(**kwargs):
     kwargs.setdefault("budget", BUDGET)
-    kwargs.setdefault("hyperparameters", TINY)
+    kwargs.setdefault("trainer", sg.SB3(hyperparameters=TINY))
     return sg.Spec(CORRIDOR, TREE, **kwargs)
 
 
@@ -148,7 +148,7 @@ def test_minigrid_with_its_image():
     from example_specs import minigrid_image
 
     grid = minigrid_image.specs["green_square"]
-    assert grid.policy == "MultiInputPolicy"
+    assert grid.trainer.policy == "MultiInputPolicy"
     env = grid.make_env()
     obs, _ = env.reset(seed=0)
     assert obs[ENV_KEY].shape == (56, 56, 3) and obs[ENV_KEY].dtype == np.uint8  # NatureCNN takes it
@@ -213,13 +213,14 @@ def test_an_env_key_that_is_no_string_or_an_empty_part_is_refused_naming_the_obs
             r"observation='features\+env' is for the constructed env",
         ),
         (
-            {"policy": "MlpPolicy"},
-            r"Spec 'end'.policy: the agent's observation is a Dict \(observation='features\+env'\), which 'MlpPolicy' "
-            r"does not take; one that does: MultiInputPolicy",
+            {"trainer": sg.SB3(policy="MlpPolicy", hyperparameters=TINY)},
+            r"Spec 'end'.trainer.policy: the agent's observation is a Dict \(observation='features\+env'\), "
+            r"which 'MlpPolicy' does not take; one that does: MultiInputPolicy",
         ),
         (
-            {"algorithm": "ARS", "hyperparameters": {}},
-            r"Spec 'end'.policy: .*which 'MultiInputPolicy' does not take; one that does: none: ARS has no policy",
+            {"trainer": sg.SB3("ARS")},
+            r"Spec 'end'.trainer.policy: .*which 'MultiInputPolicy' does not take; "
+            r"one that does: none: ARS has no policy",
         ),
     ],
 )
@@ -232,14 +233,17 @@ def test_a_dict_policy_for_the_flat_observation_is_refused_naming_the_one_that_f
     with pytest.raises(
         sg.error.InvalidSpec, match=r"the agent's observation is a flat Box .*'MultiInputPolicy' does not"
     ) as e:
-        spec(policy="MultiInputPolicy")
+        spec(trainer=sg.SB3(policy="MultiInputPolicy", hyperparameters=TINY))
     assert e.value.message.endswith("one that does: MlpPolicy")  # not CnnPolicy: the features are no image
 
 
 def test_the_default_policy_follows_the_observation():
-    assert spec().policy == "MlpPolicy"
-    assert spec(observation="features+env").policy == "MultiInputPolicy"
-    assert spec(observation="features+env", algorithm="RecurrentPPO").policy == "MultiInputLstmPolicy"
+    assert spec().trainer.policy == "MlpPolicy"
+    assert spec(observation="features+env").trainer.policy == "MultiInputPolicy"
+    assert (
+        spec(observation="features+env", trainer=sg.SB3(algorithm="RecurrentPPO", hyperparameters=TINY)).trainer.policy
+        == "MultiInputLstmPolicy"
+    )
 
 
 # -- identity --------------------------------------------------------------------------------------------------
@@ -247,10 +251,10 @@ def test_the_default_policy_follows_the_observation():
 
 def test_the_observation_is_in_a_runs_key_only_when_it_is_not_the_default():
     default = spec()
-    fields = _algorithm_fields(default, _fields(default, frozenset()))
+    fields = _trained_fields(default, _fields(default, frozenset()))
     assert "observation" not in fields and "policy" not in fields  # the keys of specs before the field: unchanged
     beside = spec(observation="features+env")
-    fields = _algorithm_fields(beside, _fields(beside, frozenset()))
+    fields = _trained_fields(beside, _fields(beside, frozenset()))
     assert fields["observation"] == "features+env" and "policy" not in fields  # MultiInputPolicy: its default
     one, other = fingerprint_spec(default), fingerprint_spec(beside)
     assert one.run_base != other.run_base and one.spec_key != other.spec_key
@@ -283,11 +287,16 @@ def test_a_dict_spec_trains_with_multi_input_policy_is_judged_and_served_from_th
 
 @pytest.mark.slow
 def test_normalize_normalizes_the_features_and_own_state_only(tmp_path):
-    result, model = train_run(spec(observation="features+env", normalize=True), 0)
+    result, model = train_run(spec(observation="features+env", trainer=sg.SB3(normalize=True, hyperparameters=TINY)), 0)
     normalizer = model.get_env()
     assert normalizer.norm_obs_keys == [SPEC_KEY] and set(normalizer.obs_rms) == {SPEC_KEY}
     assert result.timesteps == 128
-    cached = sg.run_spec(spec(observation="features+env", normalize=True), workers=1, cache_dir=tmp_path, progress=None)
+    cached = sg.run_spec(
+        spec(observation="features+env", trainer=sg.SB3(normalize=True, hyperparameters=TINY)),
+        workers=1,
+        cache_dir=tmp_path,
+        progress=None,
+    )
     assert set(load_normalizer(cached, 0).obs_rms) == {SPEC_KEY}  # the statistics kept in the cache, per key
     obs = sg.rollout(cached, 0)[0][0]["obs"]  # the cached policy acts through them
     normalized = load_normalizer(cached, 0).normalize_obs(obs)
@@ -321,7 +330,7 @@ def test_the_falsifiers_lockstep_batches_and_the_policy_take_dict_observations()
 def test_a_batch_of_dict_observations_has_as_many_rows_as_envs_not_keys():
     from sb3_contrib import RecurrentPPO
 
-    beside = spec(observation="features+env", algorithm="RecurrentPPO")
+    beside = spec(observation="features+env", trainer=sg.SB3(algorithm="RecurrentPPO", hyperparameters=TINY))
     model = RecurrentPPO("MultiInputLstmPolicy", beside.make_env(), seed=0, device="cpu")
     env = beside.make_env()
     observations = [env.reset(seed=s)[0] for s in range(5)]  # five envs, three keys

@@ -24,7 +24,7 @@ BUDGET = sg.Budget(timesteps=128, min_seeds=1, eval_episodes=2)
 
 def spec(tree=None, **kwargs):
     kwargs.setdefault("budget", BUDGET)
-    kwargs.setdefault("hyperparameters", TINY)
+    kwargs.setdefault("trainer", sg.SB3(hyperparameters=TINY))
     return sg.Spec(pendulum.initial_env, tree or pendulum.trees["w"], **kwargs)
 
 

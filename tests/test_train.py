@@ -12,6 +12,7 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
+from specguard.construction.env import make_baseline_env
 from specguard.engine.trained import load_normalizer
 from specguard.error import TrainingError
 from specguard.evaluation.episodes import EVAL_SEED_BASE, evaluate
@@ -24,7 +25,7 @@ TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
 
 def tiny_spec(**kwargs):
     kwargs.setdefault("budget", sg.Budget(timesteps=128, eval_episodes=2, max_eval_episodes=4))
-    kwargs.setdefault("hyperparameters", TINY)
+    kwargs.setdefault("trainer", sg.SB3(hyperparameters=TINY))
     return sg.Spec(pendulum.initial_env, pendulum.trees["w"], **kwargs)
 
 
@@ -53,14 +54,16 @@ def test_a_run_leaves_no_logger_folder_in_the_temporary_directory(tmp_path, monk
 
 @pytest.mark.slow
 def test_a_run_compiles_its_tree_once_for_all_its_envs(build_counts):
-    train_run(tiny_spec(n_envs=2), seed=0)  # two training envs and the evaluation env
+    train_run(
+        tiny_spec(trainer=sg.SB3(n_envs=2, hyperparameters=TINY)), seed=0
+    )  # two training envs and the evaluation env
     assert build_counts == {"compile": 1, "codegen": 1}
 
 
 def test_evaluate_counts_the_last_state_of_each_episode():
     initial = sg.InitialEnv(lambda: ReplayEnv([[0.0], [1.0], [0.0], [1.0]]), features=("x",))
     tree = sg.All(sg.Goal("up", x=(0.5, None)), sg.Goal("any", x=(-1.0, None)), name="root")
-    env = sg.make_baseline_env(initial, tree)  # the replay truncates after 3 steps, in "up"
+    env = make_baseline_env(initial, tree)  # the replay truncates after 3 steps, in "up"
     counts = evaluate(lambda obs: 0, env, episodes=3, seeds=[EVAL_SEED_BASE, EVAL_SEED_BASE + 1, EVAL_SEED_BASE + 2])
     assert counts == {"root": 3, "root/up": 3, "root/any": 3}
 
@@ -90,15 +93,19 @@ def test_evaluate_tells_an_episode_policy_as_each_episode_starts():
 
 @pytest.mark.slow
 def test_algorithm_must_fit_the_action_space():
-    with pytest.raises(sg.error.InvalidSpec, match=r"Spec 'pendulum'.algorithm: DQN cannot act in a Box action space"):
-        train_run(tiny_spec(algorithm="DQN", hyperparameters={}), seed=0)
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"Spec 'pendulum'.trainer.algorithm: DQN cannot act in a Box action space"
+    ):
+        train_run(tiny_spec(trainer=sg.SB3(algorithm="DQN", hyperparameters={})), seed=0)
 
 
 @pytest.mark.slow
 def test_hyperparameters_sb3_rejects_are_attributed_to_the_spec():
     # A value SB3 refuses (names it does not take are refused by the Spec: tests/test_algorithms.py).
-    with pytest.raises(sg.error.InvalidSpec, match=r"Spec 'pendulum'.hyperparameters: PPO rejected them: .*batch_size"):
-        train_run(tiny_spec(hyperparameters={**TINY, "batch_size": 1}), seed=0)
+    with pytest.raises(
+        sg.error.InvalidSpec, match=r"Spec 'pendulum'.trainer.hyperparameters: PPO rejected them: .*batch_size"
+    ):
+        train_run(tiny_spec(trainer=sg.SB3(hyperparameters={**TINY, "batch_size": 1})), seed=0)
 
 
 class Exploding(gym.Wrapper):
@@ -116,7 +123,7 @@ class Exploding(gym.Wrapper):
 @pytest.mark.slow
 def test_env_failures_name_the_seed_and_step():
     initial = sg.InitialEnv(lambda: Exploding(gym.make("Pendulum-v1"), at=50), features=("x", "y", "omega"))
-    spec = sg.Spec(initial, pendulum.trees["b"], budget=sg.Budget(timesteps=128), hyperparameters=TINY)
+    spec = sg.Spec(initial, pendulum.trees["b"], budget=sg.Budget(timesteps=128), trainer=sg.SB3(hyperparameters=TINY))
     with pytest.raises(
         TrainingError, match=r"Spec 'pendulum', seed 5, training step 4\d: .*RuntimeError: simulator diverged"
     ):
@@ -136,7 +143,9 @@ class ExplodingInEvaluation(gym.Wrapper):
 def test_an_env_failure_in_a_checkpoint_evaluation_names_the_evaluation_not_a_training_step():
     initial = sg.InitialEnv(lambda: ExplodingInEvaluation(ReplayEnv([[0.0], [1.0]])), features=("x",))
     budget = sg.Budget(timesteps=256, eval_episodes=2, checkpoints=4)
-    spec = sg.Spec(initial, sg.Goal("up", x=(0.5, None)), budget=budget, hyperparameters=TINY, expect=0.8)
+    spec = sg.Spec(
+        initial, sg.Goal("up", x=(0.5, None)), budget=budget, expect=0.8, trainer=sg.SB3(hyperparameters=TINY)
+    )
     with pytest.raises(TrainingError) as raised:
         train_run(spec, seed=5)
     message = str(raised.value)
@@ -184,7 +193,7 @@ def test_evaluate_counts_episodes_without_a_violation_in_the_baseline_env():
         sg.Goal("any", x=(-1.0, None)),
         name="root",
     ).annotate(sg.Constraint(lambda s, a: a == 2, name="two"))
-    env = sg.make_baseline_env(replay_initial(), tree)  # 3 steps an episode: s = 0, 1, 0, 1
+    env = make_baseline_env(replay_initial(), tree)  # 3 steps an episode: s = 0, 1, 0, 1
     counts = evaluate(scripted([0, 0, 0, 2, 0, 0, 0, 0, 0]), env, episodes=3, seeds=SEEDS)
     # "hot" is violated at step 2 of every episode (s = 1); "two" only in the second episode's first step.
     assert counts == {"root": 3, "root/up": 3, "root/any": 3, "root/up:hot": 0, "root:two": 2}
@@ -210,7 +219,12 @@ def test_runs_measure_the_safety_rate_of_every_constraint(baseline):
     tree = sg.All(*pendulum.trees["b"].children, name="pendulum").annotate(fast)
     budget = sg.Budget(timesteps=128, eval_episodes=2, max_eval_episodes=4)
     spec = sg.Spec(
-        pendulum.initial_env, tree, budget=budget, hyperparameters=TINY, baseline=baseline, expect={"fast": 0.0}
+        pendulum.initial_env,
+        tree,
+        budget=budget,
+        baseline=baseline,
+        expect={"fast": 0.0},
+        trainer=sg.SB3(hyperparameters=TINY),
     )
     result, _ = train_run(spec, seed=0)
     assert set(result.successes) == {"pendulum", "pendulum/position", "pendulum/stabilization", "pendulum:fast"}
@@ -228,7 +242,9 @@ def reached_initial():
 @pytest.mark.slow
 def test_a_run_whose_thresholds_are_met_stops_at_the_first_checkpoint():
     budget = sg.Budget(timesteps=4096, eval_episodes=30, checkpoints=4)
-    spec = sg.Spec(reached_initial(), sg.Goal("up", x=(0.5, None)), budget=budget, hyperparameters=TINY, expect=0.8)
+    spec = sg.Spec(
+        reached_initial(), sg.Goal("up", x=(0.5, None)), budget=budget, expect=0.8, trainer=sg.SB3(hyperparameters=TINY)
+    )
     result, model = train_run(spec, seed=0)
     assert result.met_early and result.timesteps == 1024  # judged at the first quarter, stopped there
     assert (result.successes, result.episodes) == ({"up": 30}, 30)
@@ -243,7 +259,9 @@ def test_a_run_stopped_by_a_met_checkpoint_did_not_hit_the_wall_clock(monkeypatc
     from specguard.training import train
 
     budget = sg.Budget(timesteps=4096, eval_episodes=30, checkpoints=4, wall_clock_s=60)
-    spec = sg.Spec(reached_initial(), sg.Goal("up", x=(0.5, None)), budget=budget, hyperparameters=TINY, expect=0.8)
+    spec = sg.Spec(
+        reached_initial(), sg.Goal("up", x=(0.5, None)), budget=budget, expect=0.8, trainer=sg.SB3(hyperparameters=TINY)
+    )
     late, perf_counter, interim_look = [0.0], time.perf_counter, train.interim_look
     monkeypatch.setattr(time, "perf_counter", lambda: perf_counter() + late[0])
 
@@ -259,7 +277,9 @@ def test_a_run_stopped_by_a_met_checkpoint_did_not_hit_the_wall_clock(monkeypatc
 @pytest.mark.slow
 def test_the_cached_model_of_a_run_stopped_at_a_checkpoint_is_the_one_judged(tmp_path):
     budget = sg.Budget(timesteps=4096, eval_episodes=30, checkpoints=4)
-    spec = sg.Spec(reached_initial(), sg.Goal("up", x=(0.5, None)), budget=budget, hyperparameters=TINY, expect=0.8)
+    spec = sg.Spec(
+        reached_initial(), sg.Goal("up", x=(0.5, None)), budget=budget, expect=0.8, trainer=sg.SB3(hyperparameters=TINY)
+    )
     result = sg.run_spec(spec, workers=1, cache_dir=tmp_path, progress=None)
     assert result.runs[0].met_early
     assert sg.load_model(result, 0).num_timesteps == result.runs[0].timesteps == 1024
@@ -268,7 +288,13 @@ def test_the_cached_model_of_a_run_stopped_at_a_checkpoint_is_the_one_judged(tmp
 @pytest.mark.slow
 def test_a_run_whose_thresholds_are_not_met_trains_its_whole_budget():
     budget = sg.Budget(timesteps=4096, eval_episodes=30, checkpoints=4)
-    spec = sg.Spec(reached_initial(), sg.Goal("far", x=(5.0, None)), budget=budget, hyperparameters=TINY, expect=0.5)
+    spec = sg.Spec(
+        reached_initial(),
+        sg.Goal("far", x=(5.0, None)),
+        budget=budget,
+        expect=0.5,
+        trainer=sg.SB3(hyperparameters=TINY),
+    )
     result, _ = train_run(spec, seed=0)
     assert not result.met_early and result.timesteps == 4096
     evaluated = [p for p in result.curve if "evaluation" in p]
@@ -282,7 +308,9 @@ def test_a_run_whose_thresholds_are_not_met_trains_its_whole_budget():
 @pytest.mark.slow
 def test_one_checkpoint_trains_the_whole_budget_even_when_met():
     budget = sg.Budget(timesteps=4096, eval_episodes=30, checkpoints=1)
-    spec = sg.Spec(reached_initial(), sg.Goal("up", x=(0.5, None)), budget=budget, hyperparameters=TINY, expect=0.8)
+    spec = sg.Spec(
+        reached_initial(), sg.Goal("up", x=(0.5, None)), budget=budget, expect=0.8, trainer=sg.SB3(hyperparameters=TINY)
+    )
     result, _ = train_run(spec, seed=0)
     assert not result.met_early and result.timesteps == 4096
 
@@ -291,7 +319,9 @@ def test_one_checkpoint_trains_the_whole_budget_even_when_met():
 def test_auto_weights_adapt_during_training_and_are_recorded():
     initial = sg.InitialEnv(lambda: ReplayEnv([[0.0], [1.0], [0.0], [1.0]]), features=("x",))
     tree = sg.All(sg.Goal("up", x=(0.5, None)), sg.Goal("low", x=(None, 0.7)), name="p", weights="auto")
-    spec = sg.Spec(initial, tree, budget=sg.Budget(timesteps=128, eval_episodes=2), hyperparameters=TINY)
+    spec = sg.Spec(
+        initial, tree, budget=sg.Budget(timesteps=128, eval_episodes=2), trainer=sg.SB3(hyperparameters=TINY)
+    )
     result, model = train_run(spec, seed=0)
     # Every episode ends at x = 1: in "up", not in "low", so "low" takes the weight.
     assert result.weights == {"p": pytest.approx([0.1 / 1.2, 1.1 / 1.2])}
@@ -307,7 +337,9 @@ def test_auto_weights_see_the_safety_of_the_nodes_own_constraints():
     initial = sg.InitialEnv(lambda: ReplayEnv([[0.0], [1.0], [0.0], [1.0]]), features=("x",))
     never = sg.Constraint(lambda s, a: False, name="never")
     tree = sg.All(sg.Goal("up", x=(0.5, None)), sg.Goal("low", x=(None, 0.7)), name="p", weights="auto").annotate(never)
-    spec = sg.Spec(initial, tree, budget=sg.Budget(timesteps=128, eval_episodes=2), hyperparameters=TINY)
+    spec = sg.Spec(
+        initial, tree, budget=sg.Budget(timesteps=128, eval_episodes=2), trainer=sg.SB3(hyperparameters=TINY)
+    )
     result, _ = train_run(spec, seed=0)
     # "up" reached and "never" kept in every episode: "low" takes the weight, both others keep the floor.
     assert result.weights == {"p": pytest.approx([0.1 / 1.3, 1.1 / 1.3, 0.1 / 1.3])}
@@ -324,7 +356,7 @@ BALANCE = sg.Always(sg.Goal("upright", theta=(-0.2, 0.2)), name="balance")
 def digested(tmp_path_factory):
     """Two seeds of a normalizing CartPole spec, a few hundred steps each, run through a cache."""
     budget = sg.Budget(timesteps=256, eval_episodes=2, max_eval_episodes=4, min_seeds=2, max_seeds=2, checkpoints=1)
-    spec = sg.Spec(CARTPOLE, BALANCE, budget=budget, hyperparameters=TINY, normalize=True, expect=0.5)
+    spec = sg.Spec(CARTPOLE, BALANCE, budget=budget, expect=0.5, trainer=sg.SB3(hyperparameters=TINY, normalize=True))
     return spec, sg.run_spec(spec, workers=1, cache_dir=tmp_path_factory.mktemp("digests"), progress=None)
 
 

@@ -157,7 +157,7 @@ class ReturnsAList:
 @pytest.mark.parametrize(
     ("trainer", "match"),
     [
-        (3, r"Spec 'balance'\.trainer: expected a generator function .* got 3"),
+        (3, r"Spec 'balance'\.trainer: expected sg.SB3\(\.\.\.\) or a generator function .* got 3"),
         (not_a_generator, r"the function .*not_a_generator, which does not yield"),
         (functools.partial(not_a_generator), r"the function .*not_a_generator, which does not yield"),
     ],
@@ -219,9 +219,16 @@ def test_a_trainer_that_raises_fails_its_seed_naming_the_trainer_the_seed_and_it
         ("tensorboard_log", "tb"),
     ],
 )
-def test_the_fields_that_only_configure_sb3_are_refused_with_a_trainer(field, value):
-    with pytest.raises(InvalidSpec, match=rf"Spec 'balance'\.{field}: {field}=.* and the spec trains with the trainer"):
+def test_the_keywords_that_only_configure_sb3_are_refused_beside_a_trainer_of_its_own(field, value):
+    # Spec(algorithm=...) is the old form of Spec(trainer=sg.SB3(algorithm=...)): beside a loop it would be ignored.
+    with pytest.raises(InvalidSpec, match=rf"^Spec: {field}= configure SB3's training, and the spec trains with its "):
         spec(**{field: value})
+
+
+def test_the_old_sb3_keywords_still_make_an_sb3_trainer_with_a_deprecation_warning():
+    with pytest.warns(DeprecationWarning, match=r"Spec\(algorithm=, n_envs=\.\.\.\) moved into the spec's trainer"):
+        old = sg.Spec(SHORT, sg.Goal("up", theta=(-0.2, 0.2)), budget=BUDGET, algorithm="A2C", n_envs=2)
+    assert old.trainer == sg.SB3("A2C", n_envs=2, policy="MlpPolicy")
 
 
 def test_auto_weights_are_refused_with_a_trainer():
@@ -232,9 +239,7 @@ def test_auto_weights_are_refused_with_a_trainer():
 
 def test_the_doors_tensorboard_folder_leaves_a_trainer_spec_as_it_is_and_says_so(tmp_path):
     s = spec()
-    with pytest.warns(
-        sg.error.SpecWarning, match=r"trains with its own trainer \(.*improving.*\): the TensorBoard folder"
-    ):
+    with pytest.warns(sg.error.SpecWarning, match=r"trains with its own trainer .*improving.*: the TensorBoard folder"):
         assert s.as_run(tensorboard_log=tmp_path) is s
 
 

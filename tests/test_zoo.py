@@ -6,6 +6,7 @@ read its files as specguard does.
 
 from __future__ import annotations
 
+import dataclasses
 import pickle
 import textwrap
 import warnings
@@ -45,22 +46,24 @@ def test_cartpole_ppo_is_the_zoos_entry_with_its_schedules():
     settings, warned = zoo("PPO", "CartPole-v1")
     assert warned == []
     assert dict(settings) == {
-        "algorithm": "PPO",
-        "policy": "MlpPolicy",
-        "hyperparameters": {
-            "n_steps": 32,
-            "batch_size": 256,
-            "gae_lambda": 0.8,
-            "gamma": 0.98,
-            "n_epochs": 20,
-            "ent_coef": 0.0,
-            "learning_rate": LinearSchedule(0.001),
-            "clip_range": LinearSchedule(0.2),
-        },
-        "n_envs": 8,
-        "normalize": False,
+        "trainer": sg.SB3(
+            algorithm="PPO",
+            policy="MlpPolicy",
+            hyperparameters={
+                "n_steps": 32,
+                "batch_size": 256,
+                "gae_lambda": 0.8,
+                "gamma": 0.98,
+                "n_epochs": 20,
+                "ent_coef": 0.0,
+                "learning_rate": LinearSchedule(0.001),
+                "clip_range": LinearSchedule(0.2),
+            },
+            n_envs=8,
+            normalize=False,
+            callbacks=(),
+        ),
         "observation": "features",
-        "callbacks": (),
     }
     assert settings.timesteps == 100_000 and type(settings.timesteps) is int
     assert settings.env_id == "CartPole-v1" and settings.not_taken == {}
@@ -69,8 +72,8 @@ def test_cartpole_ppo_is_the_zoos_entry_with_its_schedules():
 
 def test_policy_kwargs_are_evaluated_with_torch_nn_classes():
     settings, _ = zoo("RecurrentPPO", "CartPoleNoVel-v1")
-    assert settings.policy == "MlpLstmPolicy"
-    assert settings.hyperparameters["policy_kwargs"] == {
+    assert settings.trainer.policy == "MlpLstmPolicy"
+    assert settings.trainer.hyperparameters["policy_kwargs"] == {
         "ortho_init": False,
         "activation_fn": nn.ReLU,
         "lstm_hidden_size": 64,
@@ -82,13 +85,13 @@ def test_policy_kwargs_are_evaluated_with_torch_nn_classes():
 def test_what_a_spec_cannot_say_is_warned_and_kept():
     settings, warned = zoo("TD3", "Pendulum-v1")
     assert set(settings.not_taken) == {"noise_type", "noise_std"}
-    assert "noise_type" not in settings.hyperparameters and settings.hyperparameters["gamma"] == 0.98
+    assert "noise_type" not in settings.trainer.hyperparameters and settings.trainer.hyperparameters["gamma"] == 0.98
     [message] = warned
     assert "zoo_settings('TD3', 'Pendulum-v1')" in message and "not taken" in message
     assert "noise_type: 'normal'" in message and "noise_std: 0.1" in message
 
     settings, warned = zoo("PPO", "MountainCarContinuous-v0")  # normalize: true with gamma 0.9999
-    assert settings.normalize is True
+    assert settings.trainer.normalize is True
     assert settings.not_taken["normalize"].startswith("gamma=0.9999: a spec's normalize=True is VecNormalize")
     assert len(warned) == 1 and "normalize: gamma=0.9999" in warned[0]
 
@@ -109,7 +112,7 @@ def test_every_entry_of_the_zoos_files_maps_onto_a_spec():
             try:
                 sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=settings.timesteps), **settings)
             except sg.error.InvalidSpec as e:
-                assert str(settings.policy).startswith("Cnn") and "not an image" in str(e), (algorithm, env_id)
+                assert str(settings.trainer.policy).startswith("Cnn") and "not an image" in str(e), (algorithm, env_id)
                 images += 1
                 continue
             mapped += 1
@@ -120,7 +123,7 @@ def test_the_atari_entry_on_a_spec_of_numbers_is_refused_naming_the_policy():
     settings, _ = zoo("PPO", "atari")
     with pytest.raises(sg.error.InvalidSpec) as e:
         sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=1000), **settings)
-    assert e.value.where == "Spec 'right'.policy"
+    assert e.value.where == "Spec 'right'.trainer.policy"
     assert "which 'CnnPolicy' does not take; one that does: MlpPolicy" in e.value.message
 
 
@@ -128,9 +131,9 @@ def test_an_entry_whose_policy_takes_a_dict_lets_the_agent_see_the_envs_own_obse
     # The zoo trained FetchReach on a Dict observation (MultiInputPolicy): a spec gives its agent the env's own
     # observation beside the features (observation="features+env"), which that policy takes.
     settings, _ = zoo("SAC", "FetchReach-v1")
-    assert settings["policy"] == "MultiInputPolicy" and settings["observation"] == "features+env"
+    assert settings.trainer.policy == "MultiInputPolicy" and settings["observation"] == "features+env"
     spec = sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=1000), **settings)
-    assert spec.observation == "features+env" and spec.policy == "MultiInputPolicy"
+    assert spec.observation == "features+env" and spec.trainer.policy == "MultiInputPolicy"
 
 
 # -- refusals -----------------------------------------------------------------------------------------
@@ -153,7 +156,7 @@ def test_a_name_the_zoo_lacks_is_one_line(algorithm, env_id, message):
 
 def test_the_default_entry_is_asked_for_by_name():
     settings, _ = zoo("PPO", "default")
-    assert settings.hyperparameters == {} and settings.timesteps == 1_000_000
+    assert settings.trainer.hyperparameters == {} and settings.timesteps == 1_000_000
 
 
 @pytest.mark.parametrize(
@@ -225,9 +228,9 @@ def test_a_file_of_ones_own_with_every_kind_of_key(tmp_path):
         """,
     )
     settings, [message] = zoo("A2C", "MyEnv-v0", file=path)
-    assert settings.timesteps == 20_000 and settings.n_envs == 2 and settings.normalize is True
-    assert settings.hyperparameters["learning_rate"] == LinearSchedule(7.3e-4)
-    assert settings.hyperparameters["policy_kwargs"]["activation_fn"] is nn.Tanh
+    assert settings.timesteps == 20_000 and settings.trainer.n_envs == 2 and settings.trainer.normalize is True
+    assert settings.trainer.hyperparameters["learning_rate"] == LinearSchedule(7.3e-4)
+    assert settings.trainer.hyperparameters["policy_kwargs"]["activation_fn"] is nn.Tanh
     assert set(settings.not_taken) == {
         "normalize",
         "env_wrapper",
@@ -241,8 +244,8 @@ def test_a_file_of_ones_own_with_every_kind_of_key(tmp_path):
     assert "A2C's constructor takes no 'no_such_key'" in settings.not_taken["no_such_key"]
     assert "cannot import it (ModuleNotFoundError" in settings.not_taken["callback[2]"]
     assert "not a stable_baselines3 BaseCallback class" in settings.not_taken["callback[3]"]
-    bar, checkpoint = settings.callbacks
-    assert bar is ProgressBarCallback and settings["callbacks"] == settings.callbacks
+    bar, checkpoint = settings.trainer.callbacks
+    assert bar is ProgressBarCallback
     assert checkpoint.func is CheckpointCallback
     assert checkpoint.keywords == {"save_freq": 100, "save_path": "checkpoints"}
     assert settings.source == str(path) and str(path) in message
@@ -277,19 +280,19 @@ def test_normalize_discounts_by_the_algorithms_gamma_as_rl_zoo3_does(tmp_path):
     # rl-zoo3 gives VecNormalize the algorithm's gamma over the one its options name: here 0.99, VecNormalize's own.
     path = write(tmp_path, 'E-v0:\n  n_timesteps: 100\n  gamma: 0.99\n  normalize: "dict(gamma=0.95)"\n')
     settings, warned = zoo("PPO", "E-v0", file=path)
-    assert settings.normalize is True and settings.not_taken == {} and warned == []
+    assert settings.trainer.normalize is True and settings.not_taken == {} and warned == []
 
 
 def test_an_entry_without_a_policy_gets_the_algorithms_default(tmp_path):
     path = write(tmp_path, "E-v0:\n  n_timesteps: 100\n")
-    assert zoo("RecurrentPPO", "E-v0", file=path)[0].policy == "MlpLstmPolicy"
-    assert zoo("PPO", "E-v0", file=path)[0].policy == "MlpPolicy"
+    assert zoo("RecurrentPPO", "E-v0", file=path)[0].trainer.policy == "MlpLstmPolicy"
+    assert zoo("PPO", "E-v0", file=path)[0].trainer.policy == "MlpPolicy"
 
 
 def test_train_freq_as_a_list_is_a_tuple_and_a_bad_schedule_is_refused(tmp_path):
     path = write(tmp_path, "E-v0:\n  n_timesteps: 100\n  train_freq: [1, episode]\n")
     settings, _ = zoo("SAC", "E-v0", file=path)
-    assert settings.hyperparameters["train_freq"] == (1, "episode")
+    assert settings.trainer.hyperparameters["train_freq"] == (1, "episode")
     path = write(tmp_path, "E-v0:\n  n_timesteps: 100\n  learning_rate: exp_0.1\n")
     with pytest.raises(
         sg.error.InvalidSpec, match=r"learning_rate: expected a number or a schedule 'lin_<initial value>'"
@@ -384,8 +387,8 @@ def test_a_schedule_that_is_not_finite_is_refused_naming_the_hyperparameter(tmp_
 )
 def test_a_spec_refuses_a_schedule_that_is_not_finite_naming_the_hyperparameter(key, value, message):
     # It trained to NaN logits, which fail the agent at evaluation ("the agent raised ValueError"): refused first.
-    with pytest.raises(sg.error.InvalidSpec, match=rf"^Spec 'right'.hyperparameters: {message}"):
-        sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=64), hyperparameters={key: value})
+    with pytest.raises(sg.error.InvalidSpec, match=rf"^SB3.hyperparameters: {message}"):
+        sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=64), trainer=sg.SB3(hyperparameters={key: value}))
 
 
 # -- schedules ------------------------------------------------------------------------------------------
@@ -417,23 +420,18 @@ def test_a_zoo_entry_trains_with_its_schedules_and_is_cached(tmp_path):
     assert model.clip_range(0.5) == pytest.approx(0.1) and model.lr_schedule(0.25) == pytest.approx(0.00025)
     again = sg.run_spec(spec, workers=1, cache_dir=tmp_path, progress=None)
     assert again.cached == {0: True, 1: True}
-    constant = {**settings, "hyperparameters": {**settings.hyperparameters, "learning_rate": 0.001}}
-    other = sg.Spec(CARTPOLE, UPRIGHT, budget=spec.budget, **constant)
+    hyperparameters = {**settings.trainer.hyperparameters, "learning_rate": 0.001}
+    constant = dataclasses.replace(settings.trainer, hyperparameters=hyperparameters)
+    other = sg.Spec(CARTPOLE, UPRIGHT, budget=spec.budget, observation=settings.observation, trainer=constant)
     assert fingerprint_spec(other).run_base != fingerprint_spec(spec).run_base
 
 
 def test_settings_unpack_as_spec_fields_and_can_be_overridden():
     settings, _ = zoo("PPO", "CartPole-v1")
-    assert isinstance(settings, ZooSettings) and list(settings) == [
-        "algorithm",
-        "policy",
-        "hyperparameters",
-        "n_envs",
-        "normalize",
-        "observation",
-        "callbacks",
-    ]
-    spec = sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=64), **{**settings, "n_envs": 1})
-    assert spec.n_envs == 1 and spec.hyperparameters["n_steps"] == 32
+    assert isinstance(settings, ZooSettings) and list(settings) == ["trainer", "observation"]
+    assert isinstance(settings.trainer, sg.SB3) and settings.trainer.n_envs == 8
+    one_env = dataclasses.replace(settings.trainer, n_envs=1)
+    spec = sg.Spec(CARTPOLE, UPRIGHT, budget=sg.Budget(timesteps=64), **{**settings, "trainer": one_env})
+    assert spec.trainer.n_envs == 1 and spec.trainer.hyperparameters["n_steps"] == 32
     with pytest.raises(KeyError):
         settings["timesteps"]

@@ -50,7 +50,7 @@ def test_pendulum():
     # (every episode runs its 200 steps), so "held" is judged where the episode's last state lies.
     tree = sg.Always(sg.Goal("held", x={region}), sg.Goal("slow", omega=(-8.0, 8.0)), name="pendulum")
     budget = sg.Budget(timesteps=128, eval_episodes=10, checkpoints=1)
-    return sg.Spec(pendulum, tree, budget=budget, hyperparameters=TINY, name={name!r})
+    return sg.Spec(pendulum, tree, budget=budget, trainer=sg.SB3(hyperparameters=TINY), name={name!r})
 """
 PROJECTS = {
     "main": {"region": (-1.0, 1.0), "name": "gate"},  # every final state: 100% of episodes

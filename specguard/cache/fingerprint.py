@@ -46,7 +46,6 @@ from typing import Any
 from specguard.cache.canonical import digest
 from specguard.cache.probe import probe
 from specguard.cache.versions import torch_capability, versions
-from specguard.spec.algorithms import SB3, algorithm_class, default_policy
 from specguard.utils.numerics import numerics_key
 
 __all__ = ["SpecFingerprint", "fingerprint_spec"]
@@ -54,8 +53,9 @@ __all__ = ["SpecFingerprint", "fingerprint_spec"]
 # Spec fields that change how many runs are trained or how they are counted, not what one run does:
 # they are part of the spec's identity (shared results, baselines) but not of a run's cache key.
 _SPEC_ONLY_FIELDS = frozenset({"quorum", "undecided", "name", "xfail"})
-# Spec fields that change neither a run nor a verdict: the falsifier's default start space, where runs write logs.
-_NOT_IDENTITY_FIELDS = frozenset({"starts", "tensorboard_log"})
+# Spec fields that change neither a run nor a verdict: the falsifier's default start space (where runs write logs is
+# the trainer's, and left out of its identity).
+_NOT_IDENTITY_FIELDS = frozenset({"starts"})
 _BUDGET_SPEC_ONLY_FIELDS = frozenset({"min_seeds", "max_seeds"})
 
 
@@ -88,35 +88,26 @@ def _fields(obj: Any, exclude: frozenset[str]) -> dict[str, Any]:
     return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj) if f.name not in exclude}
 
 
-def _algorithm_fields(spec: Any, fields: dict[str, Any]) -> dict[str, Any]:
-    """``fields`` with the algorithm by identity and version, and the policy, the observation, the user's
-    callbacks and trainer only where they are not the default (a trainer by its code, as the tree's functions).
+def _trained_fields(spec: Any, fields: dict[str, Any]) -> dict[str, Any]:
+    """``fields`` with the trainer's own identity in place of the trainer (:meth:`Trainer.identity
+    <specguard.spec.trainers.Trainer.identity>`: an SB3 trainer's algorithm, hyperparameters, ...; a training loop's
+    code, as the tree's functions), the observation only where it is not the default, and the numerics.
 
-    stable-baselines3's algorithms stay their names (its version is in every key already); any other algorithm is
-    its class: an installed one by module, qualified name and its distribution's version (sb3-contrib's), the user's
-    own by its code, as any class in a spec. A run of the default policy and observation keeps the key it had before
-    specs had them.
+    A run of the default observation keeps the key it had before specs had them.
     """
     out = dict(fields)
-    with_env = out["observation"] != "features"
-    if not with_env:
+    trainer = out.pop("trainer")
+    out.update(trainer.identity(observation=spec.observation))
+    if out["observation"] == "features":
         del out["observation"]
-    if out["policy"] == default_policy(spec.algorithm, dict_observation=with_env):
-        del out["policy"]
-    if not (isinstance(spec.algorithm, str) and spec.algorithm in SB3):
-        out["algorithm"] = algorithm_class(spec.algorithm)
-    if not out["callbacks"]:  # a run without callbacks of the user's keeps the key it had before specs took them
-        del out["callbacks"]
-    if out["trainer"] is None:  # a spec trained by SB3 keeps the key it had before specs took trainers
-        del out["trainer"]
     out["numerics"] = numerics_key(spec.numerics, torch_capability)  # a native run is this CPU's: its key names it
     return out
 
 
 def _compute(spec: Any) -> SpecFingerprint:
     where = f"Spec {spec.label!r}"
-    full = _algorithm_fields(spec, _fields(spec, _NOT_IDENTITY_FIELDS))
-    run = _algorithm_fields(spec, _fields(spec, _SPEC_ONLY_FIELDS | _NOT_IDENTITY_FIELDS))
+    full = _trained_fields(spec, _fields(spec, _NOT_IDENTITY_FIELDS))
+    run = _trained_fields(spec, _fields(spec, _SPEC_ONLY_FIELDS | _NOT_IDENTITY_FIELDS))
     run["budget"] = _fields(spec.budget, _BUDGET_SPEC_ONLY_FIELDS)
     build = spec.env_factory()  # a fresh env per probe, on one compiled tree
     first, second = probe(spec, build=build), probe(spec, build=build)

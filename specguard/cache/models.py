@@ -8,6 +8,7 @@ from typing import Any
 
 from specguard.spec import algorithms as sb3
 from specguard.spec.spec import Spec
+from specguard.spec.trainers import SB3
 
 __all__ = ["load_cached"]
 
@@ -28,10 +29,10 @@ def load_cached(spec: Spec, seed: int, cache_dir: Path | str) -> tuple[Any, Any]
     if cache.load(spec, seed) is None:  # validates the entry's checksums before anything is unpickled
         raise FileNotFoundError(f"run seed {seed} of spec {spec.label!r} is not in the cache {str(cache_dir)!r}")
     path = cache.model_path(spec, seed)
-    if spec.trainer is not None:
+    if not isinstance(spec.trainer, SB3):  # a training loop's agent, as run_files stored it
         with (path.parent / AGENT).open("rb") as f:
             return pickle.load(f), None  # cloudpickle's output is read by pickle
-    model = sb3.load_model(spec.algorithm, path)
+    model = sb3.load_model(spec.trainer.algorithm, path)
     stats = path.parent / NORMALIZER
     normalizer = None
     if stats.exists():

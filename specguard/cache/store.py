@@ -44,6 +44,7 @@ from specguard.cache.fingerprint import fingerprint_spec
 from specguard.cache.versions import versions
 from specguard.error import CacheLockTimeout
 from specguard.spec.spec import Spec
+from specguard.spec.trainers import SB3
 from specguard.training.result import RunResult
 from specguard.tree.keys import result_keys
 from specguard.utils.atomic import staged
@@ -207,7 +208,8 @@ class Cache:
 
     def store(self, spec: Spec, seed: int, result: RunResult, model: Any) -> Path:
         """Write the run atomically; returns its folder."""
-        return self.store_key(fingerprint_spec(spec).run_key(seed), result, model, normalize=spec.normalize)
+        files, _ = run_files(spec, model)  # a training loop's agent that cannot be pickled: the result alone
+        return self.store_files(fingerprint_spec(spec).run_key(seed), result, files)
 
     def store_key(self, key: str, result: RunResult, model: Any, *, normalize: bool) -> Path:
         """Write a run under ``key`` atomically (see :meth:`store_files`)."""
@@ -272,10 +274,11 @@ def model_files(model: Any, *, normalize: bool) -> dict[str, bytes]:
 
 
 def run_files(spec: Spec, model: Any) -> tuple[dict[str, bytes], str | None]:
-    """A trained run's entry files, and why they are none: an SB3 model's (:func:`model_files`), or a trainer's
-    last agent pickled (cloudpickle, as the spec reaches a worker), or ``({}, why)`` when it cannot be pickled."""
-    if spec.trainer is None:
-        return model_files(model, normalize=spec.normalize), None
+    """A trained run's entry files, and why they are none: an SB3 trainer's model (:func:`model_files`), or a training
+    loop's last agent pickled (cloudpickle, as the spec reaches a worker), or ``({}, why)`` when it cannot be
+    pickled."""
+    if isinstance(spec.trainer, SB3):
+        return model_files(model, normalize=spec.trainer.normalize), None
     import cloudpickle
 
     try:

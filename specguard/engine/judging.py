@@ -116,7 +116,7 @@ def judged(
 def episode_notes(tree: Node | None, runs: Sequence[RunResult], *, ends_at_goal: bool = True) -> list[str]:
     """The facts about the evaluation episodes that every door shows beside the verdicts, one line each.
 
-    First, each run whose training one of the spec's callbacks stopped before its budget (``seed 0: training
+    First, each run whose training one of the trainer's callbacks stopped before its budget (``seed 0: training
     stopped by <callback> at <steps> of <budget> steps``, :attr:`RunResult.stop_reason
     <specguard.training.result.RunResult>`): its episodes are those of a policy trained that far. The episodes cut
     at specguard's step cap; where the root goal holds until the end, the episodes that started

@@ -106,7 +106,7 @@ def run_spec(
             :class:`~specguard.parallel.executors.Executor`. The cache stays on this
             machine either way: only missing seeds are submitted.
         tensorboard_log: a folder every run trained writes TensorBoard logs to (SB3's curves and each goal's
-            success), one subfolder per spec and seed (:attr:`Spec.tensorboard_log <specguard.Spec>`); not part of
+            success), one subfolder per spec and seed (:attr:`SB3.tensorboard_log <specguard.SB3>`); not part of
             the cache key: a run found in the cache trains nothing and writes nothing.
 
     Returns:

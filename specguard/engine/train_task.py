@@ -9,6 +9,7 @@ from specguard.cache.versions import check_versions, torch_capability
 from specguard.error import SpecError, TrainingError
 from specguard.parallel.protocol import Failure, Report
 from specguard.spec.spec import Spec
+from specguard.spec.trainers import SB3
 from specguard.utils.numerics import hold_numerics
 
 __all__ = ["describe_failure", "is_spec_error", "train_task"]
@@ -49,7 +50,7 @@ def judged_digest(spec: Spec, model: Any) -> str | None:
 
     name = type(model).__name__
     try:
-        if spec.trainer is None or callable(getattr(model, "predict", None)):
+        if isinstance(spec.trainer, SB3) or callable(getattr(model, "predict", None)):
             return weights_digest(model, normalizer_of(model), name=name)
         return weights_digest(model, None, name=name, kind="callable")
     except Exception:  # the user's objects: a FingerprintError, or anything a state_dict() or an attribute raises

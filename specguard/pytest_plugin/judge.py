@@ -87,7 +87,7 @@ class GoalCheck:
 
     def junit_properties(self) -> list[tuple[str, Any]]:
         """The figures as ``(name, value)`` pairs for JUnit XML properties; ``stopped`` only where one of the
-        spec's callbacks stopped a run's training (``seed 0: stopped by <callback> at <steps> of <budget> steps``,
+        trainer's callbacks stopped a run's training (``seed 0: stopped by <callback> at <steps> of <budget> steps``,
         one clause a seed); ``weights``, each run's weights digest (``seed 0: 3c61144ad8e8; seed 1: ...``, the first
         12 hex digits of :attr:`RunResult.weights_digest <specguard.training.result.RunResult>`), where any has one;
         ``numerics``, what the runs computed with (``portable numerics``)."""

@@ -40,7 +40,7 @@ class Options:
     compare_seeds: int = DEFAULT_COMPARE_SEEDS
     plan: bool = False
     progress_every: int = PROGRESS_EVERY_S  # in a log: seconds between progress lines (0: each seed's last only)
-    tensorboard_log: str | None = None  # None: each spec's own Spec.tensorboard_log
+    tensorboard_log: str | None = None  # None: each spec's trainer's own (SB3.tensorboard_log)
     numerics: str | None = None  # None: each spec's own Spec.numerics
     ahead: bool = True  # train the seeds of specs to come on cores the running item leaves idle
 
@@ -268,7 +268,7 @@ def parse_options(config: pytest.Config) -> Options:
     report = get("--goal-specs-report")
     tensorboard_log = get("--goal-specs-tensorboard-log") or None
     if tensorboard_log is not None:
-        from specguard.spec.spec import check_tensorboard_log
+        from specguard.spec.trainers import check_tensorboard_log
 
         try:
             check_tensorboard_log("--goal-specs-tensorboard-log", tensorboard_log)

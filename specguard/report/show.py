@@ -21,8 +21,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from specguard.spec.algorithms import algorithm_name, collect_steps, collection_unit
-from specguard.spec.budget import trained_timesteps
 from specguard.spec.spec import Spec
 from specguard.tree.formula import formula
 from specguard.tree.nodes import Node
@@ -81,18 +79,7 @@ def _layout(spec: Spec) -> list[str]:
 
 def _budget(spec: Spec) -> str:
     b = spec.budget
-    trained = trained_timesteps(b, spec.algorithm, spec.hyperparameters, spec.n_envs)
-    envs = f"{spec.n_envs} env{'s' if spec.n_envs != 1 else ''}"
-    if trained == b.timesteps:
-        steps = f"{trained} timesteps per seed ({envs})"
-    else:
-        per_env = collect_steps(spec.algorithm, spec.hyperparameters)
-        unit = collection_unit(spec.algorithm)
-        steps = (
-            f"{trained} timesteps per seed ({b.timesteps} asked, rounded up to whole "
-            f"{algorithm_name(spec.algorithm)} {unit} "
-            f"of {per_env * spec.n_envs} = {per_env} steps x {envs})"
-        )
+    steps = spec.trainer.steps_text(b.timesteps)
     seeds = f"{b.min_seeds} seeds" + (f" (up to {b.max_seeds})" if b.max_seeds != b.min_seeds else "")
     cap = f", wall clock <= {b.wall_clock_s:g}s" if b.wall_clock_s is not None else ""
     anytime = (
@@ -113,7 +100,7 @@ def render_spec(spec: Spec, name: str | None = None) -> str:
     kind = "baseline: the initial env's own reward" if spec.baseline else "constructed env"
     lines = [
         f"== {name or spec.label}",
-        f"{spec.initial_env!r}, {algorithm_name(spec.algorithm)}, {kind}",
+        f"{spec.initial_env!r}, {spec.trainer.title}, {kind}",
         *render_tree(spec.tree),
         *_layout(spec),
         _budget(spec),

@@ -1,7 +1,7 @@
 """What specguard knows of the algorithms: which a spec can name, their policies and hyperparameters, loading.
 
-A spec's algorithm is stable-baselines3's by name (``PPO``, ``A2C``, ``DQN``,
-``SAC``, ``TD3``, ``DDPG``), sb3-contrib's by name (``ARS``, ``CrossQ``,
+An SB3 trainer's algorithm (:class:`specguard.spec.trainers.SB3`) is stable-baselines3's by name (``PPO``,
+``A2C``, ``DQN``, ``SAC``, ``TD3``, ``DDPG``), sb3-contrib's by name (``ARS``, ``CrossQ``,
 ``MaskablePPO``, ``QRDQN`` (also ``QR-DQN``), ``RecurrentPPO``, ``TQC``,
 ``TRPO``; the ``contrib`` extra installs it), or any subclass of SB3's
 ``BaseAlgorithm``, given as a class or as ``"module:Class"``
@@ -74,7 +74,7 @@ ALGORITHMS: dict[str, tuple[str, ...]] = {
 
 # Keyword arguments specguard passes itself: a hyperparameter of that name is refused, with what to do instead.
 _SET_BY_SPECGUARD = {
-    "policy": "the policy is a field of the spec: Spec(..., policy=...)",
+    "policy": "the policy is a field of the trainer: sg.SB3(..., policy=...)",
     "env": "the env is the spec's constructed env (Spec.make_env)",
     "seed": "each run's seed is set by specguard (Budget's seeds)",
     "device": "specguard trains on the CPU",
@@ -297,7 +297,7 @@ def check_hyperparameters(where: str, algorithm: str | type, hyperparameters: Ma
             maybe = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
             lines.append(f"{name} takes no hyperparameter {key!r}{maybe}")
     if lines:
-        hint = "use Spec(..., policy=...)" if "policy" in hyperparameters else None
+        hint = "use sg.SB3(..., policy=...)" if "policy" in hyperparameters else None
         if hint is None and known is not None:
             hint = f"{name} takes {', '.join(known)}"
         raise InvalidSpec(where, "\n".join(lines), hint=hint)

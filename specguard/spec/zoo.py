@@ -3,11 +3,11 @@
 `rl-zoo3 <https://rl-baselines3-zoo.readthedocs.io>`_ keeps tuned settings per
 algorithm and env id in YAML files (``rl_zoo3/hyperparams/ppo.yml``, ...).
 :func:`zoo_settings` reads one entry the way rl-zoo3's ``ExperimentManager``
-preprocesses it and maps it onto :class:`~specguard.spec.spec.Spec`'s fields:
+preprocesses it and maps it onto a :class:`~specguard.spec.trainers.SB3` trainer's fields:
 ``policy``, ``n_envs``, ``normalize``, ``hyperparameters`` (``policy_kwargs``
 evaluated in a closed scope, ``lin_<x>`` schedules as :class:`LinearSchedule`),
 and ``n_timesteps`` as :attr:`ZooSettings.timesteps`. What a spec cannot say
-(env wrappers, frame stacking, callbacks, action noise, VecNormalize options
+(env wrappers, frame stacking, action noise, VecNormalize options
 other than its defaults, ...) is named in one :class:`~specguard.error.SpecWarning`
 and kept in :attr:`ZooSettings.not_taken`; nothing is dropped silently.
 
@@ -46,6 +46,8 @@ from specguard.spec.algorithms import (
     hyperparameter_names,
     resolve_algorithm,
 )
+from specguard.spec.schedules import SCHEDULED, LinearSchedule
+from specguard.spec.trainers import SB3
 from specguard.utils.text import MAX_VALUE, elide, value_text
 from specguard.validation import check_text, is_count
 
@@ -67,10 +69,7 @@ ZOO_FILES: dict[str, str] = {
 }
 """The algorithms rl-zoo3 has files for, by specguard's name: the file's stem (MaskablePPO has none)."""
 
-SCHEDULED = ("learning_rate", "clip_range", "clip_range_vf", "delta_std")
-"""The hyperparameters whose ``"lin_<x>"`` values rl-zoo3 turns into linear schedules (as it does, and no others)."""
-
-SPEC_FIELDS = ("algorithm", "policy", "hyperparameters", "n_envs", "normalize", "observation", "callbacks")
+SPEC_FIELDS = ("trainer", "observation")
 """The :class:`~specguard.spec.spec.Spec` keyword arguments a :class:`ZooSettings` unpacks into."""
 
 _HINT = "pip install 'specguard[zoo]'"
@@ -95,27 +94,14 @@ _VECNORMALIZE = {"norm_obs": True, "norm_reward": True, "clip_obs": 10.0, "clip_
 
 
 @dataclass(frozen=True)
-class LinearSchedule:
-    """rl-zoo3's ``lin_<x>``: ``initial_value`` times the progress remaining (1 at the start, 0 at the end).
-
-    stable-baselines3 takes it wherever it takes a schedule (``learning_rate``, ``clip_range``, ...). The same numbers
-    as rl-zoo3's ``SimpleLinearSchedule``; a frozen dataclass, so it pickles to worker processes and enters a run's key
-    by its value.
-    """
-
-    initial_value: float
-
-    def __call__(self, progress_remaining: float) -> float:
-        return progress_remaining * self.initial_value
-
-
-@dataclass(frozen=True)
 class ZooSettings(Mapping[str, Any]):
     """One rl-zoo3 entry as a spec's fields: unpack it into ``sg.Spec(..., **settings)``.
 
-    As a mapping it holds exactly the :class:`~specguard.spec.spec.Spec` keyword arguments ``algorithm``, ``policy``,
-    ``hyperparameters``, ``n_envs``, ``normalize`` and ``observation``; override one with ``{**settings, "n_envs": 1}``.
-    ``callbacks`` are the entry's ``callback`` classes as the spec's callback factories (a class, or a
+    As a mapping it holds exactly the :class:`~specguard.spec.spec.Spec` keyword arguments ``trainer`` (an
+    :class:`~specguard.spec.trainers.SB3` with the entry's algorithm, policy, hyperparameters, ``n_envs``,
+    ``normalize`` and callbacks) and ``observation``; change one of the trainer's with
+    ``dataclasses.replace(settings.trainer, n_envs=1)``.
+    The trainer's ``callbacks`` are the entry's ``callback`` classes as callback factories (a class, or a
     ``functools.partial`` with the entry's keyword arguments), as rl-zoo3's ``get_callback_list`` makes them
     (imported where the settings are read, and again in each training process: one of ``rl_zoo3.callbacks``
     imports rl_zoo3, which patches Gymnasium's ``TimeLimit`` in that process, as it does wherever rl-zoo3 trains).
@@ -123,21 +109,17 @@ class ZooSettings(Mapping[str, Any]):
     gave one), so the agent sees the env's own observation beside the spec's features; else ``"features"``.
 
     Attributes:
+        trainer: the entry's training settings.
         env_id: the entry's env id.
         timesteps: the zoo's ``n_timesteps`` (its whole training budget; ``sg.Budget(timesteps=...)`` takes it).
         not_taken: ``{zoo key: its value and why a spec does not take it}``, as the warning named them.
         source: where the entry was read (``rl-zoo3 2.9.2, ppo.yml``, or the file given).
     """
 
-    algorithm: str
+    trainer: SB3
     env_id: str
-    policy: str | type
-    hyperparameters: dict[str, Any]
-    n_envs: int
-    normalize: bool
     timesteps: int
     observation: str = "features"
-    callbacks: tuple[Any, ...] = ()
     not_taken: dict[str, str] = field(default_factory=dict)
     source: str = ""
 
@@ -512,14 +494,14 @@ def _is_timesteps(value: Any) -> bool:
 
 
 def zoo_settings(algorithm: str | type, env_id: str, *, file: str | Path | None = None) -> ZooSettings:
-    """rl-zoo3's tuned settings of ``algorithm`` for ``env_id``, as a spec's fields.
+    """rl-zoo3's tuned settings of ``algorithm`` for ``env_id``, as a spec's ``trainer`` and ``observation``.
 
     Unpack the result into a spec, and take its budget where you want the zoo's::
 
         zoo = sg.zoo_settings("PPO", "CartPole-v1")
         spec = sg.Spec(initial_env, tree, budget=sg.Budget(timesteps=zoo.timesteps), **zoo)
 
-    Taken: ``callback`` (its classes, with their keyword arguments, as :attr:`ZooSettings.callbacks`; one that cannot
+    Taken: ``callback`` (its classes, with their keyword arguments, as the trainer's ``callbacks``; one that cannot
     be imported, or is no SB3 callback, is named below), ``policy``, ``n_envs``,
     ``normalize`` (``True``, or VecNormalize's options: see below),
     ``n_timesteps`` (as :attr:`ZooSettings.timesteps`), and every key the algorithm's constructor takes as a
@@ -577,16 +559,19 @@ def zoo_settings(algorithm: str | type, env_id: str, *, file: str | Path | None 
             SpecWarning,
             stacklevel=user_stacklevel(),
         )
-    return ZooSettings(
+    trainer = SB3(
         algorithm=resolved,
-        env_id=env_id,
-        policy=policy,
         hyperparameters=fields["hyperparameters"],
+        policy=policy,
         n_envs=n_envs,
         normalize=fields["normalize"],
+        callbacks=fields["callbacks"],
+    )
+    return ZooSettings(
+        trainer=trainer,
+        env_id=env_id,
         timesteps=int(timesteps),
         observation="features+env" if dict_observation else "features",
-        callbacks=fields["callbacks"],
         not_taken=not_taken,
         source=source,
     )

@@ -1,7 +1,7 @@
 """Training one run (one seed) of a spec and measuring every goal's success (docs/semantics.md, "Success").
 
-A run trains ``spec.algorithm`` for ``spec.budget.timesteps`` steps on the
-constructed env (or, for a baseline spec, on the initial env's own reward),
+A run trains with the spec's trainer (:mod:`specguard.spec.trainers`: an SB3 algorithm, or the user's own loop)
+for ``spec.budget.timesteps`` steps on the constructed env (or, for a baseline spec, on the initial env's own reward),
 then evaluates the policy on episodes whose seeds are disjoint from training:
 training envs are seeded ``seed .. seed + n_envs - 1`` (as ``make_vec_env``
 does), evaluation episode ``i`` of run ``seed`` uses
@@ -33,6 +33,7 @@ from specguard.evaluation.policy import policy as policy_of
 from specguard.parallel.protocol import Report
 from specguard.spec.algorithms import ALGORITHMS, algorithm_class, algorithm_name, takes_action_masks
 from specguard.spec.spec import Spec
+from specguard.spec.trainers import SB3, TrainingLoop
 from specguard.stats.anytime import checkpoint_steps, final_evaluation, interim_look
 from specguard.training.auto_weights import WeightAdapter
 from specguard.training.curve import GoalCurve, root_success
@@ -122,8 +123,9 @@ def _masks_problem(build: Callable[[], gym.Env]) -> str | None:
         env.close()
 
 
-def _build(spec: Spec, seed: int) -> _Run:
-    """The model on the spec's training envs (normalized if the spec asks), and the evaluation env, one compilation.
+def _build(spec: Spec, sb3: SB3, seed: int) -> _Run:
+    """The model on the spec's training envs (normalized if its trainer asks), and the evaluation env, one
+    compilation.
 
     Raises:
         InvalidSpec: the algorithm does not fit the action space, or SB3 rejects the hyperparameters.
@@ -141,39 +143,39 @@ def _build(spec: Spec, seed: int) -> _Run:
         # The constructed envs stepped together (the same steps, without a Monitor and an info copy per env); a
         # baseline's envs are the initial env's own, in make_vec_env's.
         vectorise = make_vec_env if spec.baseline else spec_vec_env
-        venv = vectorise(build, n_envs=spec.n_envs, seed=seed)
+        venv = vectorise(build, n_envs=sb3.n_envs, seed=seed)
     except SpecError:
         raise
     except Exception as e:
         raise TrainingError(f"{label}, seed {seed}, building the env: {type(e).__name__}: {e}") from e
-    name = algorithm_name(spec.algorithm)
+    name = algorithm_name(sb3.algorithm)
     space = type(venv.action_space).__name__
-    if isinstance(spec.algorithm, str) and space not in ALGORITHMS[spec.algorithm]:
+    if isinstance(sb3.algorithm, str) and space not in ALGORITHMS[sb3.algorithm]:
         venv.close()
         raise InvalidSpec(
-            f"{label}.algorithm",
-            f"{name} cannot act in a {space} action space; it handles {', '.join(ALGORITHMS[spec.algorithm])}",
+            f"{label}.trainer.algorithm",
+            f"{name} cannot act in a {space} action space; it handles {', '.join(ALGORITHMS[sb3.algorithm])}",
         )
-    algorithm = algorithm_class(spec.algorithm, f"{label}.algorithm")
+    algorithm = algorithm_class(sb3.algorithm, f"{label}.trainer.algorithm")
     problem = _masks_problem(build) if takes_action_masks(algorithm) else None
     if problem is not None:
         venv.close()
         raise InvalidSpec(
-            f"{label}.algorithm",
+            f"{label}.trainer.algorithm",
             f"{name} acts on action masks, and {problem}",
             hint="give the initial env an action_masks() method (sb3_contrib.common.wrappers.ActionMasker wraps one "
             "around an env), or train an algorithm without masks (PPO)",
         )
-    if spec.normalize:  # a Dict observation's "spec" part only: the features and own state, as for a Box
+    if sb3.normalize:  # a Dict observation's "spec" part only: the features and own state, as for a Box
         venv = VecNormalize(venv, norm_obs_keys=[SPEC_KEY] if spec.observation == "features+env" else None)
-    hyperparameters = dict(spec.hyperparameters)
-    if spec.tensorboard_log is not None:  # the run option over the spec's own, which would write into one folder
-        hyperparameters["tensorboard_log"] = spec.tensorboard_log
+    hyperparameters = dict(sb3.hyperparameters)
+    if sb3.tensorboard_log is not None:  # the trainer's folder (a door's option replaced it: Spec.as_run)
+        hyperparameters["tensorboard_log"] = sb3.tensorboard_log
     try:
-        model = algorithm(spec.policy, venv, seed=seed, device="cpu", verbose=0, **hyperparameters)
+        model = algorithm(sb3.policy, venv, seed=seed, device="cpu", verbose=0, **hyperparameters)
     except (TypeError, ValueError, AssertionError) as e:
         venv.close()
-        raise InvalidSpec(f"{label}.hyperparameters", f"{name} rejected them: {e}") from e
+        raise InvalidSpec(f"{label}.trainer.hyperparameters", f"{name} rejected them: {e}") from e
     if hyperparameters.get("tensorboard_log") is None:
         # SB3's logger for a quiet model without a TensorBoard folder writes nothing, and learn() makes it in a
         # new empty folder /tmp/SB3-<time> each call: one left behind per run. The same logger, without the folder.
@@ -182,7 +184,11 @@ def _build(spec: Spec, seed: int) -> _Run:
     return _Run(spec, seed, model, normalizer, build())
 
 
-def _learn(run: _Run, emit: Emit) -> tuple[GoalCurve, WeightAdapter | None, dict[str, Any], float]:
+Learned = tuple[GoalCurve, WeightAdapter | None, dict[str, Any], float]
+"""What training a run gives its evaluation: the curve, the weight adapter, a met look's counts, the seconds."""
+
+
+def _learn(run: _Run, sb3: SB3, emit: Emit) -> Learned:
     """Train the run's budget, looking at its checkpoints; the curve, the adapter, a met look's counts, the seconds.
 
     What stopped training early is recorded on ``run`` (``met_early``, ``hit_wall_clock``, ``stop_reason``).
@@ -206,7 +212,7 @@ def _learn(run: _Run, emit: Emit) -> tuple[GoalCurve, WeightAdapter | None, dict
     log = run.log = LogGoals()
     stop_on_checkpoint = StopTrainingOnMetCheckpoint(_checkpoints(spec), _looker(run, curve, looked))
     stop_on_wall_clock = StopTrainingOnWallClock(budget.wall_clock_s)
-    user = _user_callbacks(run)
+    user = _user_callbacks(run, sb3.callbacks)
     callback = training_callbacks(
         curve,
         every=budget.timesteps // CURVE_POINTS,
@@ -273,8 +279,8 @@ def _looker(run: _Run, curve: GoalCurve, looked: dict[str, Any]) -> Callable[[in
     return look
 
 
-def _learn_with_trainer(run: _Run, emit: Emit) -> tuple[GoalCurve, None, dict[str, Any], float]:
-    """Run the spec's trainer through its checkpoints (:func:`specguard.training.trainer.drive`), looking at the
+def _learn_with_loop(run: _Run, loop: TrainingLoop, emit: Emit) -> Learned:
+    """Run the spec's training loop through its checkpoints (:func:`specguard.training.trainer.drive`), looking at the
     planned ones as :func:`_learn` does; the run's model is then the last agent, its steps the last checkpoint's.
 
     Raises:
@@ -292,7 +298,6 @@ def _learn_with_trainer(run: _Run, emit: Emit) -> tuple[GoalCurve, None, dict[st
         run.model, run.steps = agent, steps
         return look(steps)
 
-    assert spec.trainer is not None
     emit("train", 0, None)
     start = time.perf_counter()
     tenth = max(1, budget.timesteps // CURVE_POINTS)
@@ -318,7 +323,7 @@ def _learn_with_trainer(run: _Run, emit: Emit) -> tuple[GoalCurve, None, dict[st
 
     try:
         done = drive(
-            spec.trainer,
+            loop.function,
             spec.env_factory(),
             budget.timesteps,
             run.seed,
@@ -338,8 +343,8 @@ def _learn_with_trainer(run: _Run, emit: Emit) -> tuple[GoalCurve, None, dict[st
     return curve, None, looked, seconds
 
 
-def _user_callbacks(run: _Run) -> list[UserCallback]:
-    """The spec's callbacks of the user's, each made by its factory for this run and guarded (its errors named).
+def _user_callbacks(run: _Run, factories: Sequence[Callable[..., Any]]) -> list[UserCallback]:
+    """The trainer's callbacks of the user's, each made by its factory for this run and guarded (its errors named).
 
     Raises:
         TrainingError: a factory raised, or returned something that is no SB3 ``BaseCallback``.
@@ -349,7 +354,7 @@ def _user_callbacks(run: _Run) -> list[UserCallback]:
     from specguard.training.callback import UserCallback
 
     made = []
-    for factory in run.spec.callbacks:
+    for factory in factories:
         name = function_text(factory)
         try:
             callback = factory(**_run_arguments(factory, run))
@@ -420,6 +425,29 @@ def _evaluate(run: _Run, curve: GoalCurve, looked: Mapping[str, Any], emit: Emit
     return counts, episodes
 
 
+@functools.singledispatch
+def _train(trainer: Any, spec: Spec, seed: int, emit: Emit) -> tuple[_Run, Learned]:
+    """Train run ``seed`` of ``spec`` with ``trainer``: the run and what it learned (one implementation per trainer
+    class of :mod:`specguard.spec.trainers`, registered below)."""
+    raise InvalidSpec(
+        f"Spec {spec.label!r}.trainer",
+        f"specguard cannot train with {shown(trainer)}; it trains with sg.SB3(...) or a training loop of yours",
+    )
+
+
+@_train.register
+def _train_sb3(trainer: SB3, spec: Spec, seed: int, emit: Emit) -> tuple[_Run, Learned]:
+    run = _build(spec, trainer, seed)
+    return run, _learn(run, trainer, emit)
+
+
+@_train.register
+def _train_loop(trainer: TrainingLoop, spec: Spec, seed: int, emit: Emit) -> tuple[_Run, Learned]:
+    # The loop's agent trains on envs it makes; it is evaluated on one of the spec's, as an SB3 model is.
+    run = _Run(spec, seed, None, None, spec.make_env())
+    return run, _learn_with_loop(run, trainer, emit)
+
+
 def train_run(
     spec: Spec,
     seed: int,
@@ -435,15 +463,16 @@ def train_run(
     receives ``(phase, step, line)`` as the run moves through building the
     env, training and evaluation (worker processes pass it to the parent).
 
-    A spec with a ``trainer`` trains with it instead (:mod:`specguard.training.trainer`): its checkpoints are
-    looked at as SB3's are, and its last agent is evaluated as an SB3 model is.
+    A spec whose trainer is the user's own loop trains with it (:mod:`specguard.training.trainer`): its checkpoints
+    are looked at as SB3's are, and its last agent is evaluated as an SB3 model is.
 
     Returns:
-        The result and the trained model (an SB3 ``BaseAlgorithm``; with a trainer, its last agent).
+        The result and the trained model (an SB3 ``BaseAlgorithm``; with a training loop, its last agent).
 
     Raises:
         InvalidSpec: the algorithm does not fit the action space, or SB3
-            rejects the hyperparameters (its message, attributed to the spec); a trainer returned no generator.
+            rejects the hyperparameters (its message, attributed to the spec); a training loop returned no generator;
+            the spec's trainer is one specguard cannot run.
         TrainingError: the env or a user function failed; the message has the
             seed and the training step, or the checkpoint and evaluation episode.
     """
@@ -458,12 +487,7 @@ def train_run(
             progress(decode_update(spec.label, seed, line))
 
     emit("build", None, None)
-    if spec.trainer is None:
-        run = _build(spec, seed)
-        curve, adapter, looked, train_seconds = _learn(run, emit)
-    else:  # the user's trainer: its agent on envs it makes; evaluated on one of the spec's, as an SB3 model is
-        run = _Run(spec, seed, None, None, spec.make_env())
-        curve, adapter, looked, train_seconds = _learn_with_trainer(run, emit)
+    run, (curve, adapter, looked, train_seconds) = _train(spec.trainer, spec, seed, emit)
     counts, episodes = _evaluate(run, curve, looked, emit)
     result = RunResult(
         spec=spec.label,
