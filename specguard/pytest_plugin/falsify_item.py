@@ -22,8 +22,8 @@ from typing import Any
 
 import pytest
 
-from specguard.pytest_plugin.items import GoalMissed, group_of, one_line_errors, spec_of
-from specguard.pytest_plugin.session import GoalSpecSession, run, scaled, terminal_lines
+from specguard.pytest_plugin.items import GoalMissed, group_of, one_line_errors
+from specguard.pytest_plugin.session import GoalSpecSession, terminal_lines
 
 __all__ = ["COUNTEREXAMPLES", "run_falsify_item"]
 
@@ -39,7 +39,7 @@ def run_falsify_item(item: pytest.Function, state: GoalSpecSession, check: Any, 
     from specguard.stats.verdicts import UNDECIDED_AS, RunVerdict, Word
 
     with one_line_errors(item):
-        spec, _, agent = spec_of(item, expect)
+        spec, _, agent = state.item_spec(item, expect)
         if agent is not None:  # an agent trained elsewhere: its one policy, in the env check_agent judges it in
             trained = spec.as_run(undecided=state.options.undecided)
             space = start_space(trained, check.starts)
@@ -63,10 +63,10 @@ def run_falsify_item(item: pytest.Function, state: GoalSpecSession, check: Any, 
             }
             result = None
         else:
-            trained = scaled(state, spec)
+            trained = state.scaled(spec)
             space = start_space(trained, check.starts)
             space.resolve(trained.initial_env.make())  # names and bounds checked before anything trains
-            result = run(state, trained, item)
+            result = state.run(trained, item)
             found = falsify_runs(result, space, **check.kwargs(), progress=terminal_lines(item.config))
     verdicts = {seed: falsify_verdict(f, check.max_rate, trained.confidence) for seed, f in found.items()}
     for seed, falsification in sorted(found.items()):

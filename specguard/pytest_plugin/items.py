@@ -20,6 +20,7 @@ from specguard.error import GoalMissed, RunsCrashed
 from specguard.pytest_plugin.declare import GOAL_FIXTURE, FalsifyItem, SpecItem
 
 __all__ = [
+    "PROPERTY",
     "GoalMissed",
     "detailed",
     "falsify_check",
@@ -29,6 +30,9 @@ __all__ = [
     "raise_outcome",
     "spec_of",
 ]
+
+PROPERTY = "specguard"
+"""The user property that carries a goal item's row (its junit properties are ``specguard.<goal>.<name>``)."""
 
 
 def group_of(item: pytest.Item) -> str:

@@ -11,7 +11,6 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from specguard.engine.judging import goal_hint
 from specguard.engine.spec_result import SpecResult
 from specguard.spec.spec import Spec
 from specguard.stats.sequential import GateState
@@ -175,7 +174,7 @@ def judge_goal(result: SpecResult, spec: Spec, path: str, group: str) -> GoalChe
         cached=bool(result.cached) and all(result.cached.values()),
         errors=dict(result.errors),
         spec_key=result.spec_key,
-        hint=None if outcome is GoalOutcome.PASSED else goal_hint(spec, path, result),
+        hint=result.hints.get(path),  # the judge's (specguard.engine.judging.hints): one hint at every door
         kind=kind(path),
         notes=list(result.notes),
         agent=result.agent,

@@ -2,7 +2,7 @@
 
 Hooks, fixtures and the marker only. The logic lives in plain modules:
 :mod:`~specguard.pytest_plugin.options` (the options and their one parse),
-:mod:`~specguard.pytest_plugin.session` (one result per spec),
+:mod:`~specguard.pytest_plugin.session` (the session object: one result per spec, and what each goal item runs),
 :mod:`~specguard.pytest_plugin.items` (what an item runs and its outcome),
 :mod:`~specguard.pytest_plugin.judge` (judging each goal),
 :mod:`~specguard.pytest_plugin.recorder` (reports and baselines),
@@ -14,7 +14,6 @@ specguard installed stays fast.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable, Generator
 from typing import Any
 
@@ -22,23 +21,10 @@ import pytest
 
 from specguard.error import RunsCrashed
 from specguard.pytest_plugin.declare import FALSIFY, GOAL_FIXTURE, SpecItem
-from specguard.pytest_plugin.items import GoalMissed, falsify_check, group_of, one_line_errors, raise_outcome, spec_of
+from specguard.pytest_plugin.items import GoalMissed, falsify_check, group_of
 from specguard.pytest_plugin.options import add_options, baseline_path, parse_options
-from specguard.pytest_plugin.recorder import PROPERTY, Recorder
-from specguard.pytest_plugin.session import (
-    GoalSpecSession,
-    agent_gate_of,
-    baseline_name,
-    close_ahead,
-    gate_of,
-    judge_agent,
-    run,
-    saved_agent,
-    saved_runs,
-    scaled,
-    terminal_progress,
-    upcoming_specs,
-)
+from specguard.pytest_plugin.recorder import Recorder
+from specguard.pytest_plugin.session import GoalSpecSession, terminal_progress
 
 __all__ = ["GoalMissed"]
 
@@ -94,7 +80,7 @@ def pytest_configure(config: pytest.Config) -> None:
 def pytest_unconfigure(config: pytest.Config) -> None:
     state = config.stash.get(_SESSION, None)
     if state is not None:
-        close_ahead(state)
+        state.close_ahead()
     if state is not None and state.executor is not None:
         state.executor.close()
 
@@ -117,7 +103,7 @@ def goal_spec_result(request: pytest.FixtureRequest) -> Callable[[Any], Any]:
     state = request.config.stash[_SESSION]
     if not state.options.enabled:
         pytest.skip(SKIP_REASON)
-    return lambda spec: run(state, scaled(state, spec), request.node)
+    return lambda spec: state.run(state.scaled(spec), request.node)
 
 
 def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
@@ -165,7 +151,7 @@ def pytest_collection_finish(session: pytest.Session) -> None:
     shows = config.getoption("goal_specs_show", False) or config.getoption("goal_specs_plan", False)
     worker = hasattr(config, "workerinput")  # an xdist worker runs only some of the items it collected
     if options.enabled and options.ahead and local and options.cache_dir is not None and not shows and not worker:
-        state.upcoming = upcoming_specs(state, session.items)
+        state.upcoming = state.upcoming_specs(session.items)
 
 
 # -- running -------------------------------------------------------------------
@@ -176,50 +162,16 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     marker = pyfuncitem.get_closest_marker(MARKER)
     if marker is None:
         return None
-    from specguard.pytest_plugin.judge import check_item
-
     state = pyfuncitem.config.stash[_SESSION]
     if marker.kwargs.get("error"):  # a malformed @goal_spec fails its own item, not the collection
         pytest.fail(f"{pyfuncitem.path.name}::{pyfuncitem.name}: {marker.kwargs['error']}", pytrace=False)
-    group = group_of(pyfuncitem)
     check = falsify_check(pyfuncitem, marker)
     if check is not None:
         from specguard.pytest_plugin.falsify_item import run_falsify_item
 
         run_falsify_item(pyfuncitem, state, check, marker.kwargs.get("expect"))
-        return True
-    with one_line_errors(pyfuncitem):
-        spec, paths, agent = spec_of(pyfuncitem, marker.kwargs.get("expect"))
-        agent_gate, entry = None, None
-        if agent is not None:  # an agent trained elsewhere: judged, not trained; compared on the saved episodes
-            agent, result = judge_agent(state, agent, pyfuncitem, group)
-            trained, gate, stored = agent.spec, None, None
-            agent_gate = agent_gate_of(state, agent, group)
-            entry = saved_agent(state, agent, group) if state.options.save else None
-        else:
-            trained = scaled(state, spec)
-            result = run(state, trained, pyfuncitem)
-            gate = gate_of(state, trained, result, group)
-            stored = saved_runs(state, trained, result, gate) if state.options.save else None
-    baseline = (state.baseline, baseline_name(state)) if state.baseline is not None else None
-    checks = check_item(result, spec, paths, group, baseline=baseline, gate=gate, agent_gate=agent_gate)
-    for check in checks:
-        if isinstance(entry, str):  # nothing to save: say why, after any comparison
-            check.comparison = f"{check.comparison}; {entry}" if check.comparison else entry
-        elif entry is not None:
-            check.agent_baseline = entry.to_dict()
-        if stored is not None:
-            check.baseline_runs = [[r.seed, r.successes[check.goal], r.episodes] for r in stored.runs]
-        row = check.to_row()
-        if state.options.report_dir is not None:
-            if agent is not None:  # nothing trained: no curves; its GIF is the agent's own (state.agent_checks)
-                row["agent"], row["curves"] = result.agent, []
-            else:
-                row["curves"] = [r.curve for r in result.runs]
-            state.specs.setdefault(row["group"], trained)  # the spec as trained: its cache entries
-        pyfuncitem.user_properties.append((PROPERTY, json.dumps(row)))
-        pyfuncitem.user_properties += [(f"{PROPERTY}.{check.goal}.{k}", v) for k, v in check.junit_properties()]
-    raise_outcome(pyfuncitem, checks, trained.undecided, result)
+    else:
+        state.run_item(pyfuncitem, marker.kwargs.get("expect"))
     return True
 
 
@@ -245,38 +197,12 @@ def pytest_runtest_call(item: pytest.Item) -> None:
     state = item.config.stash[_SESSION]
     if not state.options.enabled or marker.kwargs.get("error"):
         return  # skipped without --goal-specs; a malformed @goal_spec fails as usual
-    from specguard.report.show import SHOW_PROPERTY, SHOWN, agent_plan_text, plan_text, render_spec
+    from specguard.report.show import SHOW_PROPERTY, SHOWN
 
-    group = group_of(item)
-    shown = item.config.stash.setdefault(_SHOWN_GROUPS, set())
-    if group in shown:  # one rendering (and one budget warning) per spec, not per goal item
-        pytest.skip(SHOWN)
-    with one_line_errors(item):
-        spec, _, agent = spec_of(item, marker.kwargs.get("expect"))
-        trained = scaled(state, spec) if agent is None else spec
-        texts = [render_spec(trained, group)] if show else []
-        # without a baseline: the session's goal items, and at least this spec's own thresholds (an item
-        # asserting a spec's own thresholds is one item for several comparisons)
-        family = state.baseline.family if state.baseline is not None else state.goal_items
-        family = max(1, family, len(trained.thresholds))
-        if plan and agent is not None:
-            texts.append(agent_plan_text(agent, group, family=family, baseline=state.baseline))
-        elif plan:
-            texts.append(
-                plan_text(
-                    trained,
-                    group,
-                    family=family,
-                    compare_seeds=state.options.compare_seeds,
-                    baseline=state.baseline,
-                )
-            )
-    shown.add(group)
-    item.user_properties.append((SHOW_PROPERTY, "\n".join(texts)))
+    text = state.show_item(item, marker.kwargs.get("expect"), show=show, plan=plan)
+    if text is not None:  # None: its spec was shown by an earlier item
+        item.user_properties.append((SHOW_PROPERTY, text))
     pytest.skip(SHOWN)
-
-
-_SHOWN_GROUPS = pytest.StashKey[set[str]]()
 
 
 def pytest_terminal_summary(terminalreporter: Any) -> None:

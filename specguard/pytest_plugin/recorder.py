@@ -16,11 +16,11 @@ from typing import Any
 import pytest
 
 from specguard.pytest_plugin.falsify_item import COUNTEREXAMPLES
+from specguard.pytest_plugin.items import PROPERTY
 from specguard.pytest_plugin.session import GoalSpecSession
 
-__all__ = ["PROPERTY", "Recorder", "apply_family", "interruption", "unsigned_cache_note", "write_outputs"]
+__all__ = ["Recorder", "apply_family", "interruption", "unsigned_cache_note", "write_outputs"]
 
-PROPERTY = "specguard"  # the user property that carries a goal item's row
 WARNING = "specguard: warning:"  # a line saying an output was not written
 
 
