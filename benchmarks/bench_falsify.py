@@ -65,8 +65,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the case stud
 
 import specguard as sg
 from specguard.engine.falsify_run import batch_policy, property_keys
+from specguard.engine.result_models import load_normalizer
 from specguard.engine.run_spec import RunOptions, train_seeds
-from specguard.engine.trained import load_normalizer
 from specguard.evaluation.policy import one_torch_thread, policy
 from specguard.evaluation.rollout import episode
 from specguard.falsify.robustness import SCORES

@@ -56,8 +56,8 @@ _EXPORTS = {
     "run_spec": "specguard.engine.run_spec",
     "SpecResult": "specguard.engine.spec_result",
     "table": "specguard.report.table",
-    "load_model": "specguard.engine.trained",
-    "rollout": "specguard.engine.trained",
+    "load_model": "specguard.engine.result_models",
+    "rollout": "specguard.engine.result_models",
     "falsify_runs": "specguard.engine.falsify_run",
     # agents trained elsewhere
     "load_agent": "specguard.agents.sources",
@@ -102,7 +102,7 @@ _MOVED = {
     "Cache": "specguard.cache.store",
     "GoalVerdict": "specguard.engine.spec_result",
     "check_spec": "specguard.spec.spec",
-    "load_normalizer": "specguard.engine.trained",
+    "load_normalizer": "specguard.engine.result_models",
 }
 """The names the face gave up (0.x, CHANGELOG): each still resolves, with a ``DeprecationWarning`` naming its home."""
 
@@ -150,10 +150,10 @@ if TYPE_CHECKING:  # explicit re-exports (`name as name`) for type checkers
     from specguard.engine.check_agent import check_agent as check_agent
     from specguard.engine.falsify_run import falsify_agent as falsify_agent
     from specguard.engine.falsify_run import falsify_runs as falsify_runs
+    from specguard.engine.result_models import load_model as load_model
+    from specguard.engine.result_models import rollout as rollout
     from specguard.engine.run_spec import run_spec as run_spec
     from specguard.engine.spec_result import SpecResult as SpecResult
-    from specguard.engine.trained import load_model as load_model
-    from specguard.engine.trained import rollout as rollout
     from specguard.error import SpecError as SpecError
     from specguard.extend import Node as Node
     from specguard.falsify.assertion import Falsify as Falsify

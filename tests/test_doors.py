@@ -22,7 +22,7 @@ from bad_modules import CASES, write_bad_modules
 import specguard as sg
 import specguard.cache.versions
 import specguard.engine.run_spec
-import specguard.engine.train_task
+import specguard.engine.worker_task
 from specguard.cli.main import main
 from specguard.spec.loading import load_objects
 from specguard.stats.verdicts import GoalOutcome

@@ -6,8 +6,7 @@ import pytest
 
 import specguard as sg
 from example_specs import pendulum
-from specguard.engine.judging import judge as _judge
-from specguard.engine.spec_result import SpecResult
+from specguard.engine.judging import judged
 from specguard.gate.baseline import Baseline
 from specguard.pytest_plugin.judge import judge_goal
 from specguard.stats.intervals import success_interval
@@ -29,9 +28,7 @@ def result_of(spec, per_seed, errors=None):
         )
         for i, (k, n) in enumerate(per_seed)
     ]
-    result = SpecResult(spec=spec.label, runs=runs, goals={}, errors=errors or {})
-    result.goals = _judge(spec, runs, len(result.errors))
-    return result
+    return judged(spec, runs, errors=errors)  # the judge every door uses: verdicts, notes and hints
 
 
 def spec(tree="b", expect=None, **budget):
@@ -98,8 +95,7 @@ def test_competing_subgoals_hint_at_weights():
         )
         for i in range(2)
     ]
-    result = SpecResult(spec="pendulum", runs=runs, goals={})
-    result.goals = _judge(s, runs, 0)
+    result = judged(s, runs)
     check = judge_goal(result, s, "pendulum", "g")
     assert check.hint == (
         "subgoals compete: 'pendulum/stabilization' is reached in 100% of episodes, 'pendulum/position' in 33%; "
@@ -201,9 +197,7 @@ def safety_result(spec, safe_per_seed, episodes=30):
         )
         for i, k in enumerate(safe_per_seed)
     ]
-    result = SpecResult(spec=spec.label, runs=runs, goals={})
-    result.goals = _judge(spec, runs, 0)
-    return result
+    return judged(spec, runs)
 
 
 def test_a_missed_safety_threshold_speaks_of_violations():

@@ -345,8 +345,8 @@ def test_a_lazy_import_of_the_engine_from_the_tree_is_a_violation(tmp_path):
 UPWARD = [
     ("spec/spec.py", "training/train.py"),
     ("training/train.py", "cache/store.py"),
-    ("cache/store.py", "engine/runs.py"),
-    ("engine/runs.py", "gate/comparison.py"),
+    ("cache/store.py", "engine/seeds.py"),
+    ("engine/seeds.py", "gate/comparison.py"),
     ("gate/comparison.py", "report/session_report.py"),
     ("report/session_report.py", "pytest_plugin/items.py"),
 ]
@@ -443,14 +443,14 @@ def test_relative_imports_and_the_facade_are_resolved(tmp_path):
     package = write_package(
         tmp_path,
         {
-            "engine/run_spec.py": "from . import runs\nfrom .runs import Runs\nimport specguard\n",
-            "engine/runs.py": "from .. import error\n",
+            "engine/run_spec.py": "from . import seeds\nfrom .seeds import Runs\nimport specguard\n",
+            "engine/seeds.py": "from .. import error\n",
             "error.py": "",
         },
     )
     graph = import_graph(package)
-    assert graph["specguard.engine.run_spec"] == {"specguard", "specguard.engine.runs"}
-    assert graph["specguard.engine.runs"] == {"specguard.error"}
+    assert graph["specguard.engine.run_spec"] == {"specguard", "specguard.engine.seeds"}
+    assert graph["specguard.engine.seeds"] == {"specguard.error"}
     assert layer_violations(graph) == [
         "specguard.engine.run_spec -> specguard (the facade: import the module that defines the name)"
     ]
@@ -571,7 +571,7 @@ def test_a_misplaced_exception_class_is_found(tmp_path):
         tmp_path,
         {
             "error.py": "class SpecError(Exception):\n    pass\nclass Broken(Exception):\n    pass\n",
-            "engine/runs.py": "from specguard import error\nclass Late(error.SpecError):\n    pass\n",
+            "engine/seeds.py": "from specguard import error\nclass Late(error.SpecError):\n    pass\n",
             "registry.py": "class Loud(UserWarning):\n    pass\nclass Plain:\n    pass\n",
             "contract/trees.py": "class Broken(Exception):\n    pass\nclass Worse(Broken):\n    pass\n",
             "report/gifs.py": "class Broken(Exception):\n    pass\nclass Stray(RuntimeError):\n    pass\n",
@@ -579,7 +579,7 @@ def test_a_misplaced_exception_class_is_found(tmp_path):
     )
     assert misplaced_exception_classes(package, {"specguard.contract.trees": frozenset({"Broken"})}) == [
         "specguard.contract.trees.Worse (neither public, in specguard.error, nor a signal listed at its home)",
-        "specguard.engine.runs.Late (a public exception: its home is specguard.error)",
+        "specguard.engine.seeds.Late (a public exception: its home is specguard.error)",
         "specguard.error.Broken (an internal signal: its home is specguard.contract.trees)",
         "specguard.registry.Loud (neither public, in specguard.error, nor a signal listed at its home)",
         "specguard.report.gifs.Broken (neither public, in specguard.error, nor a signal listed at its home)",

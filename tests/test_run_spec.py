@@ -348,7 +348,7 @@ def test_safety_rates_are_judged_tabled_and_serialised_like_goals():
 
 
 def test_progress_lines_label_safety_rates():
-    from specguard.engine.runs import Runs as _Runs
+    from specguard.engine.seeds import Runs as _Runs
 
     run = _safety_result([12], {"fast": 0.0}).runs[0]
     assert _Runs._rates(run).startswith("pendulum:fast (safe) 12/30, pendulum 30/30")
@@ -407,7 +407,7 @@ def test_the_table_lists_each_seeds_adapted_weights():
 def test_a_worker_running_other_code_than_the_key_names_refuses_to_train(tmp_path, monkeypatch):
     # The driver keyed its runs with one specguard; the spawned workers import another (sources edited meanwhile).
     from specguard.cache.versions import versions
-    from specguard.engine import runs as engine
+    from specguard.engine import seeds as engine
 
     keyed = {**versions(), "specguard": "0.0.0+edited"}
     monkeypatch.setattr(engine, "versions", lambda: keyed)
@@ -448,7 +448,7 @@ def test_a_local_version_label_alone_is_the_installed_library(monkeypatch):
 @pytest.mark.slow
 def test_a_worker_with_the_keyed_versions_trains():
     from specguard.cache.versions import versions
-    from specguard.engine.train_task import train_task as _train_task
+    from specguard.engine.worker_task import train_task as _train_task
 
     native = spec().as_run(numerics="native")  # this process is no worker: its torch has chosen its own kernels
     out = _train_task(native, 0, versions(), report=lambda phase, step=None, line=None: None)

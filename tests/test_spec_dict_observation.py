@@ -18,7 +18,7 @@ import specguard as sg
 from specguard.cache.fingerprint import _fields, _trained_fields, fingerprint_spec
 from specguard.construction.env import ENV_KEY, SPEC_KEY, stack_observations
 from specguard.engine.falsify_run import batch_policy, property_keys
-from specguard.engine.trained import load_normalizer
+from specguard.engine.result_models import load_normalizer
 from specguard.evaluation.policy import policy
 from specguard.falsify.search import EpisodeRunner
 from specguard.report.show import render_spec

@@ -13,7 +13,7 @@ import pytest
 import specguard as sg
 from example_specs import pendulum
 from specguard.construction.env import make_baseline_env
-from specguard.engine.trained import load_normalizer
+from specguard.engine.result_models import load_normalizer
 from specguard.error import TrainingError
 from specguard.evaluation.episodes import EVAL_SEED_BASE, evaluate
 from specguard.stats.anytime import min_successes_to_meet

@@ -13,7 +13,7 @@ seed from starting late and leaving the other cores idle at the session's end. A
 a run still queued moves it to the front, so the order changes when a run starts, never what it trains.
 
 The foreground asks for a run by its cache key (:meth:`TrainAhead.take`, from
-:class:`~specguard.engine.runs.Runs`): a planned run still queued moves to the front, one training is waited for,
+:class:`~specguard.engine.seeds.Runs`): a planned run still queued moves to the front, one training is waited for,
 and its outcome is handed over with its lock, exactly as the foreground's own executor would have returned it.
 The foreground then stores it, warns about it, reports it ("trained", not "cached") and judges it in the item it
 belongs to; what its process wrote comes out there too. Nothing reaches the cache or the user from a slot's thread.
@@ -40,7 +40,7 @@ from typing import Any
 from specguard.cache.fingerprint import fingerprint_spec
 from specguard.cache.store import Cache, try_acquire
 from specguard.cache.versions import versions
-from specguard.engine.train_task import train_task
+from specguard.engine.worker_task import train_task
 from specguard.error import CacheWarning
 from specguard.parallel.protocol import Done, Task, TaskOutcome
 from specguard.parallel.slots import FOREGROUND, Inbox, SlotPool, Ticket, stop, wait_message
@@ -59,7 +59,7 @@ Progress = Callable[[ProgressEvent], None]
 
 
 def seed_task(spec: Spec, seed: int, keyed: dict[str, str] | None, *, output: str | None = None) -> Task:
-    """The task that trains ``seed`` of ``spec`` (:func:`~specguard.engine.train_task.train_task`), with the numerics
+    """The task that trains ``seed`` of ``spec`` (:func:`~specguard.engine.worker_task.train_task`), with the numerics
     its process starts with; ``keyed``: the versions a cached run's key names (None: not cached)."""
     return Task(seed, train_task, (spec, seed, keyed), numerics_environ(spec.numerics), output=output)
 

@@ -26,8 +26,8 @@ from typing import Any
 
 import numpy as np
 
+from specguard.engine.result_models import load_run
 from specguard.engine.spec_result import SpecResult
-from specguard.engine.trained import load_run
 from specguard.evaluation.policy import one_torch_thread
 from specguard.falsify.robustness import SCORES
 from specguard.falsify.search import EpisodeRunner, Falsification, falsify
@@ -117,7 +117,7 @@ def falsify_runs(
         Per seed, what was found (:class:`~specguard.falsify.search.Falsification`).
 
     Raises:
-        SpecError: a run was not cached (:func:`specguard.engine.trained.load_run`).
+        SpecError: a run was not cached (:func:`specguard.engine.result_models.load_run`).
         InvalidSpec: ``score`` is not one of ``SCORES`` (:data:`specguard.falsify.robustness.SCORES`).
 
     Example:

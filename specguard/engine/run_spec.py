@@ -28,7 +28,7 @@ from pathlib import Path
 from specguard.cache.store import Cache
 from specguard.engine.ahead import TrainAhead
 from specguard.engine.judging import episode_notes, hints, judge, seeds_still_needed
-from specguard.engine.runs import Runs
+from specguard.engine.seeds import Runs
 from specguard.engine.spec_result import SpecResult
 from specguard.error import SpecError
 from specguard.parallel.executors import LOCAL, Executor, make_executor

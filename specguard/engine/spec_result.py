@@ -3,7 +3,7 @@
 A result says what was measured and how each goal is judged, in the words of
 :mod:`specguard.stats.verdicts`; ``to_dict()`` is JSON and
 :meth:`SpecResult.from_dict` reads it back. What acts on a result lives
-elsewhere: its models, rollouts and falsification in :mod:`specguard.engine.trained`
+elsewhere: its models, rollouts and falsification in :mod:`specguard.engine.result_models`
 and :mod:`specguard.engine.falsify_run`, its table in :mod:`specguard.report.table`.
 
 Example:
@@ -164,7 +164,7 @@ class SpecResult:
         hints: per goal (or safety rate) that did not pass, what to try (:func:`specguard.engine.judging.goal_hint`),
             the hint every door prints under its verdict; a result stored before hints were kept has none.
         trained: the spec as run, which with ``cache_dir`` reaches the runs' models
-            (:func:`specguard.engine.trained.load_model`); neither is reported nor serialised.
+            (:func:`specguard.engine.result_models.load_model`); neither is reported nor serialised.
     """
 
     spec: str

@@ -6,7 +6,7 @@ A :class:`~specguard.spec.spec.Spec` says what it asks (the env, the tree, the t
 * :class:`SB3` (the default): a stable-baselines3 or sb3-contrib algorithm with its hyperparameters, policy, training
   envs, ``VecNormalize``, callbacks and TensorBoard folder (:mod:`specguard.training.train` runs it);
 * :class:`TrainingLoop`: the user's own generator function ``trainer(make_env, timesteps, seed)`` yielding
-  ``(steps, agent)`` checkpoints (:mod:`specguard.training.trainer` drives it). ``Spec(trainer=my_loop)`` wraps a
+  ``(steps, agent)`` checkpoints (:mod:`specguard.training.user_loop` drives it). ``Spec(trainer=my_loop)`` wraps a
   function in one.
 
 Each trainer checks its own arguments where it is made, checks itself against the spec that holds it
@@ -285,7 +285,7 @@ class SB3:
 def _checked_loop(where: str, function: object) -> Callable[..., Any]:
     """A training loop: callable as ``function(make_env, timesteps, seed)``; a plain function (or a partial of one)
     must be a generator function. Another callable (an object with ``__call__``) must return an iterator when
-    called, which the run checks (:mod:`specguard.training.trainer`)."""
+    called, which the run checks (:mod:`specguard.training.user_loop`)."""
     if not callable(function):
         raise InvalidSpec(
             where,
@@ -311,7 +311,7 @@ class TrainingLoop:
     ``(steps, agent)`` checkpoints as it trains: ``steps`` the steps trained so far (increasing ints), ``agent`` a
     callable ``obs -> action``, an object with SB3's ``predict``, or an SB3 model. The checkpoints are judged with the
     anytime looks of SB3's training, the generator closed once a look meets every threshold, and the last agent gets
-    the final evaluation (:mod:`specguard.training.trainer`). Part of the run's key by its code, as the tree's
+    the final evaluation (:mod:`specguard.training.user_loop`). Part of the run's key by its code, as the tree's
     functions. A tree with ``weights="auto"`` (which adapts SB3's training envs) is refused.
     """
 

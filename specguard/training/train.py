@@ -280,14 +280,14 @@ def _looker(run: _Run, curve: GoalCurve, looked: dict[str, Any]) -> Callable[[in
 
 
 def _learn_with_loop(run: _Run, loop: TrainingLoop, emit: Emit) -> Learned:
-    """Run the spec's training loop through its checkpoints (:func:`specguard.training.trainer.drive`), looking at the
+    """Run the spec's training loop through its checkpoints (:func:`specguard.training.user_loop.drive`), looking at the
     planned ones as :func:`_learn` does; the run's model is then the last agent, its steps the last checkpoint's.
 
     Raises:
         InvalidSpec: the trainer returned no generator.
         TrainingError: the trainer failed or yielded a bad checkpoint, or an evaluation failed (named).
     """
-    from specguard.training.trainer import drive
+    from specguard.training.user_loop import drive
 
     spec, budget = run.spec, run.spec.budget
     looked: dict[str, Any] = {}
@@ -463,7 +463,7 @@ def train_run(
     receives ``(phase, step, line)`` as the run moves through building the
     env, training and evaluation (worker processes pass it to the parent).
 
-    A spec whose trainer is the user's own loop trains with it (:mod:`specguard.training.trainer`): its checkpoints
+    A spec whose trainer is the user's own loop trains with it (:mod:`specguard.training.user_loop`): its checkpoints
     are looked at as SB3's are, and its last agent is evaluated as an SB3 model is.
 
     Returns:

@@ -11,7 +11,7 @@ from specguard.cache.store import Cache, try_acquire, wait_for
 from specguard.cache.versions import versions
 from specguard.engine.ahead import TrainAhead, seed_task
 from specguard.engine.spec_result import SpecResult
-from specguard.engine.train_task import describe_failure, is_spec_error
+from specguard.engine.worker_task import describe_failure, is_spec_error
 from specguard.error import CacheWarning
 from specguard.parallel.executors import Executor
 from specguard.parallel.protocol import Failure, TaskOutcome

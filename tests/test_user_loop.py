@@ -361,7 +361,7 @@ def test_a_warning_of_run_spec_points_at_the_users_line(tmp_path):
 
 @pytest.mark.slow
 def test_a_trainers_agent_has_its_weights_digest_or_none_where_it_cannot_be_digested():
-    from specguard.engine.train_task import judged_digest
+    from specguard.engine.worker_task import judged_digest
 
     result, agent = train_run(spec(), seed=0)
     assert agent is lean and judged_digest(spec(), agent) == sg.load_agent(lean).identity  # as a check of it says
