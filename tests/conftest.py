@@ -1,5 +1,8 @@
+import atexit
 import os
+import shutil
 import sys
+import tempfile
 
 import pytest
 import torch  # noqa: F401
@@ -10,6 +13,12 @@ from hypothesis import HealthCheck, settings
 # (tests/test_doors.py's three runs of one test in a process crashed pytest so).
 
 pytest_plugins = ["pytester"]
+
+# stable-baselines3 makes an empty folder /tmp/SB3-<time> for each quiet model that learns without a logger of its own
+# (the tests that train SB3 directly): here they share one folder per process, removed when the process ends.
+_SB3_LOGDIR = tempfile.mkdtemp(prefix="specguard-tests-sb3-")
+os.environ.setdefault("SB3_LOGDIR", _SB3_LOGDIR)
+atexit.register(shutil.rmtree, _SB3_LOGDIR, ignore_errors=True)
 
 # Headless rendering for check_env's render-mode checks.
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")

@@ -76,6 +76,9 @@ def test_reproduce_writes_a_table_beside_the_paper_and_a_plot_per_case(tmp_path,
     assert "specguard " + versions()["specguard"] + ". 2 seeds per spec, budget scale 1x." in text
     # 128 steps finish no Pendulum episode, so the weights stay where "auto" starts.
     assert "Adapted weights of (auto) when training ended: seed 0 p (0.50, 0.50), seed 1 p (0.50, 0.50)." in text
+    # The hint of each goal that did not pass, as the table of `specguard run` and the pytest item print it.
+    hints = [line for line in text.splitlines() if line.startswith("Hint for (")]
+    assert hints and all(line.count(": ") >= 1 for line in hints), text
     # Resumable: a second call trains nothing, every run comes from the cache.
     assert main(argv) == 0
     assert out.read_text() == text

@@ -2,10 +2,11 @@
 try where a goal did not pass, and how many more seeds could change a verdict.
 
 The hints are one function, :func:`goal_hint`, for every door: the pytest item's failure (``pytest
---goal-specs``), the table of ``specguard run`` and ``specguard check``, and a result's JSON, ``reproduce``'s
-too (:attr:`SpecResult.hints <specguard.engine.spec_result.SpecResult.hints>`). A sparse goal never reached asks
-for a ``Distance``, subgoals that compete name the weaker one, runs left undecided say by how much, a safety rate
-names its violations, and an agent trained elsewhere is told what its episodes show, not how to train it.
+--goal-specs``), the table of ``specguard run`` and ``specguard check``, a result's JSON, and ``specguard
+reproduce``'s Markdown (:attr:`SpecResult.hints <specguard.engine.spec_result.SpecResult.hints>`). A sparse
+goal never reached asks for a ``Distance``, subgoals that compete name the weaker one, runs left undecided say by
+how much, a safety rate names its violations, and an agent trained elsewhere is told what its episodes show, not
+how to train it.
 
 Example:
     >>> import specguard as sg

@@ -77,7 +77,9 @@ HEADER = ("spec", "root success", "95% interval", "runs met", "paper", "steps pe
 
 
 def case_section(reproduction: Reproduction, case: CaseStudy, images: Mapping[str, str]) -> str:
-    """One case's section: how it was made, its table, its adapted weights and its plot."""
+    """One case's section: how it was made, its table, its adapted weights, the hint of each goal that did not pass
+    (:attr:`SpecResult.hints <specguard.engine.spec_result.SpecResult.hints>`, as every door prints them) and its
+    plot."""
     r = reproduction
     lines = [
         f"## {case.name}",
@@ -92,6 +94,9 @@ def case_section(reproduction: Reproduction, case: CaseStudy, images: Mapping[st
         seeds = per_seed_text((run.seed, run.weights) for run in r.results[case.name][key].runs)
         if seeds:
             lines += ["", f"Adapted weights of ({key}) when training ended: {seeds}."]
+    for key in case.specs:
+        for path, hint in r.results[case.name][key].hints.items():
+            lines += ["", f"Hint for ({key}) `{path}`: {hint}"]
     if case.name in images:
         lines += ["", f"![{case.name}: success per goal over training]({images[case.name]})"]
     return "\n".join(lines) + "\n"
