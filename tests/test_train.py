@@ -68,6 +68,39 @@ def test_evaluate_counts_the_last_state_of_each_episode():
     assert counts == {"root": 3, "root/up": 3, "root/any": 3}
 
 
+def test_evaluate_keeps_each_episodes_start_features_and_outcome():
+    initial = sg.InitialEnv("CartPole-v1", features=("x", "v", "theta", "omega"))
+    env = sg.make_env(initial, sg.Always(sg.Goal("upright", theta=(-0.2, 0.2)), name="kept"))
+    starts, outcomes = [], []
+    seeds = [EVAL_SEED_BASE, EVAL_SEED_BASE + 1]
+    counts = evaluate(lambda obs: 0, env, 2, seeds, outcomes=outcomes, starts=starts)
+    reset = gym.make("CartPole-v1")
+    assert starts == [reset.reset(seed=s)[0].astype(float).tolist() for s in seeds]  # the state each began in
+    assert outcomes == [{"kept": 0, "kept/upright": 0}] * 2 and counts == {"kept": 0, "kept/upright": 0}
+
+
+def test_a_run_stored_before_its_looks_were_kept_still_reads_and_a_bad_look_is_refused():
+    from specguard.training.result import RunResult
+
+    look = {"timesteps": 64, "features": [[0.5], [-0.25]], "held": {"p": "10"}}
+    run = RunResult(spec="p", seed=0, timesteps=64, episodes=2, successes={"p": 1}, train_seconds=1.0, looks=[look])
+    data = run.to_dict()
+    assert RunResult.from_dict(data, seed=0, paths=["p"]) == run
+    old = {k: v for k, v in data.items() if k != "looks"}
+    assert RunResult.from_dict(old, seed=0, paths=["p"]).looks == []
+    bad = {
+        "looks[0].held['p'] is not one 0 or 1 per episode": {**look, "held": {"p": "1"}},
+        "looks[0].held is not an object of the run's goal": {**look, "held": {"q": "10"}},
+        "looks[0].features is not a list of lists of finite numbers": {**look, "features": [[float("nan")], [0.0]]},
+        "looks[0].features has episodes of different lengths": {**look, "features": [[0.5], [0.1, 0.2]]},
+        "looks[0].timesteps -1 is not an integer": {**look, "timesteps": -1},
+        "looks[0] is not an object of features, held, timesteps": {"timesteps": 64},
+    }
+    for message, broken in bad.items():
+        with pytest.raises(ValueError, match=re.escape(message)):
+            RunResult.from_dict({**data, "looks": [broken]}, seed=0, paths=["p"])
+
+
 def test_evaluate_tells_an_episode_policy_as_each_episode_starts():
     initial = sg.InitialEnv(lambda: ReplayEnv([[0.0], [1.0], [0.0], [1.0]]), features=("x",))
     env = sg.make_env(initial, sg.Goal("up", x=(0.5, None)))
@@ -283,6 +316,12 @@ def test_the_cached_model_of_a_run_stopped_at_a_checkpoint_is_the_one_judged(tmp
     result = sg.run_spec(spec, workers=1, cache_dir=tmp_path, progress=None)
     assert result.runs[0].met_early
     assert sg.load_model(result, 0).num_timesteps == result.runs[0].timesteps == 1024
+    # The look that met every threshold is the run's last, kept in its cache entry and in the result's data.
+    (look,) = result.runs[0].looks
+    assert look["timesteps"] == 1024 and look["held"]["up"].count("1") == result.runs[0].successes["up"]
+    again = sg.run_spec(spec, workers=1, cache_dir=tmp_path, progress=None)
+    assert all(again.cached.values()) and again.runs[0].looks == [look]
+    assert type(result).from_dict(json.loads(json.dumps(result.to_dict()))).runs[0].looks == [look]
 
 
 @pytest.mark.slow
@@ -303,6 +342,15 @@ def test_a_run_whose_thresholds_are_not_met_trains_its_whole_budget():
     need = min_successes_to_meet(30, 0.5, spec.verdict_confidence)
     assert [p["evaluation_episodes"] for p in evaluated[:3]] == [30 - need + 1] * 3
     assert result.episodes == 30
+    # What each evaluation saw is kept, episode by episode: the starts' features and each key's outcome.
+    assert [look["timesteps"] for look in result.looks] == [1024, 2048, 3072, 4096]
+    for look, point in zip(result.looks, evaluated):
+        assert len(look["features"]) == point["evaluation_episodes"]
+        assert all(len(start) == 1 for start in look["features"])  # the spec's one feature, x, at reset
+        assert set(look["held"]) == set(result.successes)
+    final = result.looks[-1]
+    assert {key: bits.count("1") for key, bits in final["held"].items()} == result.successes
+    assert all(start == [0.0] for start in final["features"])  # every episode of this env starts at x = 0
 
 
 @pytest.mark.slow

@@ -349,6 +349,9 @@ class SpecEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         self._read = FeatureReader(tree.name, self.features, state, from_info, from_env)
         self._identity = state is None and not self._read.extra  # the observation is the features
         self._t = 0  # steps since the reset, for messages
+        self.start_features: tuple[float, ...] = ()
+        """The features of the episode's first state, as the last ``reset`` read them (the start a falsifier's
+        failure predictor learns from: :attr:`RunResult.looks <specguard.training.result.RunResult.looks>`)."""
         self._safety_keys = self.evaluator.safety_keys
         base_space = env.observation_space
         self._read.check(base_space)
@@ -435,6 +438,7 @@ class SpecEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         obs, info = self.env.reset(seed=seed, options=options)
         self._t = 0
         f = self._read(obs, info, self.env, 0)
+        self.start_features = tuple(f)
         ev = self.evaluator
         ev.reset(f)
         info = StepInfo(
@@ -558,6 +562,8 @@ class BaselineEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         self.feature_high = np.full(n, np.inf) if feature_high is None else np.asarray(feature_high, dtype=np.float64)
         """The features' bounds (``-inf``/``inf`` where unknown)."""
         self._t = 0
+        self.start_features: tuple[float, ...] = ()
+        """The features of the episode's first state, as the last ``reset`` read them."""
 
     def _info(self, info: dict[str, Any], members: tuple[bool, ...]) -> dict[str, Any]:
         ev = self.evaluator
@@ -567,6 +573,7 @@ class BaselineEnv(gym.Wrapper[Any, Any, Any, Any], RecordConstructorArgs):
         obs, info = self.env.reset(seed=seed, options=options)
         self._t = 0
         f = self._read(obs, info, self.env, 0)
+        self.start_features = tuple(f)
         return obs, self._info(info, self.evaluator.reset(f))
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:

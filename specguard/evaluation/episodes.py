@@ -59,6 +59,7 @@ def evaluate(
     terminated: list[bool] | None = None,
     capped: list[bool] | None = None,
     outcomes: list[dict[str, int]] | None = None,
+    starts: list[list[float]] | None = None,
 ) -> dict[str, int]:
     """Run ``episodes`` episodes of ``policy`` on ``env`` (which reports ``info["goals"]`` and ``info["safe"]``).
 
@@ -69,7 +70,9 @@ def evaluate(
     (the first of ``info["goals"]``); ``terminated``, whether it ended by termination rather than
     truncation (a fall or a crash of the initial env, before its horizon); ``capped``, whether specguard's
     step cap cut it (``info[CAPPED]``: the env declares no episode limit, :mod:`specguard.construction.cap`);
-    ``outcomes``, the episode's own counts (1 or 0 per key, as returned), for paired comparisons.
+    ``outcomes``, the episode's own counts (1 or 0 per key, as returned), for paired comparisons; ``starts``, the
+    features of the episode's first state (``start_features`` of the constructed or baseline env, through its
+    wrappers).
 
     Returns:
         Per node path, the number of episodes whose last state lies in the
@@ -87,6 +90,8 @@ def evaluate(
             policy.start([env])
         if started is not None:
             started.append(bool(next(iter(info["goals"].values()))))
+        if starts is not None:
+            starts.append(list(env.get_wrapper_attr("start_features")))
         ended = cut = False
         while not (ended or cut):
             try:

@@ -66,6 +66,12 @@ class RunResult:
             :attr:`Agent.identity <specguard.agents.agent.Agent.identity>` of that model in memory; for an agent
             trained elsewhere (:func:`~specguard.engine.check_agent.check_agent`), the agent's identity. ``None``:
             the agent cannot be digested, or a stored run written before it was recorded.
+        looks: what each evaluation of the run saw, episode by episode, in order (its interim looks, then its final
+            evaluation unless a look met every threshold): ``{"timesteps": t, "features": [[f, ...], ...], "held":
+            {key: "1011..."}}``, the features of each episode's first state (6 significant digits) and, per goal and
+            safety key, whether the episode met it (``"1"``) or not. The data a falsifier's failure predictor
+            learns from (earlier checkpoints are less robust agents of the same training). Empty for a run stored
+            before it was recorded, and for an agent trained elsewhere.
     """
 
     spec: str
@@ -84,6 +90,7 @@ class RunResult:
     stop_reason: str | None = None
     numerics: str | None = None
     weights_digest: str | None = None
+    looks: list[dict[str, Any]] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -96,7 +103,7 @@ class RunResult:
             ValueError: the first check that failed, in words.
         """
         if isinstance(data, dict):
-            data = {**_ADDED_LATER, **data}  # a run stored before a field was recorded: its default
+            data = {**_ADDED_LATER, "looks": [], **data}  # a run stored before a field was recorded: its default
         check_run_result(data, seed, paths)
         return cls(**data)
 
@@ -161,3 +168,35 @@ def check_run_result(result: Any, seed: int, paths: Collection[str]) -> None:
         raise ValueError(f"weights_digest {digest!r} is neither a SHA-256 hex digest nor null")
     if not isinstance(result["curve"], list) or not all(isinstance(p, dict) for p in result["curve"]):
         raise ValueError("curve is not a list of points")
+    _check_looks(result["looks"], set(successes))
+
+
+_LOOK_FIELDS = {"timesteps", "features", "held"}
+
+
+def _check_looks(looks: Any, keys: Collection[str]) -> None:
+    """Raise ``ValueError`` naming the first way ``looks`` is not what :attr:`RunResult.looks` holds for ``keys``."""
+    if not isinstance(looks, list):
+        raise ValueError("looks is not a list")
+    for i, look in enumerate(looks):
+        if not isinstance(look, dict) or set(look) != _LOOK_FIELDS:
+            raise ValueError(f"looks[{i}] is not an object of {', '.join(sorted(_LOOK_FIELDS))}")
+        if not _is_int(look["timesteps"]) or look["timesteps"] < 0:
+            raise ValueError(f"looks[{i}].timesteps {look['timesteps']!r} is not an integer >= 0")
+        features = look["features"]
+        if not isinstance(features, list) or not all(
+            isinstance(row, list) and all(_is_number(x) and math.isfinite(x) for x in row) for row in features
+        ):
+            raise ValueError(f"looks[{i}].features is not a list of lists of finite numbers")
+        if len({len(row) for row in features}) > 1:
+            raise ValueError(f"looks[{i}].features has episodes of different lengths")
+        held = look["held"]
+        if not isinstance(held, dict) or not set(held) <= set(keys):
+            raise ValueError(f"looks[{i}].held is not an object of the run's goal and safety keys")
+        for key, bits in held.items():
+            if not isinstance(bits, str) or len(bits) != len(features) or set(bits) - {"0", "1"}:
+                raise ValueError(f"looks[{i}].held[{key!r}] is not one 0 or 1 per episode ({len(features)})")
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)

@@ -70,6 +70,8 @@ class _Run:
     stop_reason: str | None = None  # a user's callback stopped training: which, where (RunResult.stop_reason)
     log: Any = None  # the run's LogGoals callback, made when it trains: its evaluations go to the model's logger
     steps: int | None = None  # a trainer's last checkpoint's steps (Spec(trainer=...)); None: the SB3 model's
+    seen: list[tuple[list[float], dict[str, int]]] = field(default_factory=list)  # the evaluation under way
+    looks: list[dict[str, Any]] = field(default_factory=list)  # what each finished evaluation saw (RunResult.looks)
 
     @property
     def timesteps(self) -> int:
@@ -88,13 +90,30 @@ class _Run:
         started: list[bool] = []
         terminated: list[bool] = []
         capped: list[bool] = []
+        outcomes: list[dict[str, int]] = []
+        starts: list[list[float]] = []
         seeds = range(first + start, first + start + count)
-        counts = evaluate(act, self.eval_env, count, seeds, started, terminated, capped)
+        counts = evaluate(act, self.eval_env, count, seeds, started, terminated, capped, outcomes, starts)
+        if start == 0:  # a new evaluation (a look, or the final one) begins at its first episode
+            self.seen = []
+        self.seen += zip(starts, outcomes)
         # The evaluation counted is the last one run (a met checkpoint's, or the final one): keep each latest.
         self.started.update(zip(range(start, start + count), started))
         self.terminated.update(zip(range(start, start + count), terminated))
         self.capped.update(zip(range(start, start + count), capped))
         return counts
+
+    def record_look(self, step: int) -> None:
+        """Keep what the evaluation that just ended saw, at training step ``step`` (:attr:`RunResult.looks`)."""
+        keys = {key for _, outcome in self.seen for key in outcome}
+        self.looks.append(
+            {
+                "timesteps": int(step),
+                "features": [[float(f"{x:.6g}") for x in start] for start, _ in self.seen],
+                "held": {key: "".join(str(outcome.get(key, 0)) for _, outcome in self.seen) for key in sorted(keys)},
+            }
+        )
+        self.seen = []
 
     def started_in_goal(self, episodes: int) -> int:
         """Of evaluation episodes ``0 .. episodes - 1``, those that started in the root goal."""
@@ -270,6 +289,7 @@ def _looker(run: _Run, curve: GoalCurve, looked: dict[str, Any]) -> Callable[[in
         except Exception as e:
             raise run.failure(f"checkpoint evaluation at step {step}, evaluation episode {run.episode}", e) from e
         curve.evaluated(step, counts, episodes)
+        run.record_look(step)
         if run.log is not None:
             run.log.evaluated(step, counts, episodes)
         if ok:
@@ -415,6 +435,7 @@ def _evaluate(run: _Run, curve: GoalCurve, looked: Mapping[str, Any], emit: Emit
             stages, thresholds = spec.budget.evaluation_stages, spec.thresholds
             counts, episodes = final_evaluation(run.episodes, stages, thresholds, spec.verdict_confidence)
             curve.evaluated(run.timesteps, counts, episodes)
+            run.record_look(run.timesteps)
             if run.log is not None:
                 run.log.evaluated(run.timesteps, counts, episodes, write=True)
         emit("evaluate", episodes, None)
@@ -504,5 +525,6 @@ def train_run(
         terminated=run.ended_by_termination(episodes),
         capped=run.cut_at_cap(episodes),
         stop_reason=run.stop_reason,
+        looks=run.looks,
     )
     return result, run.model
