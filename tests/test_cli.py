@@ -390,7 +390,7 @@ def test_a_spec_file_that_ends_the_process_at_import_is_an_error_naming_it(tmp_p
 
 @pytest.mark.slow
 def test_a_json_write_that_fails_at_the_end_warns_and_keeps_the_results(spec_file, tmp_path, monkeypatch, capsys):
-    import specguard.cli.main as cli
+    import specguard.cli.arguments as cli
 
     report = tmp_path / "out.json"
 
@@ -414,7 +414,7 @@ def test_a_json_write_that_fails_at_the_end_warns_and_keeps_the_results(spec_fil
 
 @pytest.mark.slow
 def test_a_json_write_that_fails_twice_prints_the_results(spec_file, tmp_path, monkeypatch, capsys):
-    import specguard.cli.main as cli
+    import specguard.cli.arguments as cli
 
     def refuse(path, text, *args, **kwargs):
         raise OSError(28, "No space left on device", str(path))
