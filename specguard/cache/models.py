@@ -32,7 +32,7 @@ def load_cached(spec: Spec, seed: int, cache_dir: Path | str) -> tuple[Any, Any]
     if not isinstance(spec.trainer, SB3):  # a training loop's agent, as run_files stored it
         with (path.parent / AGENT).open("rb") as f:
             return pickle.load(f), None  # cloudpickle's output is read by pickle
-    model = sb3.load_model(spec.trainer.algorithm, path)
+    model = sb3.load_saved(spec.trainer.algorithm, path)
     stats = path.parent / NORMALIZER
     normalizer = None
     if stats.exists():

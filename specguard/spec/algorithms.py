@@ -43,7 +43,7 @@ __all__ = [
     "default_policy",
     "dict_policy",
     "hyperparameter_names",
-    "load_model",
+    "load_saved",
     "resolve_algorithm",
     "takes_action_masks",
 ]
@@ -364,6 +364,7 @@ def takes_action_masks(model_or_class: Any) -> bool:
     return predict is not None and "action_masks" in inspect.signature(predict).parameters
 
 
-def load_model(algorithm: str | type, path: Path | str) -> Any:
-    """A saved model of ``algorithm``, loaded on the CPU."""
+def load_saved(algorithm: str | type, path: Path | str) -> Any:
+    """A saved model of ``algorithm`` (SB3's zip at ``path``), loaded on the CPU; a result's trained run is
+    :func:`specguard.load_model`'s."""
     return algorithm_class(algorithm).load(path, device="cpu")
