@@ -66,6 +66,9 @@ def test_checkpoints_are_judged_at_the_planned_looks_and_the_generator_closed_on
     assert result.successes["balance"] == result.episodes
     assert [p["timesteps"] for p in result.curve] == [-(-s // 100) * 100 for s in looks if s <= met_at]
     assert log[-2:] == [met_at, "closed"]  # closed: asked for nothing past the met checkpoint, its finally ran
+    # What each look at the loop's agents saw is kept, as for SB3's: the last one met every threshold.
+    assert [look["timesteps"] for look in result.looks] == [p["timesteps"] for p in result.curve]
+    assert result.looks[-1]["held"]["balance"] == "1" * result.episodes
 
 
 @pytest.mark.slow
@@ -154,10 +157,29 @@ class ReturnsAList:
         return [(1, lean)]
 
 
+class ProtocolShaped:
+    """Has the Trainer protocol's methods, but is no trainer specguard runs (nor a function to call)."""
+
+    title = "mine"
+
+    def checked(self, where, *, observation, baseline, tree):
+        return self
+
+    def identity(self, *, observation):
+        return {}
+
+    def logging_to(self, where, folder):
+        return self
+
+    def steps_text(self, timesteps):
+        return ""
+
+
 @pytest.mark.parametrize(
     ("trainer", "match"),
     [
         (3, r"Spec 'balance'\.trainer: expected sg.SB3\(\.\.\.\) or a generator function .* got 3"),
+        (ProtocolShaped(), r"Spec 'balance'\.trainer: expected sg.SB3\(\.\.\.\) or a generator function .* got"),
         (not_a_generator, r"the function .*not_a_generator, which does not yield"),
         (functools.partial(not_a_generator), r"the function .*not_a_generator, which does not yield"),
     ],

@@ -58,7 +58,7 @@ from specguard.tree.nodes import Node
 from specguard.utils.text import function_text, shown
 from specguard.validation import check_count, check_folder, is_finite
 
-__all__ = ["SB3", "Trainer", "TrainingLoop", "as_trainer", "check_tensorboard_log"]
+__all__ = ["SB3", "TRAINERS", "Trainer", "TrainingLoop", "as_trainer", "check_tensorboard_log"]
 
 
 @runtime_checkable
@@ -355,12 +355,18 @@ class TrainingLoop:
         return f"{timesteps} timesteps per seed (given to the {self.title})"
 
 
+TRAINERS = (SB3, TrainingLoop)
+"""The trainers specguard runs (:mod:`specguard.training.train` has one implementation for each)."""
+
+
 def as_trainer(where: str, trainer: object) -> Trainer:
-    """``trainer`` as a :class:`Trainer`: itself, or a training loop's function in a :class:`TrainingLoop`.
+    """``trainer`` as a :class:`Trainer`: one of :data:`TRAINERS`, or a training loop's function in a
+    :class:`TrainingLoop`.
 
     Raises:
-        InvalidSpec: neither a trainer nor a generator function (one line, naming ``where``).
+        InvalidSpec: neither a trainer specguard runs nor a generator function (one line, naming ``where``):
+            refused where the spec is made, not when its first run starts.
     """
-    if isinstance(trainer, Trainer):
+    if isinstance(trainer, TRAINERS):
         return trainer
     return TrainingLoop(_checked_loop(where, trainer))
