@@ -33,7 +33,7 @@ from specguard.construction.env import OBSERVATIONS, BaselineEnv, EnvFactory, Sp
 from specguard.construction.initial_env import InitialEnv
 from specguard.error import InvalidSpec
 from specguard.spec.budget import Budget
-from specguard.spec.trainers import SB3, Trainer, as_trainer
+from specguard.spec.trainers import SB3, TRAINERS, Trainer, as_trainer
 from specguard.starts.setter import Range
 from specguard.starts.space import StartSpace, as_start_space
 from specguard.stats.verdicts import DEFAULT_UNDECIDED, UNDECIDED_OUTCOMES
@@ -278,7 +278,7 @@ def _taking_moved_keywords(init: Callable[..., None]) -> Callable[..., None]:
             names = ", ".join(f"{key}=" for key in moved)
             if kwargs.get("trainer") is not None:
                 given = kwargs["trainer"]
-                title = given.title if isinstance(given, Trainer) else f"trainer {function_text(given)}"
+                title = given.title if isinstance(given, TRAINERS) else f"trainer {function_text(given)}"
                 raise InvalidSpec(
                     "Spec",
                     f"{names} configure SB3's training, and the spec trains with its {title}",

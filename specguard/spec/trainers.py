@@ -36,7 +36,7 @@ import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from numbers import Real
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, Protocol
 
 from specguard.error import InvalidSpec, SpecWarning, user_stacklevel
 from specguard.spec.algorithms import (
@@ -61,7 +61,6 @@ from specguard.validation import check_count, check_folder, is_finite
 __all__ = ["SB3", "TRAINERS", "Trainer", "TrainingLoop", "as_trainer", "check_tensorboard_log"]
 
 
-@runtime_checkable
 class Trainer(Protocol):
     """How a spec's runs train. :class:`SB3` and :class:`TrainingLoop` are the two specguard runs.
 
@@ -232,7 +231,7 @@ class SB3:
     def identity(self, *, observation: str) -> dict[str, Any]:
         """The algorithm (a stable-baselines3 name, whose version is in every key already; any other by its class),
         the hyperparameters, ``n_envs`` and ``normalize``; the policy and the callbacks where they are not the
-        default. The fields a spec held before it had trainers, so an SB3 run keeps its key."""
+        default."""
         out: dict[str, Any] = {
             "algorithm": self.algorithm,
             "hyperparameters": self.hyperparameters,
