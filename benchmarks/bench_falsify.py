@@ -3,8 +3,11 @@
 The suite: CartPole "lean and catch" and Acrobot (c) at their envs' default
 starts, and InvertedPendulum-v5 "balance" over a start space wider than its
 default (the pole within 0.2 rad of upright and up to 1 rad/s); per case, one
-agent per training seed (``--seeds``), trained (or found in ``--cache-dir``) by
-``run_spec`` on the machine that runs this.
+agent per training seed (``--seeds``), trained by ``train_seeds`` on the machine
+that runs this and kept in ``--agents DIR`` (``DIR/<case>-<seed>/``: the SB3
+zip, its ``VecNormalize`` statistics, the run's looks), where later runs find
+them: every edit of specguard changes its cache keys, and a benchmark of the
+search must search the same agents before and after.
 
 Per agent:
 
@@ -25,19 +28,22 @@ Per agent:
   of random searches of ``--budget`` episodes that would find one,
   ``1 - (1 - rate) ** budget``;
 * **ratio**: guided ERT over random's expected episodes;
-* **per sampler** (the portfolio's arms, ``specguard.falsify.portfolio.ARMS``, and the middle of the space):
+* **the failure predictor**: each search is given the run's looks (``related=``, as ``falsify_runs`` gives
+  them) and ``--weaker`` episodes per level of the agent made weaker (0 by default); with ``--compare``, the
+  same searches without a predictor too (rerun only where a predictor was fitted: else the search is the same);
+* **importance sampling** (``--importance K``): the failure rate from ``K`` episodes of the predictor's proposal
+  beside ``K`` uniform draws', each with its 95% interval, and the ratio of their widths;
+* **per sampler** (the portfolio's arms, ``specguard.falsify.portfolio.ARMS``, the middle of the space and
+  ``related``, the weaker agent's episodes):
   each one's ERT, the episodes it drew over all searches over the searches whose failure it found, with a 95%
   interval from a bootstrap over the searches (2,000 resamples of the searches, percentiles; ``inf`` where a
   resample has no failure found by it).
 
 Target, over every agent with a failure rate in (0, 5%]: the ratio <= 1/3,
-and on no agent above 1. No constant of the search was fitted to these
-agents, but two were changed on what runs showed: a first run on seeds 2-6
-moved the middle of the space after the exploration's first uniform draws,
-and a first run on seeds 7-11 raised the uniform share from a quarter to a
-half, so those agents are not wholly held out. Seeds 12-16 (the default) are:
-no development run used them (docs/guide/falsify.md's table). Only the seeds
-asked for are trained (``train_seeds``). Also printed:
+and on no agent above 1 (the verdict lines). Which seeds served what is in
+docs/guide/falsify.md: seeds 2-16 served development runs of earlier
+versions; 7-11 the failure predictor's; 17-21 (the default) are held out.
+Only the seeds asked for are trained (``train_seeds``). Also printed:
 the cost per episode of the falsifier's runner against a plain rollout. Exits
 0 whatever the figures (targets are reported, not asserted).
 
@@ -45,15 +51,18 @@ the cost per episode of the falsifier's runner against a plain rollout. Exits
 (``EpisodeRunner(score="episode")``) instead of the default, the last state's.
 
 Usage:
-    python benchmarks/bench_falsify.py [--seeds 12 13 14 15 16] [--searches 20] [--budget 600] [--case CartPole]
-        [--score {last,episode}]
+    python benchmarks/bench_falsify.py [--seeds 17 18 19 20 21] [--searches 20] [--budget 600] [--case CartPole]
+        [--score {last,episode}] [--agents DIR] [--weaker N] [--importance K] [--compare]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
+import pickle
 import platform
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -64,13 +73,15 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the case studies live beside the package
 
 import specguard as sg
+from specguard.cache.store import NORMALIZER, Cache
 from specguard.engine.falsify_run import batch_policy, property_keys
-from specguard.engine.result_models import load_normalizer
 from specguard.engine.run_spec import RunOptions, train_seeds
 from specguard.evaluation.policy import one_torch_thread, policy
 from specguard.evaluation.rollout import episode
+from specguard.falsify.predictor import from_looks
 from specguard.falsify.robustness import SCORES
 from specguard.falsify.search import EpisodeRunner, falsify
+from specguard.spec.algorithms import load_saved
 from specguard.starts.space import StartSpace
 from specguard.stats.intervals import failure_upper_bound
 
@@ -103,7 +114,7 @@ def expected_running_time(found: list[int | None], budget: int) -> float:
     return spent / successes if successes else math.inf
 
 
-SAMPLERS = ("uniform", "middle", "trend", "local")
+SAMPLERS = ("uniform", "middle", "related", "trend", "local", "learned")
 """The samplers whose episodes are counted apart: the portfolio's arms and the middle of the space."""
 
 
@@ -190,9 +201,12 @@ def main() -> int:
     parser.add_argument("--searches", type=int, default=20)
     parser.add_argument("--budget", type=int, default=600)
     parser.add_argument("--cache-dir", default="/tmp/fz-bench")
+    parser.add_argument(
+        "--agents", default="/tmp/fz-agents", help="where trained agents and their looks are kept and read back"
+    )
     parser.add_argument("--rate-draws", type=int, default=10_000, help="uniform draws for each agent's failure rate")
     parser.add_argument("--case", default="", help="only cases whose name contains this")
-    parser.add_argument("--seeds", type=int, nargs="+", default=[12, 13, 14, 15, 16], help="the agents (their seeds)")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[17, 18, 19, 20, 21], help="the agents (their seeds)")
     parser.add_argument("--workers", type=int, default=2, help="training processes")
     parser.add_argument(
         "--score",
@@ -200,10 +214,83 @@ def main() -> int:
         default="last",
         help="the search's score: last (the falsifier's default) or episode (over the whole episode)",
     )
+    parser.add_argument("--compare", action="store_true", help="also run each search without the failure predictor")
+    parser.add_argument("--weaker", type=int, default=0, help="falsify(weaker=): episodes per level, weaker agent")
+    parser.add_argument(
+        "--importance", type=int, default=0, help="episodes of the importance-sampling rate (0: not measured)"
+    )
     args = parser.parse_args()
     with one_torch_thread():  # as the falsifier's own runs are
         run_suite(args)
     return 0
+
+
+def slug(name: str) -> str:
+    """A case's name as a folder name.
+
+    >>> slug("CartPole default starts")
+    'cartpole-default-starts'
+    """
+    return "-".join(name.lower().split())
+
+
+def trained_agents(name: str, spec: sg.Spec, args: argparse.Namespace) -> dict[int, tuple[Any, Any, list[Any]]]:
+    """Per seed, the agent's model, its ``VecNormalize`` statistics and its run's looks (``RunResult.looks``).
+
+    Read from ``--agents DIR`` (``DIR/<case>-<seed>/``) where they were kept; the others are trained by
+    ``train_seeds`` and kept there. Kept agents outlive specguard's source digest (which every edit of the
+    package changes, and with it every cache key), so one set of agents serves every run of the search.
+    """
+    out: dict[int, tuple[Any, Any, list[Any]]] = {}
+    folders = {seed: Path(args.agents) / f"{slug(name)}-{seed}" for seed in args.seeds}
+    missing = [seed for seed, folder in folders.items() if not (folder / "looks.json").exists()]
+    if missing:
+        options = RunOptions(workers=args.workers, cache_dir=args.cache_dir, progress=None)
+        result = train_seeds(spec, missing, options)
+        runs = {r.seed: r for r in result.runs}
+        for seed in missing:
+            folder = folders[seed]
+            folder.mkdir(parents=True, exist_ok=True)
+            sg.load_model(result, seed).save(folder / "model.zip")
+            stats = Cache(args.cache_dir).model_path(result.trained or spec, seed).parent / NORMALIZER
+            if stats.exists():  # VecNormalize's own file, as the cache keeps it
+                shutil.copyfile(stats, folder / "normalizer.pkl")
+            (folder / "looks.json").write_text(json.dumps(runs[seed].looks))
+    for seed, folder in folders.items():
+        assert isinstance(spec.trainer, sg.SB3)
+        model = load_saved(spec.trainer.algorithm, folder / "model.zip")
+        normalizer = None
+        if (folder / "normalizer.pkl").exists():
+            with (folder / "normalizer.pkl").open("rb") as f:
+                normalizer = pickle.load(f)  # our own file, written above
+        out[seed] = (model, normalizer, json.loads((folder / "looks.json").read_text()))
+    return out
+
+
+def importance_line(runner: EpisodeRunner, related: Any, args: argparse.Namespace, seed: int) -> str:
+    """The failure rate by importance sampling from ``--importance`` episodes of the predictor's proposal, against
+    the uniform draws' at as many episodes (same search seed): each with its 95% interval, and the widths' ratio."""
+    f = falsify(
+        runner,
+        examples=1,
+        uniform=args.importance,
+        seed=20_000 + seed,
+        shrink=False,
+        related=related,
+        weaker=args.weaker,
+        importance=args.importance,
+    )
+    lo, hi = f.interval
+    uniform = f"uniform {f.failure_rate:.3%} [{lo:.3%}, {hi:.3%}] ({f.uniform_failures}/{f.uniform_episodes})"
+    if f.importance is None:
+        return f"    rate at {args.importance} episodes: {uniform}; importance sampling: no predictor (few failures)"
+    e = f.importance
+    ratio = (e.high - e.low) / (hi - lo)
+    return (
+        f"    rate at {args.importance} episodes: {uniform}; importance sampling {e.rate:.3%} [{e.low:.3%}, "
+        f"{e.high:.3%}] ({e.failures} failures; {f.drawn_by.get('related', 0)} weaker-agent episodes); "
+        f"width ratio {ratio:.2f}"
+    )
 
 
 def run_suite(args: argparse.Namespace) -> None:
@@ -217,21 +304,28 @@ def run_suite(args: argparse.Namespace) -> None:
     for name, spec, space in cases():
         if args.case and args.case not in name:
             continue
-        options = RunOptions(workers=args.workers, cache_dir=args.cache_dir, progress=None)
-        result = train_seeds(spec, args.seeds, options)
+        agents = trained_agents(name, spec, args)
         for seed in args.seeds:
             began = time.perf_counter()
-            model, normalizer = sg.load_model(result, seed), load_normalizer(result, seed)
+            model, normalizer, looks = agents[seed]
             act = batch_policy(model, normalizer, spec.deterministic)
-            runner = EpisodeRunner(spec.make_env, act, space, property_keys(spec), score=args.score)
+            keys = property_keys(spec)
+            runner = EpisodeRunner(spec.make_env, act, space, keys, score=args.score)
+            related = from_looks(looks, keys)
             found: list[int | None] = []
             drawn_by: list[dict[str, int]] = []
             found_by: list[str | None] = []
+            plain: list[int | None] = []
             for k in range(args.searches):
-                f = falsify(runner, examples=args.budget, uniform=0, seed=k, shrink=False)
+                f = falsify(
+                    runner, examples=args.budget, uniform=0, seed=k, shrink=False, related=related, weaker=args.weaker
+                )
                 found.append(f.episodes_to_first if f.found else None)
                 drawn_by.append(f.drawn_by)
                 found_by.append(f.found_by)
+                if args.compare and f.predictor is not None:  # else the very same search: nothing learned
+                    f = falsify(runner, examples=args.budget, uniform=0, seed=k, shrink=False)
+                plain.append(f.episodes_to_first if f.found else None)
             drawn = falsify(runner, examples=1, uniform=args.rate_draws, seed=10_000 + seed, shrink=False)
             rate = drawn.failure_rate
             guided = expected_running_time(found, args.budget)
@@ -247,6 +341,15 @@ def run_suite(args: argparse.Namespace) -> None:
                 flush=True,
             )
             print(sampler_line(drawn_by, found_by), flush=True)
+            if args.compare:
+                ert = expected_running_time(plain, args.budget)
+                print(
+                    f"    without the predictor: {sum(f is not None for f in plain)}/{len(plain)} found,"
+                    f" ERT {ert:.1f}, ratio {ert / random if math.isfinite(random) else math.nan:.2f}",
+                    flush=True,
+                )
+            if args.importance:
+                print(importance_line(runner, related, args, seed), flush=True)
             verdicts.append(verdict(name, seed, rate, ratio, drawn.uniform_episodes))
     print("\nsummary:\n  " + "\n  ".join(verdicts))
 

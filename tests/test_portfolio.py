@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from specguard.falsify import portfolio as pf
-from specguard.falsify.portfolio import ARMS, Portfolio
+from specguard.falsify.portfolio import Portfolio
 
 
 def run(portfolio: Portfolio, score, rounds: int, batch: int = 8) -> list[str]:
@@ -40,16 +40,16 @@ def test_the_uniform_floor_holds_however_the_others_earn(score):
     run(portfolio, score, rounds=30)
     shares = portfolio.shares()
     assert shares["uniform"] >= pf.UNIFORM_FLOOR
-    assert sum(shares.values()) == pytest.approx(1.0) and set(shares) == set(ARMS)
+    assert sum(shares.values()) == pytest.approx(1.0) and set(shares) == set(portfolio.arms)
 
 
 def test_samplers_that_find_lower_scores_earn_more_of_the_next_rounds():
     portfolio = Portfolio(2, np.random.default_rng(2))
     run(portfolio, toward_corner, rounds=40)
-    rates = {a: portfolio.paid[a] / max(1, portfolio.tried[a]) for a in ARMS}
+    rates = {a: portfolio.paid[a] / max(1, portfolio.tried[a]) for a in portfolio.arms}
     assert rates["trend"] > rates["uniform"] and rates["local"] > rates["uniform"]
     shares = portfolio.shares()  # what is not the floor goes mostly to the guided samplers, not evenly
-    assert shares["uniform"] < pf.UNIFORM_FLOOR + (1 - pf.UNIFORM_FLOOR) / len(ARMS) - 0.05
+    assert shares["uniform"] < pf.UNIFORM_FLOOR + (1 - pf.UNIFORM_FLOOR) / len(portfolio.arms) - 0.05
 
 
 def test_the_trend_sampler_follows_the_scores_across_the_space():

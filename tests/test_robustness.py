@@ -211,7 +211,7 @@ def test_the_score_travels_from_falsify_agent_falsify_runs_falsify_and_the_cli_t
     # falsify_runs, through falsify_run, on a trained run (its loading and policy stood in for)
     monkeypatch.setattr(falsify_run, "load_run", lambda result, seed: (BALANCE, None, None))
     monkeypatch.setattr(falsify_run, "batch_policy", lambda model, normalizer, deterministic: lean_rows)
-    trained = SimpleNamespace(runs=[SimpleNamespace(seed=0)], spec_key=None, cache_dir=str(tmp_path))
+    trained = SimpleNamespace(runs=[SimpleNamespace(seed=0, looks=[])], spec_key=None, cache_dir=str(tmp_path))
     with pytest.raises(Ran) as ran:
         sg.falsify_runs(trained, space, examples=1, uniform=0, **given)
     assert ran.value.args == (expected,)

@@ -40,6 +40,19 @@ def add_parser(sub: Any) -> None:
         help="uniform draws for the failure rate, 0 for none (default: 100)",
     )
     fz.add_argument(
+        "--weaker",
+        type=arguments.natural("episodes per level of the agent made weaker"),
+        default=0,
+        help="episodes per level of the agent with epsilon-random actions, the failure predictor's data; they count "
+        "among the guided episodes (default: 0, none; a trained run's looks are its data)",
+    )
+    fz.add_argument(
+        "--importance",
+        type=arguments.natural("importance-sampling episodes"),
+        default=0,
+        help="episodes for the failure rate by importance sampling from the failure predictor, 0 for none (default: 0)",
+    )
+    fz.add_argument(
         "--score",
         choices=SCORES,
         default="last",
@@ -103,6 +116,8 @@ def run(args: argparse.Namespace, argv: Sequence[str]) -> int:
                 score=args.score,
                 trust=args.trust_agent,
                 wrap=arguments.wrap_of(args),
+                weaker=args.weaker,
+                importance=args.importance,
             )
             print(f"== {name} agent {args.agent}: {'COUNTEREXAMPLE' if f.found else 'none found'}")
             print(f.report())
@@ -119,6 +134,8 @@ def run(args: argparse.Namespace, argv: Sequence[str]) -> int:
             search_seed=args.seed,
             progress=say,
             score=args.score,
+            weaker=args.weaker,
+            importance=args.importance,
         )
         for seed, f in found.items():
             print(f"== {name} seed {seed}: {'COUNTEREXAMPLE' if f.found else 'none found'}")

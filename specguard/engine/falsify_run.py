@@ -29,6 +29,7 @@ import numpy as np
 from specguard.engine.result_models import load_run
 from specguard.engine.spec_result import SpecResult
 from specguard.evaluation.policy import one_torch_thread
+from specguard.falsify.predictor import FailureData, from_looks
 from specguard.falsify.robustness import SCORES
 from specguard.falsify.search import EpisodeRunner, Falsification, falsify
 from specguard.spec.spec import Spec
@@ -97,6 +98,8 @@ def falsify_runs(
     database: str | Path | None = None,
     progress: Callable[[str], None] | None = None,
     score: str = "last",
+    weaker: int = 0,
+    importance: int = 0,
 ) -> dict[int, Falsification]:
     """Search ``starts`` for starts from which each of ``result``'s cached policies misses the spec (no retraining).
 
@@ -112,6 +115,9 @@ def falsify_runs(
         score: the robustness score that steers the search: ``"last"``, each key's margin in the episode's last
             state (the default), or ``"episode"``, over the whole episode (signal temporal logic's; dearer per
             episode, not better on docs/guide/falsify.md's held-out agents).
+        weaker, importance: as :func:`specguard.falsify.search.falsify`'s: episodes per level of the agent made
+            weaker, for the failure predictor (0: none; each run's looks are its data without them), and episodes
+            of the failure rate by importance sampling (0: none).
 
     Returns:
         Per seed, what was found (:class:`~specguard.falsify.search.Falsification`).
@@ -128,6 +134,7 @@ def falsify_runs(
     """
     check_choice("falsify_runs", "score", score, SCORES)
     found = {}
+    looks = {r.seed: r.looks for r in result.runs}
     for seed in seeds if seeds is not None else [r.seed for r in result.runs]:
         spec, model, normalizer = load_run(result, seed)
         found[seed] = falsify_run(
@@ -143,6 +150,9 @@ def falsify_runs(
             database=database if database is not None else (Path(result.cache_dir or ".") / "falsify"),
             progress=progress,
             score=score,
+            related=from_looks(looks.get(seed, []), property_keys(spec)),
+            weaker=weaker,
+            importance=importance,
         )
     return found
 
@@ -161,12 +171,17 @@ def falsify_run(
     database: str | Path | None = None,
     progress: Callable[[str], None] | None = None,
     score: str = "last",
+    related: FailureData | None = None,
+    weaker: int = 0,
+    importance: int = 0,
 ) -> Falsification:
     """Search the start space of run ``seed`` of ``spec`` for a start from which its policy misses the spec.
 
     Args:
         starts: the start space; ``None``: :func:`start_space`'s (the spec's own, else the env's).
         database: the directory of the Hypothesis example database; ``None``: nothing stored or replayed.
+        related: the run's looks as failure data (:func:`~specguard.falsify.predictor.from_looks`), which
+            :func:`falsify_runs` gives.
         Others: as :func:`specguard.falsify.search.falsify`.
     """
     from hypothesis.database import DirectoryBasedExampleDatabase
@@ -185,7 +200,7 @@ def falsify_run(
     db = DirectoryBasedExampleDatabase(str(database)) if database is not None and spec_key else None
     key = database_key(spec_key, seed, space) if spec_key else ""
     label = f"{spec.label} seed {seed}"
-    return _search(runner, spec, label, db, key, examples, uniform, search_seed, progress)
+    return _search(runner, spec, label, db, key, examples, uniform, search_seed, progress, related, weaker, importance)
 
 
 def falsify_agent(
@@ -203,6 +218,8 @@ def falsify_agent(
     algorithm: str | type | None = None,
     score: str = "last",
     trust: bool = False,
+    weaker: int = 0,
+    importance: int = 0,
 ) -> Falsification:
     """Search ``starts`` for a start from which ``agent``, trained elsewhere, misses ``spec`` (training nothing).
 
@@ -219,6 +236,9 @@ def falsify_agent(
         database: the directory of the Hypothesis example database; ``None``: nothing stored or replayed.
         observation, wrap, algorithm, trust: what the agent sees and how it is loaded, as for ``check_agent``.
         score: the robustness score that steers the search, as for :func:`falsify_runs`.
+        weaker: episodes per level of the agent made weaker (``epsilon``-random actions), the failure predictor's
+            data (:func:`specguard.falsify.search.falsify`); 0, the default: no predictor (an agent trained
+            elsewhere brings no looks).
         Others: as :func:`specguard.falsify.search.falsify`.
 
     Raises:
@@ -261,7 +281,7 @@ def falsify_agent(
         key = database_key(fingerprint_spec(spec).spec_key, None, space, agent=f"{acting.identity} {seen}")
         db = DirectoryBasedExampleDatabase(str(database))
     label = f"{spec.label} agent {acting.name}"
-    found = _search(runner, spec, label, db, key, examples, uniform, search_seed, progress)
+    found = _search(runner, spec, label, db, key, examples, uniform, search_seed, progress, None, weaker, importance)
     if found.counterexample is not None and acting.model is None:
         _replay_afresh(
             runner, found, fresh, lambda a: spec_agent(spec, a, algorithm=algorithm, batch=True, trust=trust), label
@@ -328,6 +348,9 @@ def _search(
     uniform: int,
     search_seed: int,
     progress: Callable[[str], None] | None,
+    related: FailureData | None = None,
+    weaker: int = 0,
+    importance: int = 0,
 ) -> Falsification:
     """The search on ``runner`` at the spec's confidence, one torch thread, its progress lines labelled."""
     with one_torch_thread():
@@ -340,4 +363,7 @@ def _search(
             key=key,
             confidence=spec.confidence,
             progress=(lambda line: progress(f"{label}: {line}")) if progress is not None else None,
+            related=related,
+            weaker=weaker,
+            importance=importance,
         )

@@ -59,7 +59,9 @@ from specguard.construction.env import BaselineEnv, SpecEnv, features_space, sta
 from specguard.construction.episode_policy import EpisodePolicy
 from specguard.error import InvalidSpec
 from specguard.extend import until_end
-from specguard.falsify.portfolio import Portfolio
+from specguard.falsify.portfolio import ARMS, Portfolio
+from specguard.falsify.predictor import FailureData, FailurePredictor
+from specguard.falsify.related import EPSILONS, perturbed
 from specguard.falsify.robustness import (
     SCORES,
     EpisodeMinimum,
@@ -71,6 +73,7 @@ from specguard.falsify.robustness import (
 )
 from specguard.starts.setter import env_label
 from specguard.starts.space import START_OPTION, Starts, StartSpace, starts_of
+from specguard.stats.importance import RateEstimate, importance_rate, proposal, weights_of
 from specguard.stats.intervals import failure_upper_bound, success_interval
 from specguard.validation import check_choice, check_count, check_flag, check_natural, check_open_fraction
 
@@ -81,6 +84,16 @@ BISECTIONS = 16
 
 EXPLORE = 16
 """Uniform draws (the middle of the space among them) before the portfolio's rounds."""
+
+POOL = 20
+"""The importance-sampling pool holds this many uniform starts per episode drawn from it (its own spread is a floor
+under the interval's width; a start is scored without an episode, by a reset)."""
+
+DEFENSIVE = 0.5
+"""The uniform share of the importance-sampling proposal: every weight is at most ``1 / DEFENSIVE``."""
+
+MIN_FAILURES = 3
+"""The failure predictor is fitted only on data with at least this many failures (and a success)."""
 
 MIDDLE_AFTER = 3
 """The exploration runs the middle of the space after this many uniform draws.
@@ -102,6 +115,7 @@ class Outcome:
         steps: the episode's length.
         ended: ``"terminated"`` or ``"truncated"``.
         last: the last state's features, by name.
+        first: the first state's features, in the spec's order (the failure predictor's input).
     """
 
     start: dict[str, float]
@@ -109,6 +123,7 @@ class Outcome:
     steps: int
     ended: str
     last: dict[str, float]
+    first: tuple[float, ...] = ()
 
     @property
     def failed(self) -> bool:
@@ -184,6 +199,16 @@ class EpisodeRunner:
             self._envs.append(self._make_env(starts=self.space))
         return self._envs[:k]
 
+    def features(self, points: np.ndarray) -> np.ndarray:
+        """The first state's features from each start (rows of ``points``): each start set by a reset, no step
+        run, no episode counted (what the failure predictor reads of a start it is asked about)."""
+        env, judged = self._envs[0], judged_env(self._envs[0])
+        rows = []
+        for p in points:
+            env.reset(seed=0, options={START_OPTION: self.starts.values(p)})
+            rows.append(judged.start_features)
+        return np.array(rows, dtype=np.float64).reshape(len(points), -1)
+
     def run(self, points: np.ndarray) -> list[Outcome]:
         """One episode from each start (rows of ``points``), in lockstep batches."""
         out: list[Outcome] = []
@@ -195,6 +220,7 @@ class EpisodeRunner:
         envs = self._ready(len(points))
         starts = [self.starts.values(p) for p in points]
         obs = [env.reset(seed=0, options={START_OPTION: v})[0] for env, v in zip(envs, starts, strict=True)]
+        first = [judged_env(env).start_features for env in envs]
         steps = [0] * len(envs)
         results: list[Outcome | None] = [None] * len(envs)
         active = list(range(len(envs)))
@@ -217,7 +243,7 @@ class EpisodeRunner:
                     watch.update(i, ev.state, own_states(ev.slots, ev.own_state), info["goals"])
                 if terminated or truncated:
                     low = lowest.rows[i] if lowest is not None else None
-                    results[i] = self._outcome(envs[i], starts[i], info, steps[i], bool(terminated), low)
+                    results[i] = self._outcome(envs[i], starts[i], info, steps[i], bool(terminated), low, first[i])
             active = [i for i in active if results[i] is None]
         self.episodes += len(envs)
         return [r for r in results if r is not None]
@@ -230,6 +256,7 @@ class EpisodeRunner:
         steps: int,
         terminated: bool,
         lowest: dict[str, float] | None,
+        first: tuple[float, ...],
     ) -> Outcome:
         ev = judged_env(env).evaluator
         s = ev.state
@@ -238,7 +265,7 @@ class EpisodeRunner:
         if terminated and self.max_steps and self.reach:  # a reach goal: how early it was reached
             judgement = reached_early(judgement, self.tree.name, steps, self.max_steps)
         last = {f: float(v) for f, v in zip(s._fields, s, strict=True)}
-        return Outcome(start, judgement, steps, "terminated" if terminated else "truncated", last)
+        return Outcome(start, judgement, steps, "terminated" if terminated else "truncated", last, first)
 
 
 @dataclass
@@ -259,9 +286,15 @@ class Falsification:
         key: the database key the counterexample is stored under.
         drawn_by: the guided search's episodes (up to and including its first failure, else all of them) by the
             sampler that drew each start: ``"uniform"`` (the exploration's draws among them), ``"middle"`` (the
-            middle of the space), ``"trend"``, ``"local"`` (:data:`~specguard.falsify.portfolio.ARMS`); they sum to
+            middle of the space), ``"trend"``, ``"local"``, ``"learned"`` (:data:`~specguard.falsify.portfolio.ARMS`),
+            and ``"related"`` (episodes of the agent made weaker, the predictor's data); they sum to
             ``episodes_to_first`` where the search found the failure.
         found_by: the sampler whose start failed first (``None``: the search found none, or it was replayed).
+        predictor: the failure predictor the search fitted (``None``: none: no data, or its data saw too
+            few failures); not serialised.
+        related: what it was fitted on (the run's looks and the weaker agent's episodes).
+        importance: the failure rate by importance sampling from the predictor's proposal, with its interval
+            (``None``: not asked for, ``importance=0``, or no predictor).
     """
 
     starts: Starts
@@ -279,6 +312,9 @@ class Falsification:
     notes: list[str] = field(default_factory=list)
     drawn_by: dict[str, int] = field(default_factory=dict)
     found_by: str | None = None
+    predictor: FailurePredictor | None = field(default=None, repr=False, compare=False)
+    related: FailureData | None = field(default=None, repr=False, compare=False)
+    importance: RateEstimate | None = None
 
     @property
     def found(self) -> bool:
@@ -337,6 +373,8 @@ class Falsification:
             lines.append(f"  episode: {c.summary()}")
         if self.uniform_episodes:
             lines.append(f"failure rate over the start space: {self.rate_text}")
+        if self.importance is not None:
+            lines.append(f"failure rate by importance sampling: {self.importance.summary()}")
         return "\n".join([*lines, *self.notes])
 
     def to_dict(self) -> dict[str, Any]:
@@ -355,6 +393,7 @@ class Falsification:
             "rate": self.rate_text,
             "drawn_by": dict(self.drawn_by),
             "found_by": self.found_by,
+            "importance": self.importance.summary() if self.importance is not None else None,
         }
 
 
@@ -410,29 +449,79 @@ def _time_limit(env: Any) -> int | None:
 
 @dataclass
 class _Search:
-    """What the guided search ran: by sampler, its episodes (to the first failure), and the first failure."""
+    """What the guided search ran: by sampler, its episodes (to the first failure), and the first failure; the
+    failure predictor and what it was fitted on."""
 
     drawn_by: Counter[str] = field(default_factory=Counter)
     hit: tuple[Outcome, np.ndarray, int] | None = None
     found_by: str | None = None
+    predictor: FailurePredictor | None = None
+    related: FailureData | None = None
 
 
-def _guided(runner: EpisodeRunner, examples: int, rng: np.random.Generator) -> _Search:
+def _chances(runner: EpisodeRunner, predictor: FailurePredictor) -> Callable[[np.ndarray], np.ndarray]:
+    """The predictor's chance of failing from unit-box points of the runner's start space."""
+    starts = runner.starts
+    half = (starts.high - starts.low) / 2.0
+
+    def chances(unit: np.ndarray) -> np.ndarray:
+        points = np.clip(starts.center + unit * half, starts.low, starts.high)
+        return predictor.predict(runner.features(points))
+
+    return chances
+
+
+def _learn(
+    runner: EpisodeRunner,
+    related: FailureData | None,
+    weaker: int,
+    rng: np.random.Generator,
+    search: _Search,
+    room: int,
+) -> FailurePredictor | None:
+    """The failure predictor, fitted on ``related`` (a run's looks) and on episodes of the agent made weaker
+    (``weaker`` uniform starts at each of :data:`~specguard.falsify.related.EPSILONS`, no more than ``room`` in
+    all; counted as ``"related"`` episodes of the search). ``None`` where those saw fewer than ``MIN_FAILURES``
+    failures, or no success: nothing to learn from."""
+    data = related
+    per = min(weaker, room // len(EPSILONS))
+    for epsilon in EPSILONS if per else ():
+        episodes = perturbed(runner, runner.starts.uniform(rng, per), epsilon, rng)
+        search.drawn_by["related"] += len(episodes)
+        data = episodes if data is None else data + episodes
+    search.related = data
+    if data is None or data.failures < MIN_FAILURES or data.failures == len(data):
+        return None
+    return FailurePredictor().fit(data)
+
+
+def _guided(
+    runner: EpisodeRunner, examples: int, rng: np.random.Generator, related: FailureData | None, weaker: int
+) -> _Search:
     """The guided search: its first failing start with its point and the episodes run up to it (``hit``; ``None``:
     none), and which sampler drew each episode.
 
-    ``EXPLORE`` uniform draws with the middle of the space after the first ``MIDDLE_AFTER`` of them, then rounds
-    of the portfolio's proposals
-    (:mod:`specguard.falsify.portfolio`). A space of reset seeds has no neighbourhoods (seed 41 and seed 42
-    start anywhere): all its starts are uniform draws.
+    ``EXPLORE`` uniform draws with the middle of the space after the first ``MIDDLE_AFTER`` of them; then, given
+    ``related`` data or ``weaker`` episodes, the failure predictor is fitted (:func:`_learn`; the weaker agent's
+    episodes count among the search's); then rounds of the portfolio's proposals, its ``learned`` arm among
+    them where the predictor was fitted (:mod:`specguard.falsify.portfolio`). A space of reset seeds has no
+    neighbourhoods (seed 41 and seed 42 start anywhere): all its starts are uniform draws.
     """
     starts = runner.starts
     seeds = starts.how == "reset seeds"
     half = (starts.high - starts.low) / 2.0
-    portfolio = Portfolio(len(starts.names), rng)
     search = _Search()
-    done = 0
+    portfolio = Portfolio(len(starts.names), rng)
+    done, learned = 0, False
     while done < examples:
+        if done and (related is not None or weaker) and not seeds and not learned:
+            learned = True
+            predictor = search.predictor = _learn(runner, related, weaker, rng, search, examples - done)
+            done += search.drawn_by["related"]
+            if predictor is not None:
+                portfolio.predict = _chances(runner, predictor)
+                portfolio.arms = ARMS
+            continue
         if done == 0:
             n = min(examples, EXPLORE + (0 if seeds else 1))
             drawn = starts.uniform(rng, n - (0 if seeds else 1))
@@ -459,6 +548,26 @@ def _guided(runner: EpisodeRunner, examples: int, rng: np.random.Generator) -> _
             portfolio.observe(unit, np.array([o.judgement.score for o in outcomes]), observed)
         done += len(points)
     return search
+
+
+def _importance_rate(
+    runner: EpisodeRunner, predictor: FailurePredictor, episodes: int, seed: int, confidence: float
+) -> RateEstimate:
+    """The failure rate from ``episodes`` starts drawn from the predictor's proposal (uniform share
+    ``DEFENSIVE``) over a pool of ``POOL * episodes`` uniform starts, each weighed back (unbiased)."""
+    rng = np.random.default_rng([seed, 2])
+    pool = runner.starts.uniform(rng, POOL * episodes)
+    q = proposal(predictor.predict(runner.features(pool)), alpha=DEFENSIVE)
+    drawn = rng.choice(len(q), size=episodes, p=q)
+    outcomes = runner.run(pool[drawn])
+    return importance_rate(
+        [o.failed for o in outcomes],
+        weights_of(q, drawn),
+        pool=len(q),
+        alpha=DEFENSIVE,
+        min_weight=1.0 / (len(q) * float(q.max())),
+        confidence=confidence,
+    )
 
 
 def _load(database: Any, key: str) -> list[dict[str, float]]:
@@ -535,6 +644,9 @@ def falsify(
     shrink: bool = True,
     confidence: float = 0.95,
     progress: Callable[[str], None] | None = None,
+    related: FailureData | None = None,
+    weaker: int = 0,
+    importance: int = 0,
 ) -> Falsification:
     """Search ``runner``'s start space for a start from which its policy misses the spec.
 
@@ -547,6 +659,18 @@ def falsify(
         key: the spec's identity, under which the counterexample is stored.
         shrink: shrink the first failing start (else stop at it: the benchmark's episodes to a first failure).
         progress: called with a line at each phase.
+        related: episodes of related, less robust agents (a run's looks:
+            :func:`~specguard.falsify.predictor.from_looks`). After the exploration, a failure predictor is fitted
+            on them, and the portfolio's ``learned`` arm proposes the starts it ranks likeliest to fail.
+        weaker: episodes per level of :data:`~specguard.falsify.related.EPSILONS` of the agent made weaker
+            (``epsilon``-random actions, :mod:`specguard.falsify.related`), run after the exploration as more data
+            for the predictor; they count among the guided episodes. 0 (the default): none, as measured in
+            docs/guide/falsify.md they cost more episodes than they save.
+        importance: episodes for the failure rate by importance sampling (0: none), drawn from the failure
+            predictor's proposal over a pool of ``POOL`` times as many uniform starts
+            (:mod:`specguard.stats.importance`), counted apart like the uniform draws; only given ``related`` data or
+            ``weaker`` episodes (a search that ended before it fitted its predictor has it fitted then), and where
+            they saw enough failures (``Falsification.importance``).
 
     Raises:
         InvalidSpec: an argument of the wrong type or out of range, naming it and its value.
@@ -557,6 +681,8 @@ def falsify(
     seed = check_natural(where, "seed", seed, "the search's seed")
     confidence = check_open_fraction(where, "confidence", confidence)
     shrink = check_flag(where, "shrink", shrink)
+    weaker = check_natural(where, "weaker", weaker, "episodes per level of the agent made weaker")
+    importance = check_natural(where, "importance", importance, "episodes drawn from the predictor's proposal")
     say = progress or (lambda line: None)
     starts = runner.starts
     result = Falsification(starts=starts, key=key, confidence=confidence)
@@ -577,8 +703,9 @@ def falsify(
 
     if result.counterexample is None:
         say(f"guided search: up to {examples} episodes")
-        search = _guided(runner, examples, np.random.default_rng([seed, 1]))
+        search = _guided(runner, examples, np.random.default_rng([seed, 1]), related, weaker)
         result.drawn_by, result.found_by = dict(search.drawn_by), search.found_by
+        result.predictor, result.related = search.predictor, search.related
         if search.hit is not None:
             outcome, point, result.episodes_to_first = search.hit
             result.first = outcome
@@ -587,6 +714,14 @@ def falsify(
                 runner, outcome, point, shrink=moving if shrink else None, database=database, key=key, say=say
             )
     result.guided = runner.episodes - start_count
+    if importance and result.predictor is None and "related" not in result.drawn_by and (related or weaker):
+        fitting = _Search()  # the search ended before it fitted its predictor (an early failure): fitted now
+        result.predictor = _learn(runner, related, weaker, np.random.default_rng([seed, 3]), fitting, weaker * 3)
+        result.related = fitting.related
+        result.drawn_by["related"] = fitting.drawn_by["related"]
+    if importance and result.predictor is not None:
+        say(f"importance sampling: {importance} episodes from the predictor's proposal for the failure rate")
+        result.importance = _importance_rate(runner, result.predictor, importance, seed, confidence)
 
     if uniform:
         say(f"uniform draws: {uniform} episodes for the failure rate")
