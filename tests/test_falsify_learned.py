@@ -21,7 +21,8 @@ def corner(obs):
 
 
 def weaker_agents(n=300, seed=0):
-    """Episodes of weaker agents, which failed from the whole quarter x > 0.5, y > 0.5 (the corner within it)."""
+    """Episodes of weaker agents, which failed from the whole square x > 0.5, y > 0.5 (a sixteenth of the plane; the
+    corner within it)."""
     x = np.random.default_rng(seed).uniform(-1.0, 1.0, (n, 2))
     return FailureData(x, np.full(n, 0.5), (x[:, 0] > 0.5) & (x[:, 1] > 0.5), np.ones(n))
 
@@ -65,12 +66,12 @@ def test_the_learned_arm_proposes_where_the_predictor_expects_failures():
     predictor = FailurePredictor().fit(weaker_agents())
     portfolio = Portfolio(2, np.random.default_rng(0), predict=predictor.predict)
     learned = np.stack(list(portfolio._learned(200)))
-    assert np.mean((learned[:, 0] > 0.5) & (learned[:, 1] > 0.5)) > 0.75  # uniform draws: a quarter
+    assert np.mean((learned[:, 0] > 0.5) & (learned[:, 1] > 0.5)) > 0.75  # uniform draws: a sixteenth
     assert "learned" not in Portfolio(2, np.random.default_rng(0)).shares()
 
 
 def test_weaker_agents_data_steers_the_search_to_a_rare_failure():
-    # The corner fails from 1 start in 400. Over 10 searches the learned arm's, fitted on the weaker agents' quarter,
+    # The corner fails from 1 start in 400. Over 10 searches the learned arm's, fitted on the weaker agents' square,
     # need fewer than half the episodes of the search without it. Mutation: not giving the portfolio the predictor.
     def episodes(**kwargs):
         spent = 0
@@ -98,6 +99,7 @@ def test_importance_sampling_gives_a_rate_with_an_interval_narrower_than_uniform
     assert estimate.low <= 0.0025 <= estimate.high
     assert estimate.high - estimate.low < (found.interval[1] - found.interval[0]) / 2
     assert "importance sampling" in found.report() and found.to_dict()["importance"] == estimate.summary()
+    assert "failure predictor: fitted on 17 failures in 300 episodes of related agents" in found.report()
     assert falsify(runner(corner), examples=20, uniform=0, importance=100).importance is None  # no predictor
 
 
@@ -172,3 +174,16 @@ def test_the_command_line_passes_weaker_and_importance_to_the_search(tmp_path, m
     with pytest.raises(StopIteration):
         main([*argv, "--cache-dir", str(tmp_path / "c"), "--quiet"])
     assert given["weaker"] == 3 and given["importance"] == 7 and given["related"] is None
+
+
+def test_a_predictor_whose_data_started_elsewhere_is_not_used_and_the_report_says_so():
+    # Looks from a narrow default start (here within 0.05 of the middle), searched over the whole plane: the
+    # predictor would extrapolate. Mutation: COVERAGE = 0 fits it anyway.
+    x = np.random.default_rng(0).uniform(-0.05, 0.05, (200, 2))
+    narrow = FailureData(x, np.full(200, 0.5), x[:, 0] > 0.03, np.ones(200))
+    found = falsify(runner(corner), examples=40, uniform=0, seed=0, shrink=False, related=narrow)
+    assert found.predictor is None and found.coverage is not None and found.coverage < 0.1
+    assert "failure predictor: not used: 54 failures in 200 episodes of related agents" in found.report()
+    assert "learned" not in found.drawn_by
+    wide = falsify(runner(corner), examples=40, uniform=0, seed=0, shrink=False, related=weaker_agents())
+    assert wide.predictor is not None and wide.coverage is not None and wide.coverage > 0.9

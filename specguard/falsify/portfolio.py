@@ -57,11 +57,12 @@ ARMS = ("uniform", "trend", "local", "learned")
 SHARPNESS = 2.0
 """The ``learned`` arm picks a candidate with a chance proportional to its predicted chance of failing to this power.
 
-Measured on tests/test_falsify_learned.py's plane (weaker agents failed from a quarter, the agent from a corner of
-it, 1 start in 400): proportional (1) puts 60% of the arm's starts in the quarter, and 10 searches needed 1,270
-episodes in all; squared, 77% and 922; a power of 50 (nearly the likeliest candidate), 86% and 899; without the
-predictor, 2,272. Squared keeps most of the gain, while a predictor fitted on a few failures, whose chances are
-nearly alike, still leaves the arm's starts nearly uniform instead of sending them wherever its surface peaks.
+Measured on tests/test_falsify_learned.py's plane (weaker agents failed from a square, a sixteenth of it, the agent
+from a corner of it, 1 start in 400): proportional (1) puts 60% of the arm's starts in the square, and 10 searches
+needed 1,270 episodes in all; squared, 77% and 922; a power of 50 (nearly the likeliest candidate), 86% and 899;
+without the predictor, 2,272. Squared keeps most of the gain, while a predictor fitted on a few failures, whose
+chances are nearly alike, still leaves the arm's starts nearly uniform instead of sending them wherever its surface
+peaks.
 """
 
 CANDIDATES = 32

@@ -93,6 +93,16 @@ DEFENSIVE = 0.5
 """The uniform share of the importance-sampling proposal: every weight is at most ``1 / DEFENSIVE``."""
 
 MIN_FAILURES = 3
+
+PROBES = 64
+"""Uniform starts whose features tell how much of the start space the predictor's data spans."""
+
+COVERAGE = 0.5
+"""The failure predictor is used only where at least this share of the start space's starts (``PROBES`` uniform
+draws) have features within the range its data's starts span, feature by feature (5% of each range beyond its ends
+admitted). A run's looks start where the env's own reset does; a search over a wider space than that (as the
+benchmark's InvertedPendulum, within 0.2 rad of upright where training started within 0.01) would follow a surface
+fitted elsewhere: on those held-out agents the looks' predictor cost 16% and 36% more episodes than none."""
 """The failure predictor is fitted only on data with at least this many failures (and a success)."""
 
 MIDDLE_AFTER = 3
@@ -293,6 +303,8 @@ class Falsification:
         predictor: the failure predictor the search fitted (``None``: none: no data, or its data saw too
             few failures); not serialised.
         related: what it was fitted on (the run's looks and the weaker agent's episodes).
+        coverage: the share of the start space's starts whose features lie within the range ``related`` spans
+            (``None``: not measured: no data, or too few failures); under ``COVERAGE``, no predictor.
         importance: the failure rate by importance sampling from the predictor's proposal, with its interval
             (``None``: not asked for, ``importance=0``, or no predictor).
     """
@@ -314,6 +326,7 @@ class Falsification:
     found_by: str | None = None
     predictor: FailurePredictor | None = field(default=None, repr=False, compare=False)
     related: FailureData | None = field(default=None, repr=False, compare=False)
+    coverage: float | None = None
     importance: RateEstimate | None = None
 
     @property
@@ -373,9 +386,36 @@ class Falsification:
             lines.append(f"  episode: {c.summary()}")
         if self.uniform_episodes:
             lines.append(f"failure rate over the start space: {self.rate_text}")
+        if self.related is not None:
+            lines.append(f"failure predictor: {self.predictor_text}")
         if self.importance is not None:
-            lines.append(f"failure rate by importance sampling: {self.importance.summary()}")
+            lines.append(f"failure rate from the predictor's starts, weighed back: {self.importance.summary()}")
         return "\n".join([*lines, *self.notes])
+
+    @property
+    def predictor_text(self) -> str:
+        """What the failure predictor was fitted on, or why it was not (``""``: no related agents' episodes).
+
+        Example:
+            >>> import gymnasium as gym
+            >>> from specguard.falsify.predictor import FailureData
+            >>> from specguard.starts.space import StartSpace
+            >>> starts = StartSpace({"x": (-0.05, 0.05)}).resolve(gym.make("CartPole-v1"))
+            >>> related = FailureData(np.zeros((48, 4)), np.full(48, 0.3), np.arange(48) < 2, np.ones(48))
+            >>> Falsification(starts, related=related).predictor_text
+            'not fitted: 2 failures in 48 episodes of related agents (it needs 3, and a success)'
+        """
+        if self.related is None:
+            return ""
+        seen = f"{self.related.failures} failures in {len(self.related)} episodes of related agents"
+        if self.predictor is None and self.coverage is not None:
+            return (
+                f"not used: {seen}, whose starts span {self.coverage:.0%} of the start space's (it needs "
+                f"{COVERAGE:.0%}; fitted elsewhere it would extrapolate)"
+            )
+        if self.predictor is None:
+            return f"not fitted: {seen} (it needs {MIN_FAILURES}, and a success)"
+        return f"fitted on {seen}; the learned arm drew {self.drawn_by.get('learned', 0)} of the guided starts"
 
     def to_dict(self) -> dict[str, Any]:
         """The findings as plain JSON-ready values (the counterexample's start exact, as stored)."""
@@ -393,6 +433,7 @@ class Falsification:
             "rate": self.rate_text,
             "drawn_by": dict(self.drawn_by),
             "found_by": self.found_by,
+            "predictor": self.predictor_text,
             "importance": self.importance.summary() if self.importance is not None else None,
         }
 
@@ -457,6 +498,7 @@ class _Search:
     found_by: str | None = None
     predictor: FailurePredictor | None = None
     related: FailureData | None = None
+    coverage: float | None = None
 
 
 def _chances(runner: EpisodeRunner, predictor: FailurePredictor) -> Callable[[np.ndarray], np.ndarray]:
@@ -482,7 +524,8 @@ def _learn(
     """The failure predictor, fitted on ``related`` (a run's looks) and on episodes of the agent made weaker
     (``weaker`` uniform starts at each of :data:`~specguard.falsify.related.EPSILONS`, no more than ``room`` in
     all; counted as ``"related"`` episodes of the search). ``None`` where those saw fewer than ``MIN_FAILURES``
-    failures, or no success: nothing to learn from."""
+    failures, or no success: nothing to learn from; or where the data's starts span less than ``COVERAGE`` of the
+    start space (``search.coverage``): fitted elsewhere, it would extrapolate."""
     data = related
     per = min(weaker, room // len(EPSILONS))
     for epsilon in EPSILONS if per else ():
@@ -492,7 +535,11 @@ def _learn(
     search.related = data
     if data is None or data.failures < MIN_FAILURES or data.failures == len(data):
         return None
-    return FailurePredictor().fit(data)
+    probe = runner.features(runner.starts.uniform(rng, PROBES))
+    low, high = data.features.min(axis=0), data.features.max(axis=0)
+    margin = 0.05 * (high - low) + 1e-12
+    search.coverage = float(np.mean(np.all((probe >= low - margin) & (probe <= high + margin), axis=1)))
+    return FailurePredictor().fit(data) if search.coverage >= COVERAGE else None
 
 
 def _guided(
@@ -705,7 +752,7 @@ def falsify(
         say(f"guided search: up to {examples} episodes")
         search = _guided(runner, examples, np.random.default_rng([seed, 1]), related, weaker)
         result.drawn_by, result.found_by = dict(search.drawn_by), search.found_by
-        result.predictor, result.related = search.predictor, search.related
+        result.predictor, result.related, result.coverage = search.predictor, search.related, search.coverage
         if search.hit is not None:
             outcome, point, result.episodes_to_first = search.hit
             result.first = outcome
@@ -717,7 +764,7 @@ def falsify(
     if importance and result.predictor is None and "related" not in result.drawn_by and (related or weaker):
         fitting = _Search()  # the search ended before it fitted its predictor (an early failure): fitted now
         result.predictor = _learn(runner, related, weaker, np.random.default_rng([seed, 3]), fitting, weaker * 3)
-        result.related = fitting.related
+        result.related, result.coverage = fitting.related, fitting.coverage
         result.drawn_by["related"] = fitting.drawn_by["related"]
     if importance and result.predictor is not None:
         say(f"importance sampling: {importance} episodes from the predictor's proposal for the failure rate")
