@@ -121,6 +121,7 @@ on_track = sg.Spec(cartpole, track, budget=sg.Budget(timesteps=1), expect=0.9)
 """
 
 
+@pytest.mark.slow  # saving an SB3 model asks platform.processor(), a process (uname -p) in a fresh worker
 def test_the_command_line_falsifies_an_agent_exit_0_1_and_2(tmp_path, capsys):
     specs = tmp_path / "cartpole_specs.py"
     specs.write_text(SPEC_FILE)
