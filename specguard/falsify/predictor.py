@@ -1,9 +1,9 @@
 """A failure predictor: the chance that an agent fails from a start, learned from related, less robust agents.
 
-As Uesato et al. ("Rigorous Agent Evaluation: An Adversarial Approach to
-Uncover Catastrophic Failures", ICLR 2019) learn an adversarial value function
-from weaker agents of the same training, whose failures are frequent, and
-search with it where the agent itself rarely fails.
+After Uesato et al. ("Rigorous Agent Evaluation: An Adversarial Approach to
+Uncover Catastrophic Failures", ICLR 2019), who learn an adversarial value
+function from weaker agents of the same training, whose failures are
+frequent, and search with it where the agent itself rarely fails.
 
 The data (:class:`FailureData`): episodes of related agents, each with the
 features of its first state, how much weaker than the agent judged its agent
@@ -13,7 +13,8 @@ a weight. Two sources give them:
 * a run's interim looks (``RunResult.looks``): the checkpoint at step ``t``
   of a run of ``T`` steps has weakness ``1 - t / T``; later checkpoints weigh
   more (weight ``t / T``), as the agent judged is the last;
-* the agent itself with ``epsilon``-random actions (:func:`perturbed`): at each
+* the agent itself with ``epsilon``-random actions
+  (:func:`specguard.falsify.related.perturbed`): at each
   step, with probability ``epsilon``, a uniformly random action instead of its
   own; weakness ``epsilon``. It needs only the agent, so it serves agents
   trained elsewhere too (and a run whose looks saw too few failures).
@@ -21,12 +22,12 @@ a weight. Two sources give them:
 The model (:class:`FailurePredictor`): a logistic regression over the
 standardised features, their squares and products, and the weakness, with an
 L2 penalty, fitted by Newton's method (numpy; a few milliseconds on hundreds
-of episodes), asked at weakness 0. Why not scikit-learn's gradient boosting:
-measured on the benchmark's development agents (docs/guide/falsify.md), the
-quadratic logistic model ranked the agent's own failures as well, needs no new
-dependency, and its output is smooth over the space, so the learned arm's
-proposals spread over a region instead of piling onto the few starts a tree
-ensemble scores highest.
+of episodes), asked at weakness 0. Why not scikit-learn: on the benchmark's
+development agents (docs/guide/falsify.md), this model ranked the agent's own
+failures better (AUC 0.68, 0.62 and 0.90 on CartPole seeds 9 and 10 and
+InvertedPendulum seed 9) than scikit-learn's ``LogisticRegression`` over the
+same features (0.58, 0.52, 0.89) and its ``HistGradientBoostingClassifier``
+(0.57, 0.41, 0.85), in 1-3 ms against 11-830 ms, and needs no new dependency.
 
 Example:
     >>> import numpy as np
@@ -88,10 +89,6 @@ class FailureData:
     @property
     def failures(self) -> int:
         return int(self.failed.sum())
-
-    @classmethod
-    def empty(cls, width: int) -> FailureData:
-        return cls(np.empty((0, width)), np.empty(0), np.empty(0, dtype=bool), np.empty(0))
 
     def __add__(self, other: FailureData) -> FailureData:
         return FailureData(
