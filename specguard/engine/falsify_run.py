@@ -200,7 +200,20 @@ def falsify_run(
     db = DirectoryBasedExampleDatabase(str(database)) if database is not None and spec_key else None
     key = database_key(spec_key, seed, space) if spec_key else ""
     label = f"{spec.label} seed {seed}"
-    return _search(runner, spec, label, db, key, examples, uniform, search_seed, progress, related, weaker, importance)
+    return _search(
+        runner,
+        spec,
+        label,
+        db,
+        key,
+        examples,
+        uniform,
+        search_seed,
+        progress,
+        related=related,
+        weaker=weaker,
+        importance=importance,
+    )
 
 
 def falsify_agent(
@@ -281,7 +294,9 @@ def falsify_agent(
         key = database_key(fingerprint_spec(spec).spec_key, None, space, agent=f"{acting.identity} {seen}")
         db = DirectoryBasedExampleDatabase(str(database))
     label = f"{spec.label} agent {acting.name}"
-    found = _search(runner, spec, label, db, key, examples, uniform, search_seed, progress, None, weaker, importance)
+    found = _search(
+        runner, spec, label, db, key, examples, uniform, search_seed, progress, weaker=weaker, importance=importance
+    )
     if found.counterexample is not None and acting.model is None:
         _replay_afresh(
             runner, found, fresh, lambda a: spec_agent(spec, a, algorithm=algorithm, batch=True, trust=trust), label
@@ -321,12 +336,9 @@ def _replay_afresh(
     else:
         acting = fresh.batched(True) if isinstance(fresh, Agent) else load(fresh)
         check_fits(acting, runner.observation_space, runner.action_space)
-        searching, runner.act = runner.act, acting
-        try:
+        with runner.acting(acting):
             point = np.array([c.start[n] for n in runner.starts.names], dtype=np.float64)
             replay = runner.run(point[None, :])[0]
-        finally:
-            runner.act = searching
         if replay.failed:
             return
         note = (
@@ -348,6 +360,7 @@ def _search(
     uniform: int,
     search_seed: int,
     progress: Callable[[str], None] | None,
+    *,
     related: FailureData | None = None,
     weaker: int = 0,
     importance: int = 0,

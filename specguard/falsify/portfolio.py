@@ -117,12 +117,16 @@ class Portfolio:
         self.dimensions = int(dimensions)
         self.rng = rng
         self.predict = predict
-        self.arms = ARMS if predict is not None else tuple(a for a in ARMS if a != "learned")
         self.points: list[np.ndarray] = []
         self.scores: list[float] = []
         self.paid: Counter[str] = Counter()
         self.tried: Counter[str] = Counter()
         self._uses: Counter[int] = Counter()
+
+    @property
+    def arms(self) -> tuple[str, ...]:
+        """The arms in play: :data:`ARMS`, ``learned`` only with a predictor."""
+        return ARMS if self.predict is not None else tuple(a for a in ARMS if a != "learned")
 
     def shares(self) -> dict[str, float]:
         """Each arm's share of the next round: the uniform floor, the rest by payoff rate."""

@@ -69,12 +69,8 @@ class EpsilonRandom:
 def perturbed(runner: Any, points: np.ndarray, epsilon: float, rng: np.random.Generator) -> FailureData:
     """One episode from each start (rows of ``points``, the unit box) of the runner's agent with ``epsilon``-random
     actions, as failure data of weakness ``epsilon``, weight 1. The runner's own agent is put back after."""
-    agent = runner.act
-    runner.act = EpsilonRandom(agent, runner.action_space, epsilon, rng)
-    try:
+    with runner.acting(EpsilonRandom(runner.act, runner.action_space, epsilon, rng)):
         outcomes = runner.run(points)
-    finally:
-        runner.act = agent
     return FailureData(
         np.array([o.first for o in outcomes], dtype=np.float64),
         np.full(len(outcomes), float(epsilon)),

@@ -46,9 +46,10 @@ database: the counterexample replayed first.
 
 from __future__ import annotations
 
+import contextlib
 import json
 from collections import Counter
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -59,7 +60,7 @@ from specguard.construction.env import BaselineEnv, SpecEnv, features_space, sta
 from specguard.construction.episode_policy import EpisodePolicy
 from specguard.error import InvalidSpec
 from specguard.extend import until_end
-from specguard.falsify.portfolio import ARMS, Portfolio
+from specguard.falsify.portfolio import Portfolio
 from specguard.falsify.predictor import FailureData, FailurePredictor
 from specguard.falsify.related import EPSILONS, perturbed
 from specguard.falsify.robustness import (
@@ -208,6 +209,15 @@ class EpisodeRunner:
         while len(self._envs) < k:
             self._envs.append(self._make_env(starts=self.space))
         return self._envs[:k]
+
+    @contextlib.contextmanager
+    def acting(self, act: Callable[[np.ndarray], Any]) -> Iterator[None]:
+        """Episodes run within are ``act``'s instead of the runner's policy, which is put back after."""
+        own, self.act = self.act, act
+        try:
+            yield
+        finally:
+            self.act = own
 
     def features(self, points: np.ndarray) -> np.ndarray:
         """The first state's features from each start (rows of ``points``): each start set by a reset, no step
@@ -567,7 +577,6 @@ def _guided(
             done += search.drawn_by["related"]
             if predictor is not None:
                 portfolio.predict = _chances(runner, predictor)
-                portfolio.arms = ARMS
             continue
         if done == 0:
             n = min(examples, EXPLORE + (0 if seeds else 1))
@@ -761,7 +770,7 @@ def falsify(
                 runner, outcome, point, shrink=moving if shrink else None, database=database, key=key, say=say
             )
     result.guided = runner.episodes - start_count
-    if importance and result.predictor is None and "related" not in result.drawn_by and (related or weaker):
+    if importance and result.related is None and (related is not None or weaker):
         fitting = _Search()  # the search ended before it fitted its predictor (an early failure): fitted now
         result.predictor = _learn(runner, related, weaker, np.random.default_rng([seed, 3]), fitting, weaker * 3)
         result.related, result.coverage = fitting.related, fitting.coverage
