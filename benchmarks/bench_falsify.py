@@ -29,10 +29,8 @@ Per agent:
   ``1 - (1 - rate) ** budget``;
 * **ratio**: guided ERT over random's expected episodes;
 * **the failure predictor**: each search is given the run's looks (``related=``, as ``falsify_runs`` gives
-  them) and ``--weaker`` episodes per level of the agent made weaker (0 by default);
-* **the agent's critic**: the portfolio's ``value`` arm steers by it (PPO's value, DQN's Q...); ``--no-critic``
-  searches without it; with ``--compare``, the same searches without the predictor and the critic too (the
-  search that steers by the agent's margins alone);
+  them) and ``--weaker`` episodes per level of the agent made weaker (0 by default); with ``--compare``, the
+  same searches without a predictor too (rerun only where a predictor was fitted: else the search is the same);
 * **importance sampling** (``--importance K``): the failure rate from ``K`` episodes of the predictor's proposal
   beside ``K`` uniform draws', each with its 95% interval, and the ratio of their widths;
 * **per sampler** (the portfolio's arms, ``specguard.falsify.portfolio.ARMS``, the middle of the space and
@@ -54,7 +52,7 @@ the cost per episode of the falsifier's runner against a plain rollout. Exits
 
 Usage:
     python benchmarks/bench_falsify.py [--seeds 17 18 19 20 21] [--searches 20] [--budget 600] [--case CartPole]
-        [--score {last,episode}] [--agents DIR] [--weaker N] [--importance K] [--compare] [--no-critic]
+        [--score {last,episode}] [--agents DIR] [--weaker N] [--importance K] [--compare]
 """
 
 from __future__ import annotations
@@ -116,7 +114,7 @@ def expected_running_time(found: list[int | None], budget: int) -> float:
     return spent / successes if successes else math.inf
 
 
-SAMPLERS = ("uniform", "middle", "related", "trend", "local", "learned", "value")
+SAMPLERS = ("uniform", "middle", "related", "trend", "local", "learned")
 """The samplers whose episodes are counted apart: the portfolio's arms and the middle of the space."""
 
 
@@ -216,10 +214,7 @@ def main() -> int:
         default="last",
         help="the search's score: last (the falsifier's default) or episode (over the whole episode)",
     )
-    parser.add_argument(
-        "--compare", action="store_true", help="also run each search without the failure predictor and the critic"
-    )
-    parser.add_argument("--no-critic", action="store_true", help="search without the agent's critic (the value arm)")
+    parser.add_argument("--compare", action="store_true", help="also run each search without the failure predictor")
     parser.add_argument("--weaker", type=int, default=0, help="falsify(weaker=): episodes per level, weaker agent")
     parser.add_argument(
         "--importance", type=int, default=0, help="episodes of the importance-sampling rate (0: not measured)"
@@ -323,20 +318,13 @@ def run_suite(args: argparse.Namespace) -> None:
             plain: list[int | None] = []
             for k in range(args.searches):
                 f = falsify(
-                    runner,
-                    examples=args.budget,
-                    uniform=0,
-                    seed=k,
-                    shrink=False,
-                    related=related,
-                    weaker=args.weaker,
-                    critic=not args.no_critic,
+                    runner, examples=args.budget, uniform=0, seed=k, shrink=False, related=related, weaker=args.weaker
                 )
                 found.append(f.episodes_to_first if f.found else None)
                 drawn_by.append(f.drawn_by)
                 found_by.append(f.found_by)
-                if args.compare and (f.predictor is not None or f.drawn_by.get("value")):  # else the same search
-                    f = falsify(runner, examples=args.budget, uniform=0, seed=k, shrink=False, critic=False)
+                if args.compare and f.predictor is not None:  # else the very same search: nothing learned
+                    f = falsify(runner, examples=args.budget, uniform=0, seed=k, shrink=False)
                 plain.append(f.episodes_to_first if f.found else None)
             drawn = falsify(runner, examples=1, uniform=args.rate_draws, seed=10_000 + seed, shrink=False)
             rate = drawn.failure_rate
@@ -356,7 +344,7 @@ def run_suite(args: argparse.Namespace) -> None:
             if args.compare:
                 ert = expected_running_time(plain, args.budget)
                 print(
-                    f"    without the predictor and the critic: {sum(f is not None for f in plain)}/{len(plain)} found,"
+                    f"    without the predictor: {sum(f is not None for f in plain)}/{len(plain)} found,"
                     f" ERT {ert:.1f}, ratio {ert / random if math.isfinite(random) else math.nan:.2f}",
                     flush=True,
                 )

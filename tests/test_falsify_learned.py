@@ -174,10 +174,6 @@ def test_the_command_line_passes_weaker_and_importance_to_the_search(tmp_path, m
     with pytest.raises(StopIteration):
         main([*argv, "--cache-dir", str(tmp_path / "c"), "--quiet"])
     assert given["weaker"] == 3 and given["importance"] == 7 and given["related"] is None
-    assert given["critic"] is True  # the value arm, unless told not to. Mutation: dropping critic= from the call.
-    with pytest.raises(StopIteration):
-        main([*argv, "--no-critic", "--cache-dir", str(tmp_path / "c"), "--quiet"])
-    assert given["critic"] is False
 
 
 def test_a_predictor_whose_data_started_elsewhere_is_not_used_and_the_report_says_so():

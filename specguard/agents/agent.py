@@ -193,11 +193,6 @@ class Agent:
             action = self._check(action)
         return action if self._convert is None else self._convert(action)
 
-    def values(self, observations: Any) -> Any:
-        """The return the agent expects from each of a batch of observations (rows), by its model's critic
-        (:meth:`specguard.evaluation.policy.Policy.values`); ``None`` for a callable, or a model without one."""
-        return self._policy.values(observations) if self._policy is not None else None
-
     def _callable_act(self, fn: Callable[[Any], Any]) -> Callable[[Any, Sequence[int] | None], Any]:
         """``fn`` (one observation to one action) as the agent's step, decided once: normalized or not, batched or
         not (its actions stacked)."""

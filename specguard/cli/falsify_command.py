@@ -53,12 +53,6 @@ def add_parser(sub: Any) -> None:
         help="episodes for the failure rate by importance sampling from the failure predictor, 0 for none (default: 0)",
     )
     fz.add_argument(
-        "--no-critic",
-        dest="critic",
-        action="store_false",
-        help="do not steer the search by the agent's own critic (its value or Q network: the value arm)",
-    )
-    fz.add_argument(
         "--score",
         choices=SCORES,
         default="last",
@@ -124,7 +118,6 @@ def run(args: argparse.Namespace, argv: Sequence[str]) -> int:
                 wrap=arguments.wrap_of(args),
                 weaker=args.weaker,
                 importance=args.importance,
-                critic=args.critic,
             )
             print(f"== {name} agent {args.agent}: {'COUNTEREXAMPLE' if f.found else 'none found'}")
             print(f.report())
@@ -143,7 +136,6 @@ def run(args: argparse.Namespace, argv: Sequence[str]) -> int:
             score=args.score,
             weaker=args.weaker,
             importance=args.importance,
-            critic=args.critic,
         )
         for seed, f in found.items():
             print(f"== {name} seed {seed}: {'COUNTEREXAMPLE' if f.found else 'none found'}")

@@ -7,10 +7,7 @@ asked once per step. Training's evaluation and rollouts
 (:mod:`specguard.training.train`, :mod:`specguard.evaluation.rollout`) and the
 falsifier's runner (:class:`specguard.falsify.search.EpisodeRunner`, several
 envs in lockstep) all tell it, and
-:class:`specguard.evaluation.policy.Policy` is one. One that can tell the
-return it expects from a state (a trained model's critic) is a
-:class:`ValuedPolicy`; the falsifier's ``value`` arm steers by it
-(:mod:`specguard.falsify.portfolio`).
+:class:`specguard.evaluation.policy.Policy` is one.
 
 Example:
     >>> import numpy as np
@@ -28,7 +25,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any, Protocol, runtime_checkable
 
-__all__ = ["EpisodePolicy", "ValuedPolicy"]
+__all__ = ["EpisodePolicy"]
 
 
 @runtime_checkable
@@ -43,11 +40,3 @@ class EpisodePolicy(Protocol):
     def start(self, envs: Sequence[Any]) -> None: ...
 
     def __call__(self, observations: Any, rows: Sequence[int] | None = None) -> Any: ...
-
-
-@runtime_checkable
-class ValuedPolicy(Protocol):
-    """A policy that estimates, from each of a batch of observations (rows), the return it expects: a trained model's
-    critic (:meth:`specguard.evaluation.policy.Policy.values`); ``None`` where it has no estimate to give."""
-
-    def values(self, observations: Any) -> Any: ...

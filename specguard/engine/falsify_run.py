@@ -100,7 +100,6 @@ def falsify_runs(
     score: str = "last",
     weaker: int = 0,
     importance: int = 0,
-    critic: bool = True,
 ) -> dict[int, Falsification]:
     """Search ``starts`` for starts from which each of ``result``'s cached policies misses the spec (no retraining).
 
@@ -119,8 +118,6 @@ def falsify_runs(
         weaker, importance: as :func:`specguard.falsify.search.falsify`'s: episodes per level of the agent made
             weaker, for the failure predictor (0: none; each run's looks are its data without them), and episodes
             of the failure rate by importance sampling (0: none).
-        critic: the search's ``value`` arm steers by each run's own critic (its value or Q network), as
-            :func:`specguard.falsify.search.falsify`'s; ``False``: not.
 
     Returns:
         Per seed, what was found (:class:`~specguard.falsify.search.Falsification`).
@@ -156,7 +153,6 @@ def falsify_runs(
             related=from_looks(looks.get(seed, []), property_keys(spec)),
             weaker=weaker,
             importance=importance,
-            critic=critic,
         )
     return found
 
@@ -178,7 +174,6 @@ def falsify_run(
     related: FailureData | None = None,
     weaker: int = 0,
     importance: int = 0,
-    critic: bool = True,
 ) -> Falsification:
     """Search the start space of run ``seed`` of ``spec`` for a start from which its policy misses the spec.
 
@@ -205,8 +200,20 @@ def falsify_run(
     db = DirectoryBasedExampleDatabase(str(database)) if database is not None and spec_key else None
     key = database_key(spec_key, seed, space) if spec_key else ""
     label = f"{spec.label} seed {seed}"
-    how: dict[str, Any] = {"related": related, "weaker": weaker, "importance": importance, "critic": critic}
-    return _search(runner, spec, label, db, key, examples, uniform, search_seed, progress, **how)
+    return _search(
+        runner,
+        spec,
+        label,
+        db,
+        key,
+        examples,
+        uniform,
+        search_seed,
+        progress,
+        related=related,
+        weaker=weaker,
+        importance=importance,
+    )
 
 
 def falsify_agent(
@@ -226,7 +233,6 @@ def falsify_agent(
     trust: bool = False,
     weaker: int = 0,
     importance: int = 0,
-    critic: bool = True,
 ) -> Falsification:
     """Search ``starts`` for a start from which ``agent``, trained elsewhere, misses ``spec`` (training nothing).
 
@@ -246,8 +252,6 @@ def falsify_agent(
         weaker: episodes per level of the agent made weaker (``epsilon``-random actions), the failure predictor's
             data (:func:`specguard.falsify.search.falsify`); 0, the default: no predictor (an agent trained
             elsewhere brings no looks).
-        critic: the search's ``value`` arm steers by the agent's own critic where it is an SB3 model with one (its
-            value or Q network); ``False``: not.
         Others: as :func:`specguard.falsify.search.falsify`.
 
     Raises:
@@ -290,8 +294,9 @@ def falsify_agent(
         key = database_key(fingerprint_spec(spec).spec_key, None, space, agent=f"{acting.identity} {seen}")
         db = DirectoryBasedExampleDatabase(str(database))
     label = f"{spec.label} agent {acting.name}"
-    how: dict[str, Any] = {"weaker": weaker, "importance": importance, "critic": critic}
-    found = _search(runner, spec, label, db, key, examples, uniform, search_seed, progress, **how)
+    found = _search(
+        runner, spec, label, db, key, examples, uniform, search_seed, progress, weaker=weaker, importance=importance
+    )
     if found.counterexample is not None and acting.model is None:
         _replay_afresh(
             runner, found, fresh, lambda a: spec_agent(spec, a, algorithm=algorithm, batch=True, trust=trust), label
@@ -359,7 +364,6 @@ def _search(
     related: FailureData | None = None,
     weaker: int = 0,
     importance: int = 0,
-    critic: bool = True,
 ) -> Falsification:
     """The search on ``runner`` at the spec's confidence, one torch thread, its progress lines labelled."""
     with one_torch_thread():
@@ -375,5 +379,4 @@ def _search(
             related=related,
             weaker=weaker,
             importance=importance,
-            critic=critic,
         )

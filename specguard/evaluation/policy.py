@@ -13,9 +13,6 @@ rollouts and GIFs (:mod:`specguard.evaluation.rollout`) and the falsifier
 * the env's action masks, read before every action, for an algorithm whose
   ``predict`` takes ``action_masks`` (sb3-contrib's MaskablePPO).
 
-It also tells the return the model expects from an observation (:meth:`Policy.values`, its critic's estimate), which
-the falsifier steers by.
-
 A model without a recurrent state acts exactly as ``model.predict(obs)[0]``. A callable ``obs -> action`` without
 ``predict`` (the agent a trainer of the user's yields, ``Spec(trainer=...)``) acts as itself (:func:`callable_policy`).
 """
@@ -31,15 +28,7 @@ import numpy as np
 from specguard.error import SpecError
 from specguard.spec.algorithms import takes_action_masks
 
-__all__ = [
-    "Policy",
-    "callable_policy",
-    "critic_values",
-    "normalizer_of",
-    "observation_rows",
-    "one_torch_thread",
-    "policy",
-]
+__all__ = ["Policy", "callable_policy", "normalizer_of", "observation_rows", "one_torch_thread", "policy"]
 
 
 @contextmanager
@@ -137,22 +126,6 @@ class Policy:
                 kept[:, rows] = new
         return int(action) if self._discrete else action
 
-    def values(self, observations: Any) -> np.ndarray | None:
-        """The return the model expects from each of a batch of observations (rows), by its own critic, the
-        ``VecNormalize`` statistics applied: an actor-critic's value (PPO, A2C, MaskablePPO), the largest of a
-        Q-network's action values (DQN), or the least of the critics' values of the action it takes (SAC, TD3, DDPG).
-        ``None`` where the model has no such critic, or needs more than the observation to ask it (a recurrent
-        policy's state).
-
-        Example:
-            >>> from stable_baselines3 import PPO
-            >>> model = PPO("MlpPolicy", "CartPole-v1", seed=0, device="cpu")
-            >>> Policy(model, batch=True).values(np.zeros((3, 4), dtype=np.float32)).shape
-            (3,)
-        """
-        obs = self._norm.normalize_obs(observations) if self._norm is not None else observations
-        return critic_values(self.model, obs)
-
     def _masks(self, rows: list[int]) -> np.ndarray:
         if not self._envs:
             raise SpecError(
@@ -161,30 +134,6 @@ class Policy:
             )
         masks = [np.asarray(self._envs[i].get_wrapper_attr("action_masks")()) for i in rows]
         return np.stack(masks) if self.batch else masks[0]
-
-
-def critic_values(model: Any, observations: Any) -> np.ndarray | None:
-    """``model``'s critic's estimate of the return from each observation (rows, normalised as it reads them), or
-    ``None`` (:meth:`Policy.values`)."""
-    policy = getattr(model, "policy", None)
-    if policy is None or not callable(getattr(policy, "obs_to_tensor", None)) or hasattr(policy, "lstm_actor"):
-        return None
-    import torch
-
-    with torch.no_grad(), _predicting(model):
-        obs = policy.obs_to_tensor(observations)[0]
-        if callable(getattr(policy, "predict_values", None)):  # an actor-critic: V(s)
-            values = policy.predict_values(obs)
-        elif isinstance(getattr(policy, "q_net", None), torch.nn.Module):  # DQN: max_a Q(s, a)
-            values = policy.q_net(obs).max(dim=1).values
-        elif isinstance(getattr(policy, "critic", None), torch.nn.Module) and hasattr(policy, "_predict"):
-            q = policy.critic(obs, policy._predict(obs, deterministic=True))  # SAC, TD3, DDPG: Q(s, pi(s))
-            if not isinstance(q, (tuple, list)):
-                return None  # a distributional critic (TQC's quantiles): not read here
-            values = torch.min(torch.cat(list(q), dim=1), dim=1).values
-        else:
-            return None
-    return np.asarray(values.cpu().numpy(), dtype=np.float64).reshape(-1)
 
 
 def _keep_mode(mode: bool) -> None:

@@ -21,14 +21,6 @@ variable's range mapped onto ``[-1, 1]``):
   failures) leaves its starts nearly uniform instead of piling them on the
   corner its fitted surface happens to peak at, while a sharp one still sends
   them to its region.
-* ``value`` (only given the agent's own critic, ``value``): of ``VALUE_CANDIDATES`` uniform draws, the start whose
-  first observation the agent's critic values least or, as often, most: where the agent expects to do worst, or
-  where it is surest of itself. It steers by the agent's own estimate of its return, which needs no episode and no
-  related agent. Both ends, because the failures lie at one end or the other, and which one differs from agent to
-  agent: of the benchmark's CartPole agents (docs/guide/falsify.md), five failed most from the starts their critic
-  valued least, two from those it valued most. Its share is fixed (``VALUE_SHARE``), not earned: an episode's
-  margins, which the other arms earn by, do not follow the critic the way failures do (their rank correlation with
-  its value had either sign, on agents whose failures lay at the same end).
 
 An episode *pays off* when its score falls below the ``PAYOFF_QUANTILE``
 quantile of the scores before it (it came closer to failing than most). Each
@@ -59,9 +51,8 @@ import numpy as np
 
 __all__ = ["ARMS", "Portfolio"]
 
-ARMS = ("uniform", "trend", "local", "learned", "value")
-"""The samplers, in the order a round's starts are given out (``learned`` only with a predictor, ``value`` only with
-the agent's critic)."""
+ARMS = ("uniform", "trend", "local", "learned")
+"""The samplers, in the order a round's starts are given out (``learned`` only with a predictor)."""
 
 SHARPNESS = 2.0
 """The ``learned`` arm picks a candidate with a chance proportional to its predicted chance of failing to this power.
@@ -84,12 +75,6 @@ Half: where the score leads away from the failures, half of the starts still fai
 the search needs at most about twice random's episodes (with a quarter, one CartPole agent's searches needed 1.98
 times random's).
 """
-
-VALUE_CANDIDATES = 16
-"""The ``value`` arm picks the one of this many uniform draws the agent's critic values least (or most)."""
-
-VALUE_SHARE = 0.25
-"""The ``value`` arm's share of every round, taken from the arms that share by payoff."""
 
 PAYOFF_QUANTILE = 0.1
 """An episode pays off when its score is below this quantile of the scores before it."""
@@ -121,8 +106,6 @@ class Portfolio:
         rng: the search's random generator.
         predict: ``predict(points) -> chances``: the failure predictor's chance of failing from each start (rows of
             unit-box points); ``None``: no ``learned`` arm.
-        value: ``value(points) -> values``: the return the agent's own critic expects from each start (rows of
-            unit-box points); ``None``: no ``value`` arm.
     """
 
     def __init__(
@@ -130,12 +113,10 @@ class Portfolio:
         dimensions: int,
         rng: np.random.Generator,
         predict: Callable[[np.ndarray], np.ndarray] | None = None,
-        value: Callable[[np.ndarray], np.ndarray] | None = None,
     ) -> None:
         self.dimensions = int(dimensions)
         self.rng = rng
         self.predict = predict
-        self.value = value
         self.points: list[np.ndarray] = []
         self.scores: list[float] = []
         self.paid: Counter[str] = Counter()
@@ -144,31 +125,26 @@ class Portfolio:
 
     @property
     def arms(self) -> tuple[str, ...]:
-        """The arms in play: :data:`ARMS`, ``learned`` only with a predictor, ``value`` only with a critic."""
-        absent = {"learned": self.predict is None, "value": self.value is None}
-        return tuple(a for a in ARMS if not absent.get(a, False))
+        """The arms in play: :data:`ARMS`, ``learned`` only with a predictor."""
+        return ARMS if self.predict is not None else tuple(a for a in ARMS if a != "learned")
 
     def shares(self) -> dict[str, float]:
-        """Each arm's share of the next round: the uniform floor, the ``value`` arm's fixed share, the rest by payoff
-        rate."""
-        fixed = {"uniform": UNIFORM_FLOOR, "value": VALUE_SHARE if self.value is not None else 0.0}
-        earning = [a for a in self.arms if a not in fixed]
-        rates = {a: (self.paid[a] + 1) / (self.tried[a] + 2) for a in earning}
-        total, rest = sum(rates.values()), 1.0 - sum(fixed.values())
-        return {a: fixed[a] if a in fixed else rest * rates[a] / total for a in self.arms}
+        """Each arm's share of the next round: the uniform floor, the rest by payoff rate."""
+        rates = {a: (self.paid[a] + 1) / (self.tried[a] + 2) for a in self.arms}
+        total = sum(rates.values())
+        floor = {a: UNIFORM_FLOOR if a == "uniform" else 0.0 for a in self.arms}
+        return {a: floor[a] + (1 - UNIFORM_FLOOR) * r / total for a, r in rates.items()}
 
     def propose(self, n: int) -> tuple[np.ndarray, list[str]]:
         """``n`` starts in the unit box (rows), with the arm that proposed each."""
         shares = self.shares()
-        if len(self.scores) < MIN_ELITE:  # no scores to follow yet: the predictor takes what the arms would earn
-            earned = sum(v for a, v in shares.items() if a not in ("uniform", "value"))
-            shares = {a: {"learned": earned, "value": shares[a]}.get(a, 0.0) for a in self.arms}
-            shares["uniform"] = 1.0 - sum(shares.values())
+        if len(self.scores) < MIN_ELITE:  # no scores to follow yet: uniform draws, and the predictor's (needs none)
+            ranked = 1.0 - UNIFORM_FLOOR if self.predict is not None else 0.0
+            shares = {a: {"uniform": 1.0 - ranked, "learned": ranked}.get(a, 0.0) for a in self.arms}
         counts = self.rng.multinomial(n, [shares[a] for a in self.arms])
         arms = [a for a, k in zip(self.arms, counts, strict=True) for _ in range(int(k))]
-        learned, valued = self._learned(arms.count("learned")), self._valued(arms.count("value"))
-        picked = {"learned": learned, "value": valued}
-        points = [next(picked[a]) if a in picked else self._draw(a) for a in arms]
+        learned = self._learned(arms.count("learned"))
+        points = [next(learned) if a == "learned" else self._draw(a) for a in arms]
         return (np.stack(points) if points else np.empty((0, self.dimensions))), arms
 
     def _learned(self, n: int) -> Iterator[np.ndarray]:
@@ -181,17 +157,6 @@ class Portfolio:
         chances = np.maximum(chances, 1e-12) ** SHARPNESS
         cumulative = np.cumsum(chances / chances.sum(axis=1, keepdims=True), axis=1)
         picked = (cumulative < self.rng.random((n, 1))).sum(axis=1).clip(max=CANDIDATES - 1)
-        return iter(candidates[np.arange(n), picked])
-
-    def _valued(self, n: int) -> Iterator[np.ndarray]:
-        """``n`` starts of the ``value`` arm: each, of ``VALUE_CANDIDATES`` uniform draws, the one the agent's critic
-        values least or, as often, most (one call of the critic for all)."""
-        if not n or self.value is None:
-            return iter(())
-        candidates = self.rng.uniform(-1.0, 1.0, (n, VALUE_CANDIDATES, self.dimensions))
-        values = np.asarray(self.value(candidates.reshape(-1, self.dimensions))).reshape(n, VALUE_CANDIDATES)
-        highest = self.rng.random(n) < 0.5
-        picked = np.where(highest, np.argmax(values, axis=1), np.argmin(values, axis=1))
         return iter(candidates[np.arange(n), picked])
 
     def observe(self, points: np.ndarray, scores: np.ndarray, arms: list[str]) -> None:

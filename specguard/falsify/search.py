@@ -57,10 +57,10 @@ import gymnasium as gym
 import numpy as np
 
 from specguard.construction.env import BaselineEnv, SpecEnv, features_space, stack_observations
-from specguard.construction.episode_policy import EpisodePolicy, ValuedPolicy
+from specguard.construction.episode_policy import EpisodePolicy
 from specguard.error import InvalidSpec
 from specguard.extend import until_end
-from specguard.falsify.portfolio import VALUE_CANDIDATES, VALUE_SHARE, Portfolio
+from specguard.falsify.portfolio import Portfolio
 from specguard.falsify.predictor import FailureData, FailurePredictor
 from specguard.falsify.related import EPSILONS, perturbed
 from specguard.falsify.robustness import (
@@ -229,18 +229,6 @@ class EpisodeRunner:
             rows.append(judged.start_features)
         return np.array(rows, dtype=np.float64).reshape(len(points), -1)
 
-    def values(self, points: np.ndarray) -> np.ndarray | None:
-        """The return the runner's policy expects from each start (rows of ``points``), by its own critic
-        (:class:`~specguard.construction.episode_policy.ValuedPolicy`): each start set by a reset, no step run, no
-        episode counted; ``None`` where the policy gives no such estimate."""
-        act = self.act
-        if not isinstance(act, ValuedPolicy) or not len(points):
-            return None
-        env = self._envs[0]
-        obs = [env.reset(seed=0, options={START_OPTION: self.starts.values(p)})[0] for p in points]
-        values = act.values(stack_observations(obs))
-        return None if values is None else np.asarray(values, dtype=np.float64).reshape(len(points))
-
     def run(self, points: np.ndarray) -> list[Outcome]:
         """One episode from each start (rows of ``points``), in lockstep batches."""
         out: list[Outcome] = []
@@ -329,8 +317,6 @@ class Falsification:
             (``None``: not measured: no data, or too few failures); under ``COVERAGE``, no predictor.
         importance: the failure rate by importance sampling from the predictor's proposal, with its interval
             (``None``: not asked for, ``importance=0``, or no predictor).
-        critic: whether the agent's own critic steered the search (the ``value`` arm), or why not (``""``: no guided
-            search ran: the counterexample was replayed).
     """
 
     starts: Starts
@@ -352,7 +338,6 @@ class Falsification:
     related: FailureData | None = field(default=None, repr=False, compare=False)
     coverage: float | None = None
     importance: RateEstimate | None = None
-    critic: str = ""
 
     @property
     def found(self) -> bool:
@@ -415,8 +400,6 @@ class Falsification:
             lines.append(f"failure predictor: {self.predictor_text}")
         if self.importance is not None:
             lines.append(f"failure rate from the predictor's starts, weighed back: {self.importance.summary()}")
-        if self.critic:
-            lines.append(f"the agent's critic: {self.critic_text}")
         return "\n".join([*lines, *self.notes])
 
     @property
@@ -444,13 +427,6 @@ class Falsification:
             return f"not fitted: {seen} (it needs {MIN_FAILURES}, and a success)"
         return f"fitted on {seen}; the learned arm drew {self.drawn_by.get('learned', 0)} of the guided starts"
 
-    @property
-    def critic_text(self) -> str:
-        """Whether the agent's critic steered the search, with the starts its arm drew (``""``: no search ran)."""
-        if self.critic.startswith("the value arm"):
-            return f"{self.critic}; it drew {self.drawn_by.get('value', 0)} of the guided starts"
-        return self.critic
-
     def to_dict(self) -> dict[str, Any]:
         """The findings as plain JSON-ready values (the counterexample's start exact, as stored)."""
         c = self.counterexample
@@ -468,7 +444,6 @@ class Falsification:
             "drawn_by": dict(self.drawn_by),
             "found_by": self.found_by,
             "predictor": self.predictor_text,
-            "critic": self.critic_text,
             "importance": self.importance.summary() if self.importance is not None else None,
         }
 
@@ -534,19 +509,6 @@ class _Search:
     predictor: FailurePredictor | None = None
     related: FailureData | None = None
     coverage: float | None = None
-    critic: str = ""
-
-
-def _expected(runner: EpisodeRunner) -> Callable[[np.ndarray], np.ndarray]:
-    """The return the agent's critic expects from unit-box points of the runner's start space."""
-    starts = runner.starts
-    half = (starts.high - starts.low) / 2.0
-
-    def expected(unit: np.ndarray) -> np.ndarray:
-        values = runner.values(np.clip(starts.center + unit * half, starts.low, starts.high))
-        return values if values is not None else np.zeros(len(unit))
-
-    return expected
 
 
 def _chances(runner: EpisodeRunner, predictor: FailurePredictor) -> Callable[[np.ndarray], np.ndarray]:
@@ -591,12 +553,7 @@ def _learn(
 
 
 def _guided(
-    runner: EpisodeRunner,
-    examples: int,
-    rng: np.random.Generator,
-    related: FailureData | None,
-    weaker: int,
-    critic: bool,
+    runner: EpisodeRunner, examples: int, rng: np.random.Generator, related: FailureData | None, weaker: int
 ) -> _Search:
     """The guided search: its first failing start with its point and the episodes run up to it (``hit``; ``None``:
     none), and which sampler drew each episode.
@@ -604,30 +561,14 @@ def _guided(
     ``EXPLORE`` uniform draws with the middle of the space after the first ``MIDDLE_AFTER`` of them; then, given
     ``related`` data or ``weaker`` episodes, the failure predictor is fitted (:func:`_learn`; the weaker agent's
     episodes count among the search's); then rounds of the portfolio's proposals, its ``learned`` arm among
-    them where the predictor was fitted, and its ``value`` arm where ``critic`` and the agent's policy has a critic
-    to ask (:mod:`specguard.falsify.portfolio`). A space of reset seeds has no neighbourhoods (seed 41 and seed 42
-    start anywhere): all its starts are uniform draws.
+    them where the predictor was fitted (:mod:`specguard.falsify.portfolio`). A space of reset seeds has no
+    neighbourhoods (seed 41 and seed 42 start anywhere): all its starts are uniform draws.
     """
     starts = runner.starts
     seeds = starts.how == "reset seeds"
     half = (starts.high - starts.low) / 2.0
     search = _Search()
     portfolio = Portfolio(len(starts.names), rng)
-    if seeds:
-        search.critic = "not used: a space of reset seeds is searched by uniform draws alone"
-    elif not critic:
-        search.critic = "not used (critic=False)"
-    elif runner.values(starts.center[None, :]) is None:
-        search.critic = (
-            "none to ask: the agent's policy gives no estimate of its return (a callable, a recurrent policy, or a "
-            "model without a value or Q critic)"
-        )
-    else:
-        portfolio.value = _expected(runner)
-        search.critic = (
-            f"the value arm took {VALUE_SHARE:.0%} of every round, the least or most valued of {VALUE_CANDIDATES} "
-            "uniform draws"
-        )
     done, learned = 0, False
     while done < examples:
         if done and (related is not None or weaker) and not seeds and not learned:
@@ -762,7 +703,6 @@ def falsify(
     related: FailureData | None = None,
     weaker: int = 0,
     importance: int = 0,
-    critic: bool = True,
 ) -> Falsification:
     """Search ``runner``'s start space for a start from which its policy misses the spec.
 
@@ -787,9 +727,6 @@ def falsify(
             (:mod:`specguard.stats.importance`), counted apart like the uniform draws; only given ``related`` data or
             ``weaker`` episodes (a search that ended before it fitted its predictor has it fitted then), and where
             they saw enough failures (``Falsification.importance``).
-        critic: the portfolio's ``value`` arm steers by the agent's own critic where its policy has one
-            (:meth:`EpisodeRunner.values`): the starts it expects the least return from, and the most.
-            ``False``: no ``value`` arm.
 
     Raises:
         InvalidSpec: an argument of the wrong type or out of range, naming it and its value.
@@ -802,7 +739,6 @@ def falsify(
     shrink = check_flag(where, "shrink", shrink)
     weaker = check_natural(where, "weaker", weaker, "episodes per level of the agent made weaker")
     importance = check_natural(where, "importance", importance, "episodes drawn from the predictor's proposal")
-    critic = check_flag(where, "critic", critic)
     say = progress or (lambda line: None)
     starts = runner.starts
     result = Falsification(starts=starts, key=key, confidence=confidence)
@@ -823,8 +759,8 @@ def falsify(
 
     if result.counterexample is None:
         say(f"guided search: up to {examples} episodes")
-        search = _guided(runner, examples, np.random.default_rng([seed, 1]), related, weaker, critic)
-        result.drawn_by, result.found_by, result.critic = dict(search.drawn_by), search.found_by, search.critic
+        search = _guided(runner, examples, np.random.default_rng([seed, 1]), related, weaker)
+        result.drawn_by, result.found_by = dict(search.drawn_by), search.found_by
         result.predictor, result.related, result.coverage = search.predictor, search.related, search.coverage
         if search.hit is not None:
             outcome, point, result.episodes_to_first = search.hit
