@@ -67,8 +67,9 @@ class EpsilonRandom:
 
 
 def perturbed(runner: Any, points: np.ndarray, epsilon: float, rng: np.random.Generator) -> FailureData:
-    """One episode from each start (rows of ``points``, the unit box) of the runner's agent with ``epsilon``-random
-    actions, as failure data of weakness ``epsilon``, weight 1. The runner's own agent is put back after."""
+    """One episode from each start (rows of ``points``, in the start space) of the runner's agent with
+    ``epsilon``-random actions, as failure data of weakness ``epsilon``, weight 1. The runner's own agent is put back
+    after."""
     with runner.acting(EpsilonRandom(runner.act, runner.action_space, epsilon, rng)):
         outcomes = runner.run(points)
     return FailureData(

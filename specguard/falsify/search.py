@@ -94,6 +94,7 @@ DEFENSIVE = 0.5
 """The uniform share of the importance-sampling proposal: every weight is at most ``1 / DEFENSIVE``."""
 
 MIN_FAILURES = 3
+"""The failure predictor is fitted only on data with at least this many failures (and a success)."""
 
 PROBES = 64
 """Uniform starts whose features tell how much of the start space the predictor's data spans."""
@@ -104,7 +105,6 @@ draws) have features within the range its data's starts span, feature by feature
 admitted). A run's looks start where the env's own reset does; a search over a wider space than that (as the
 benchmark's InvertedPendulum, within 0.2 rad of upright where training started within 0.01) would follow a surface
 fitted elsewhere: on those held-out agents the looks' predictor cost 16% and 36% more episodes than none."""
-"""The failure predictor is fitted only on data with at least this many failures (and a success)."""
 
 MIDDLE_AFTER = 3
 """The exploration runs the middle of the space after this many uniform draws.
@@ -772,7 +772,8 @@ def falsify(
     result.guided = runner.episodes - start_count
     if importance and result.related is None and (related is not None or weaker):
         fitting = _Search()  # the search ended before it fitted its predictor (an early failure): fitted now
-        result.predictor = _learn(runner, related, weaker, np.random.default_rng([seed, 3]), fitting, weaker * 3)
+        rng = np.random.default_rng([seed, 3])
+        result.predictor = _learn(runner, related, weaker, rng, fitting, weaker * len(EPSILONS))
         result.related, result.coverage = fitting.related, fitting.coverage
         result.drawn_by["related"] = fitting.drawn_by["related"]
     if importance and result.predictor is not None:
